@@ -1,0 +1,20 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+import os
+import pathlib
+import sys
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+# Real hair files made by others live beside the repository, never inside it.
+DATA = pathlib.Path(os.environ.get("HAIR_DATA", ROOT.parent / "shared" / "data"))
+
+
+@pytest.fixture(scope="session")
+def shared_data():
+    if not DATA.is_dir():
+        pytest.fail(f"real data folder {DATA} is missing; put ../shared beside the checkout or set HAIR_DATA")
+    return DATA
