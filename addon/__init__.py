@@ -1,0 +1,2 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Blender glue for key-strand hair: properties, operators, panels, bpy <-> numpy."""
