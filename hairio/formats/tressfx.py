@@ -1,0 +1,352 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""AMD TressFX binary hair (.tfx, version 4), little-endian.
+
+Header, 160 bytes (TressFXTFXFileHeader in AMD's TressFXFileFormat.h):
+    float32 version (4.0)
+    uint32  numHairStrands, numVerticesPerStrand (4, 8, 16, 32 or 64)
+    uint32  byte offsets from the file start, 8-byte aligned, 0 = absent:
+            positions   float32[S*N][4]  xyz + inverse mass (w = 0 pins the vertex)
+            strand UV   float32[S][2]
+            vertex UV   float32[S*N][2]
+            thickness   float32[S]
+            vertex color float32[S*N][4]
+    uint32  reserved[32]
+
+Every strand has exactly N vertices. The writer resamples each strand by arc length from the
+root to N vertices (`resample_strands`) and reports how far that moves it (`resampling_error`).
+
+What AMD's reference loader (TressFXAsset::LoadHairData, TressFX 4.x) does with a file, and
+so what the writer respects:
+- it rounds the strand count up to the simulation thread group (64):
+  (S - S % 64) + 64, a whole extra group even when S already is a multiple of 64, and fills
+  the new strands with copies of the last one (`loaded_strand_count`). Copies render on top
+  of the last strand, so nothing shows; `pad_strands=True` writes whole groups into the file
+  for engines whose loaders assert S % 64 == 0 instead of padding.
+- it reads the strand UVs at offsetStrandUV unconditionally (0 would read the header), so
+  the writer always writes them: from the scalp's UV map when the caller has one (`root_uv`),
+  else `spherical_root_uv` (documented there).
+- follow hairs are not in the file: GenerateFollowHairs(numFollowHairsPerGuideHair, ...)
+  makes them at load time around each (padded) guide, so the engine draws
+  loaded_strand_count(S) * (1 + follow) strands. Our render strands are already every strand,
+  so their file is loaded with numFollowHairsPerGuideHair = 0; the key strands go to a separate
+  guides file (`write_tfx_pair`) for engines that simulate guides and make followers.
+- N must divide 64 (4..64) and the loader asserts N > 2.
+- AMD's Maya exporter pins the first two vertices (w = 0) and optionally the tip, and flips
+  V for DirectX; `pinned`, `pin_tip` and `flip_v` do the same here.
+Thickness (per strand) follows the .hair convention: a width, 2 * root radius. The AMD loader
+ignores it and the vertex colors, other engines read them.
+"""
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..atomic import atomic_write
+from ..validate import InputError, check_finite, check_shape
+from ._common import check_strands, need, read_bytes, strands_without_short
+
+HEADER = np.dtype([
+    ("version", "<f4"), ("num_strands", "<u4"), ("vertices_per_strand", "<u4"),
+    ("offset_positions", "<u4"), ("offset_strand_uv", "<u4"), ("offset_vertex_uv", "<u4"),
+    ("offset_thickness", "<u4"), ("offset_vertex_color", "<u4"), ("reserved", "<u4", (32,)),
+])
+assert HEADER.itemsize == 160
+
+VERTICES_PER_STRAND = (4, 8, 16, 32, 64)
+THREAD_GROUP_SIZE = 64
+
+
+@dataclass(frozen=True, eq=False)
+class TfxFile:
+    """The arrays of a .tfx file as stored (absent ones are None)."""
+    version: float
+    positions: np.ndarray               # (S, N, 4) xyz + inverse mass
+    strand_uv: np.ndarray = None        # (S, 2)
+    vertex_uv: np.ndarray = None        # (S, N, 2)
+    thickness: np.ndarray = None        # (S,)
+    vertex_color: np.ndarray = None     # (S, N, 4)
+
+
+def loaded_strand_count(num_strands, follow_per_guide=0):
+    """How many strands AMD's reference loader simulates and draws for a file of
+    `num_strands` strands: padded to the next thread group (always adding one), times
+    1 + follow hairs per guide."""
+    n = int(num_strands)
+    return ((n - n % THREAD_GROUP_SIZE) + THREAD_GROUP_SIZE) * (1 + int(follow_per_guide))
+
+
+def load_tfx(path):
+    """The raw arrays of a .tfx v4 file (`TfxFile`)."""
+    data = read_bytes(path, ".tfx")
+    need(data, HEADER.itemsize, path, ".tfx")
+    h = np.frombuffer(data, HEADER, count=1)[0]
+    version = float(h["version"])
+    if not (4.0 <= version < 5.0):
+        raise InputError(f"{path}: .tfx version {version:g}; only the version 4 binary layout is read "
+                         f"(re-export with a TressFX 4 exporter)")
+    n_s, n_v = int(h["num_strands"]), int(h["vertices_per_strand"])
+    if n_v < 2:
+        raise InputError(f"{path}: {n_v} vertices per strand; a strand needs at least 2")
+    if h["offset_positions"] == 0:
+        raise InputError(f"{path}: .tfx file without vertex positions (offset 0)")
+
+    def take(offset, dtype, shape, name):
+        if offset == 0:
+            return None
+        count = int(np.prod(shape))
+        need(data, int(offset) + 4 * count, path, f".tfx ({name})")
+        return np.frombuffer(data, dtype, count=count, offset=int(offset)).reshape(shape)
+
+    return TfxFile(
+        version=version,
+        positions=take(h["offset_positions"], "<f4", (n_s, n_v, 4), "positions"),
+        strand_uv=take(h["offset_strand_uv"], "<f4", (n_s, 2), "strand UVs"),
+        vertex_uv=take(h["offset_vertex_uv"], "<f4", (n_s, n_v, 2), "vertex UVs"),
+        thickness=take(h["offset_thickness"], "<f4", (n_s,), "thickness"),
+        vertex_color=take(h["offset_vertex_color"], "<f4", (n_s, n_v, 4), "vertex colors"),
+    )
+
+
+def read_tfx(path):
+    """Strands from a .tfx v4 file: points = xyz; radius = thickness / 2 when stored;
+    color and alpha from the vertex colors when stored."""
+    t = load_tfx(path)
+    n_s, n_v = t.positions.shape[:2]
+    points = check_finite(f"{path}: positions", t.positions[..., :3].reshape(-1, 3))
+    radius = color = alpha = None
+    if t.thickness is not None:
+        radius = np.repeat(t.thickness * np.float32(0.5), n_v)
+    if t.vertex_color is not None:
+        color = np.clip(t.vertex_color[..., :3].reshape(-1, 3), 0, None)
+        alpha = np.clip(t.vertex_color[..., 3].reshape(-1), 0, 1)
+    return strands_without_short(points, np.full(n_s, n_v, np.int32), radius=radius, color=color, alpha=alpha)
+
+
+def _arc_positions(strands, n):
+    """For each of the n target vertices of each strand: the original point index `a` where
+    its segment starts and the fraction `f` along that segment, placing the targets at equal
+    arc lengths from root (0) to tip (L). Whole-array: one searchsorted over the global
+    cumulative arc length. Returns a (S*n,) int64, f (S*n,) float64, and per-point arc
+    length s (P,) measured from each strand's root."""
+    pts = strands.points.astype(np.float64)
+    counts = strands.counts.astype(np.int64)
+    roots = strands.offsets
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    # Segments that join a strand's tip to the next strand's root are not hair.
+    seg[roots[1:] - 1] = 0.0
+    g = np.zeros(len(pts))
+    np.cumsum(seg, out=g[1:])
+    tips = roots + counts - 1
+    length = g[tips] - g[roots]
+    t = np.linspace(0.0, 1.0, n)
+    target = g[roots][:, None] + length[:, None] * t[None, :]
+    a = np.searchsorted(g, target.ravel(), side="right") - 1
+    lo = np.repeat(roots, n)
+    hi = np.repeat(tips - 1, n)
+    a = np.clip(a, lo, hi)
+    span = g[a + 1] - g[a]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = np.where(span > 0, (target.ravel() - g[a]) / span, 0.0)
+    f = np.clip(f, 0.0, 1.0)
+    s = g - np.repeat(g[roots], counts)
+    return a, f, s
+
+
+def resample_strands(strands, vertices_per_strand):
+    """`strands` with every strand resampled to `vertices_per_strand` points at equal arc
+    length steps from the root (root and tip kept exactly). Radius, color and alpha are
+    interpolated the same way; float64 inside, float32 out."""
+    s = check_strands(strands)
+    n = int(vertices_per_strand)
+    if n < 2:
+        raise InputError(f"vertices_per_strand: {n}; need at least 2")
+    if s.num_strands == 0:
+        return s
+    a, f, _ = _arc_positions(s, n)
+
+    def lerp(v):
+        v = v.astype(np.float64)
+        ff = f.reshape((-1,) + (1,) * (v.ndim - 1))
+        return v[a] * (1.0 - ff) + v[a + 1] * ff
+
+    return type(s).from_arrays(lerp(s.points), np.full(s.num_strands, n, np.int32), lerp(s.radius),
+                               lerp(s.color), np.clip(lerp(s.alpha), 0, 1), s.wisp)
+
+
+def resampling_error(strands, vertices_per_strand):
+    """How far resampling to `vertices_per_strand` moves each strand.
+
+    The resampled vertices lie on the original polyline, so the error is how far the
+    original points lie from the resampled one: each original point at arc length s is
+    measured to the resampled segment that covers s (the correspondence resampling
+    defines). Returns dict(max=, mean=, per_strand=(S,) max), in scene units."""
+    s = check_strands(strands)
+    n = int(vertices_per_strand)
+    if s.num_strands == 0:
+        return {"max": 0.0, "mean": 0.0, "per_strand": np.zeros(0)}
+    r = resample_strands(s, n)
+    q = r.points.astype(np.float64).reshape(s.num_strands, n, 3)
+    _, _, arc = _arc_positions(s, n)
+    counts = s.counts.astype(np.int64)
+    strand = np.repeat(np.arange(s.num_strands), counts)
+    tips = s.offsets + counts - 1
+    total = arc[tips]
+    step = total / (n - 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        j = np.where(step[strand] > 0, np.floor(arc / step[strand]), 0).astype(np.int64)
+    j = np.clip(j, 0, n - 2)
+    a = q[strand, j]
+    b = q[strand, j + 1]
+    p = s.points.astype(np.float64)
+    ab = b - a
+    den = np.einsum("ij,ij->i", ab, ab)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = np.where(den > 0, np.einsum("ij,ij->i", p - a, ab) / den, 0.0)
+    u = np.clip(u, 0.0, 1.0)
+    d = np.linalg.norm(p - (a + u[:, None] * ab), axis=1)
+    per_strand = np.maximum.reduceat(d, s.offsets)
+    return {"max": float(d.max()), "mean": float(d.mean()), "per_strand": per_strand}
+
+
+def resampling_errors(strands, vertex_counts=VERTICES_PER_STRAND):
+    """{vertices per strand: max resampling error} for each count (the benchmark's table)."""
+    return {int(n): resampling_error(strands, n)["max"] for n in vertex_counts}
+
+
+def _unit(v, name):
+    v = np.asarray(v, np.float64)
+    norm = np.linalg.norm(v)
+    if v.shape != (3,) or not np.isfinite(norm) or norm == 0:
+        raise InputError(f"{name}: expected a non-zero 3-vector, got {v!r}")
+    return v / norm
+
+
+def spherical_root_uv(roots, up=(0.0, 0.0, 1.0), front=(0.0, -1.0, 0.0)):
+    """Strand UVs for scalps without a UV map: a spherical projection of each root around
+    the roots' centroid. u = azimuth around `up`, 0.5 at `front` and the seam (0 / 1) straight
+    behind, where the back of the head hides it; v = elevation, 0 at the bottom pole, 1 at the
+    top. Defaults are Blender's axes (Z up, -Y front)."""
+    roots = np.asarray(roots, np.float64)
+    e_up = _unit(up, "up")
+    e_front = _unit(np.asarray(front, np.float64) - np.dot(front, e_up) * e_up, "front (perpendicular to up)")
+    e_side = np.cross(e_up, e_front)
+    if len(roots) == 0:
+        return np.zeros((0, 2), np.float32)
+    d = roots - roots.mean(axis=0)
+    r = np.linalg.norm(d, axis=1)
+    u = 0.5 + np.arctan2(d @ e_side, d @ e_front) / (2 * np.pi)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        v = 0.5 + np.arcsin(np.clip(np.where(r > 0, (d @ e_up) / r, 0.0), -1, 1)) / np.pi
+    return np.stack([u, v], axis=1).astype(np.float32)
+
+
+def _align8(n):
+    return (n + 7) // 8 * 8
+
+
+def encode_tfx(strands, vertices_per_strand=32, pinned=2, pin_tip=False, root_uv=None,
+               up=(0.0, 0.0, 1.0), front=(0.0, -1.0, 0.0), flip_v=True, thickness=True,
+               colors=True, pad_strands=False, shuffle_seed=None):
+    """The bytes of a .tfx v4 file for `strands`, as a list of blocks to write in order.
+
+    vertices_per_strand: 4, 8, 16, 32 or 64 (TressFX's simulation needs N | 64).
+    pinned: root vertices with inverse mass 0 (immovable); the rest get 1.
+    pin_tip: also pin the last vertex (AMD's "both ends immovable").
+    root_uv: (S, 2) strand UVs from the scalp's UV map; None = `spherical_root_uv` with
+    `up`/`front`. flip_v: v -> 1 - v, the DirectX convention AMD's exporter defaults to.
+    thickness / colors: also write per-strand thickness (2 * root radius) / vertex colors.
+    pad_strands: round the strand count up to a multiple of 64 with copies of the last strand.
+    shuffle_seed: shuffle the strand order (TressFX's LOD drops the last strands first, so a
+    random order thins the hair evenly); None keeps the order.
+    """
+    s = check_strands(strands)
+    n = int(vertices_per_strand) if np.ndim(vertices_per_strand) == 0 else -1
+    if n not in VERTICES_PER_STRAND:
+        raise InputError(f"vertices_per_strand: {vertices_per_strand!r}; TressFX needs one of "
+                         f"{', '.join(map(str, VERTICES_PER_STRAND))}")
+    pinned = int(pinned)
+    if not 0 <= pinned <= n:
+        raise InputError(f"pinned: {pinned} root vertices pinned; must be in 0..{n}")
+    if s.num_strands == 0:
+        raise InputError("strands: no strands to write; TressFX files need at least one strand")
+    if root_uv is None:
+        uv = spherical_root_uv(s.points[s.offsets], up, front)
+    else:
+        uv = check_finite("root_uv", check_shape("root_uv", np.asarray(root_uv), (s.num_strands, 2)))
+        uv = uv.astype(np.float32)
+    if flip_v:
+        uv = np.stack([uv[:, 0], np.float32(1) - uv[:, 1]], axis=1)
+    r = resample_strands(s, n)
+    pos = np.empty((s.num_strands, n, 4), "<f4")
+    pos[..., :3] = r.points.reshape(-1, n, 3)
+    pos[..., 3] = 1.0
+    pos[:, :pinned, 3] = 0.0
+    if pin_tip:
+        pos[:, -1, 3] = 0.0
+    width = (s.radius[s.offsets] * np.float32(2)).astype("<f4")
+    rgba = np.empty((s.num_strands, n, 4), "<f4")
+    rgba[..., :3] = r.color.reshape(-1, n, 3)
+    rgba[..., 3] = r.alpha.reshape(-1, n)
+    order = None
+    if shuffle_seed is not None:
+        order = np.random.default_rng(int(shuffle_seed)).permutation(s.num_strands)
+    if pad_strands and s.num_strands % THREAD_GROUP_SIZE:
+        extra = THREAD_GROUP_SIZE - s.num_strands % THREAD_GROUP_SIZE
+        base = order if order is not None else np.arange(s.num_strands)
+        order = np.concatenate([base, np.full(extra, base[-1])])
+    if order is not None:
+        pos, uv, width, rgba = pos[order], uv[order], width[order], rgba[order]
+    arrays = [("offset_positions", pos), ("offset_strand_uv", uv.astype("<f4"))]
+    if thickness:
+        arrays.append(("offset_thickness", width))
+    if colors:
+        arrays.append(("offset_vertex_color", rgba))
+    h = np.zeros(1, HEADER)
+    h["version"], h["num_strands"], h["vertices_per_strand"] = 4.0, len(pos), n
+    blocks, at = [None], HEADER.itemsize
+    for field, array in arrays:
+        start = _align8(at)
+        if start > at:
+            blocks.append(b"\0" * (start - at))
+        h[field] = start
+        blocks.append(np.ascontiguousarray(array).tobytes())
+        at = start + array.nbytes
+    if at >= 1 << 32:
+        raise InputError(f"strands: the .tfx file would be {at} bytes; its 32-bit offsets stop at 4 GiB; "
+                         f"export fewer strands or fewer vertices per strand")
+    blocks[0] = h.tobytes()
+    return blocks
+
+
+def write_tfx(path, strands, **opts):
+    """Write `strands` as .tfx v4, atomically (options: `encode_tfx`); returns the number of
+    strands in the file (more than `strands` has with pad_strands)."""
+    blocks = encode_tfx(strands, **opts)
+    with atomic_write(path) as f:
+        for b in blocks:
+            f.write(b)
+    return int(np.frombuffer(blocks[0], HEADER, count=1)[0]["num_strands"])
+
+
+def guides_path_for(path):
+    """Where `write_tfx_pair` puts the guides by default: NAME_guides.tfx beside NAME.tfx."""
+    stem, ext = os.path.splitext(os.fspath(path))
+    return stem + "_guides" + (ext or ".tfx")
+
+
+def write_tfx_pair(path, strands, guides, guides_path=None, guide_root_uv=None, **opts):
+    """Render strands to `path` and key strands (guides) to `guides_path` (default
+    `guides_path_for(path)`), each a complete .tfx with the same options, as TressFX loads
+    separate hair objects (load the render file with numFollowHairsPerGuideHair = 0).
+    Both are encoded before either file is opened, and a failure leaves neither.
+    Returns (path, guides_path)."""
+    guides_path = guides_path_for(path) if guides_path is None else os.fspath(guides_path)
+    guide_opts = dict(opts, root_uv=guide_root_uv)
+    strand_blocks = encode_tfx(strands, **opts)
+    guide_blocks = encode_tfx(guides, **guide_opts)
+    with atomic_write(guides_path) as fg, atomic_write(path) as fs:
+        for b in guide_blocks:
+            fg.write(b)
+        for b in strand_blocks:
+            fs.write(b)
+    return os.fspath(path), guides_path
