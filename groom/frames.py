@@ -1,0 +1,122 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Root frames (SPEC §1): normal, main tangent, second tangent at every root.
+
+The thesis takes the main tangent along the meridian through the root and the central line
+(the vertical axis of the head). That frame is undefined on the central line (the crown,
+where hair is densest) and its Euler-angle form divides by zero there.
+
+Here the main tangent is the downhill direction of the tangent plane, proj_N(-up), which is
+the thesis's meridian tangent on any head symmetric about the central line and depends only
+on the normal (so moving or scaling the head changes nothing). Near the crown, where the
+downhill direction vanishes, it blends smoothly toward proj_N(front):
+
+    s = smoothstep(cos(outer), cos(inner), N·up)
+    t = normalise((1 - s)·proj_N(-up) + s·proj_N(front))
+    b = N × t
+
+Within `inner` of the crown hair points to the front; beyond `outer` it points down the head.
+
+The seam. A tangent field that points down the head all around the crown must turn once
+around the crown, and one that points to the front does not turn at all, so the blend must
+break somewhere (a hairy-ball argument). With the vector blend above it breaks at ONE point:
+the whorl, on the back half (the side opposite `front`) of the meridian plane through up and
+front, at the polar angle where (1 - s)·|proj_N(-up)| = s·|proj_N(front)| (about 15° behind
+the crown for the defaults). Everywhere else the frame is continuous; close to the whorl it
+turns quickly, as real hair does at a crown whorl. At the whorl itself (and wherever the
+blended vector is shorter than 1e-9) the main tangent falls back to proj_N(up × front), then
+to any unit vector perpendicular to N, so a frame is never NaN. Below the equator the
+downhill field has a second zero at N = -up (the chin side of a full sphere); scalps do not
+grow hair there, and the same fallback applies.
+"""
+import numpy as np
+
+from hairio import InputError, check_finite
+
+DEFAULT_UP = (0.0, 0.0, 1.0)
+DEFAULT_FRONT = (0.0, -1.0, 0.0)
+
+
+def _axis(name, v):
+    v = check_finite(name, np.asarray(v, dtype=np.float64))
+    if v.shape != (3,) or np.linalg.norm(v) < 1e-12:
+        raise InputError(f"{name}: expected a non-zero 3-vector, got {v!r}")
+    return v / np.linalg.norm(v)
+
+
+def _project(v, n):
+    """Component of v (3,) or (N,3) in the planes with unit normals n (N,3)."""
+    return v - np.einsum("nd,nd->n", np.broadcast_to(v, n.shape), n)[:, None] * n
+
+
+def root_frames(normals, up=DEFAULT_UP, front=DEFAULT_FRONT, inner_deg=10.0, outer_deg=40.0):
+    """Frames (N,3,3) whose COLUMNS are (main tangent, second tangent, normal).
+
+    normals (N,3) need not be exactly unit. A local offset (x, y, z) maps to the world as
+    frame @ (x, y, z): x runs down the head, y across it, z out of the scalp.
+    """
+    up = _axis("up", up)
+    front = _axis("front", front)
+    if abs(float(up @ front)) > 0.999:
+        raise InputError("front: must not be parallel to up; give the direction the face looks")
+    if not 0.0 <= inner_deg < outer_deg <= 180.0:
+        raise InputError("crown blend angles: need 0 <= inner_deg < outer_deg <= 180")
+    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    n = np.where(length > 1e-300, n / np.where(length > 1e-300, length, 1.0), up)
+    c = n @ up
+    lo, hi = np.cos(np.radians(outer_deg)), np.cos(np.radians(inner_deg))
+    x = np.clip((c - lo) / (hi - lo), 0.0, 1.0)
+    s = x * x * (3.0 - 2.0 * x)
+    v = (1.0 - s)[:, None] * _project(-up, n) + s[:, None] * _project(front, n)
+    side = np.cross(up, front)
+    for fallback in (_project(side, n), _project(front, n), _project(up, n)):
+        short = np.linalg.norm(v, axis=1) < 1e-9
+        if not short.any():
+            break
+        v[short] = fallback[short]
+    # n is parallel to none of up, front, side at once, but guard the last possibility anyway.
+    short = np.linalg.norm(v, axis=1) < 1e-9
+    if short.any():
+        e = np.eye(3)[np.argmin(np.abs(n[short]), axis=1)]
+        v[short] = _project(e, n[short])
+    v = _project(v, n)  # exact tangency after the blend
+    t = v / np.linalg.norm(v, axis=1, keepdims=True)
+    b = np.cross(n, t)
+    b /= np.linalg.norm(b, axis=1, keepdims=True)
+    return np.stack([t, b, n], axis=2)
+
+
+def whorl_direction(up=DEFAULT_UP, front=DEFAULT_FRONT, inner_deg=10.0, outer_deg=40.0):
+    """Unit normal at which the frame field of a sphere has its one break (the seam point)."""
+    up, front = _axis("up", up), _axis("front", front)
+    back = -(front - (front @ up) * up)
+    back /= np.linalg.norm(back)
+    theta = np.radians(np.linspace(0.0, outer_deg, 20001))
+    normals = np.cos(theta)[:, None] * up + np.sin(theta)[:, None] * back
+    lo, hi = np.cos(np.radians(outer_deg)), np.cos(np.radians(inner_deg))
+    x = np.clip((normals @ up - lo) / (hi - lo), 0.0, 1.0)
+    s = x * x * (3.0 - 2.0 * x)
+    # On that meridian both terms are collinear; the blend changes sign at the whorl.
+    along = (1.0 - s) * np.sin(theta) - s * np.cos(theta) * np.abs(front @ back)
+    i = int(np.argmin(np.abs(along)))
+    return normals[i]
+
+
+def rotation_xyz(angles):
+    """Rotation matrices (N,3,3) = Rz(angles[:,2]) @ Ry(angles[:,1]) @ Rx(angles[:,0]):
+    angles about the frame's main tangent (x), second tangent (y), normal (z), in radians."""
+    a = np.asarray(angles, dtype=np.float64).reshape(-1, 3)
+    cx, sx = np.cos(a[:, 0]), np.sin(a[:, 0])
+    cy, sy = np.cos(a[:, 1]), np.sin(a[:, 1])
+    cz, sz = np.cos(a[:, 2]), np.sin(a[:, 2])
+    r = np.empty((len(a), 3, 3))
+    r[:, 0, 0] = cz * cy
+    r[:, 0, 1] = cz * sy * sx - sz * cx
+    r[:, 0, 2] = cz * sy * cx + sz * sx
+    r[:, 1, 0] = sz * cy
+    r[:, 1, 1] = sz * sy * sx + cz * cx
+    r[:, 1, 2] = sz * sy * cx - cz * sx
+    r[:, 2, 0] = -sy
+    r[:, 2, 1] = cy * sx
+    r[:, 2, 2] = cy * cx
+    return r

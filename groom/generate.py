@@ -1,0 +1,200 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Scalp + key strands + parameters -> a head of ordinary strands (SPEC §2–6).
+
+`generate` is the one-shot form; `Generator` keeps what does not depend on the keys
+(roots, frames, random numbers) and, when keys change, recomputes only the strands whose
+wisp or neighbours use a changed key. Its result is bit-identical to a full regeneration
+because every per-strand computation is element-wise (see interpolate.py).
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from hairio import InputError, Strands
+
+from .cylinders import error_bound_cylinders, strand_attributes
+from .frames import root_frames
+from .interpolate import (KEY_SAMPLES, evaluate_strands, key_table, length_fractions,
+                          strand_transforms, tidiness_angles)
+from .keys import KeyStrand
+from .params import GroomParams
+from .sampling import sample_roots
+from .scalp import Scalp
+from .wisps import guide_weights, root_groups_for
+
+
+@dataclass(frozen=True, eq=False)
+class GroomResult:
+    """strands: hairio.Strands (wisp = main key index); roots (S,3) float64; root_uv (S,2) or
+    None; guides (S,3) int32 (main, n1, n2 key index); guide_weights (S,3) float32;
+    root_ids (S,) int64 (stable per-root ids seeding each strand's random stream);
+    root_tri (S,), root_bary (S,3): where each root lies on the scalp."""
+    strands: Strands
+    roots: np.ndarray
+    root_uv: np.ndarray
+    guides: np.ndarray
+    guide_weights: np.ndarray
+    root_ids: np.ndarray
+    root_tri: np.ndarray
+    root_bary: np.ndarray
+
+
+def _check_inputs(scalp, keys, params):
+    if not isinstance(scalp, Scalp):
+        raise InputError(f"scalp: expected a groom.Scalp, got {type(scalp).__name__}")
+    if not isinstance(params, GroomParams):
+        raise InputError(f"params: expected a groom.GroomParams, got {type(params).__name__}")
+    keys = list(keys.values()) if isinstance(keys, dict) else list(keys)
+    if not keys:
+        raise InputError("keys: no key strands; give at least one")
+    for i, k in enumerate(keys):
+        if not isinstance(k, KeyStrand):
+            raise InputError(f"keys[{i}]: expected a groom.KeyStrand, got {type(k).__name__}")
+    return keys
+
+
+class Generator:
+    """Incremental generator. `generate()` gives the full result; `update_keys({i: KeyStrand})`
+    replaces keys and returns the new result, recomputing only affected strands."""
+
+    def __init__(self, scalp, keys, params):
+        self.keys = _check_inputs(scalp, keys, params)
+        self.scalp, self.params = scalp, params
+        p = params
+        samples = sample_roots(scalp, p.count, p.seed, p.sampling_mode)
+        self.samples = samples
+        normals = scalp.normals_at(samples.tri, samples.bary, p.normal_mode)
+        self.frames = root_frames(normals, p.up, p.front)
+        self.root_uv = scalp.uv_at(samples.tri, samples.bary)
+        self.root_groups = root_groups_for(scalp, samples.tri, samples.bary, samples.points, p)
+        ids = samples.ids
+        self.frac = length_fractions(p.seed, ids, p.min_length, p.max_length)
+        self.transforms = strand_transforms(self.frames, tidiness_angles(p.seed, ids, p.tidiness, p.theta_max),
+                                            p.intelligence)
+        self._key_data = [self._prepare_key(k) for k in self.keys]
+        self._result = None
+        self._cache = None
+
+    def _prepare_key(self, key):
+        tri, bary, _ = self.scalp.closest_points(key.root[None])
+        normal = self.scalp.normals_at(tri, bary, self.params.normal_mode)
+        frame = root_frames(normal, self.params.up, self.params.front)[0]
+        table, accel = key_table(key, frame, self.params.intelligence, KEY_SAMPLES)
+        radius = self.params.radius if key.root_radius is None else key.root_radius
+        color = np.asarray(self.params.color if key.color is None else key.color, dtype=np.float64)
+        return {"table": table, "accel": accel, "root": key.root.copy(), "group": key.group,
+                "radius": radius, "color": color}
+
+    def _assign(self):
+        kd = self._key_data
+        key_roots = np.array([d["root"] for d in kd])
+        key_groups = np.array([d["group"] for d in kd], np.int32)
+        return guide_weights(self.samples.points, key_roots, self.params.neighbour_mode,
+                             self.params.n_influence, self.root_groups, key_groups)
+
+    def _strands(self, sel, guides, weights):
+        """Points and attributes of the strands `sel` (indices into the roots), in that order."""
+        p, kd = self.params, self._key_data
+        tables = np.stack([d["table"] for d in kd])
+        g, w = guides[sel], weights[sel]
+        base_radius = (w[:, 0] * np.array([d["radius"] for d in kd])[g[:, 0]]
+                       + w[:, 1] * np.array([d["radius"] for d in kd])[g[:, 1]]
+                       + w[:, 2] * np.array([d["radius"] for d in kd])[g[:, 2]])
+        colors = np.stack([d["color"] for d in kd])
+        base_color = (w[:, 0, None] * colors[g[:, 0]] + w[:, 1, None] * colors[g[:, 1]]
+                      + w[:, 2, None] * colors[g[:, 2]])
+        max_cyl = p.points_per_strand - 1
+        if p.resolution_mode == "fixed":
+            cyl = np.full(len(sel), max_cyl, np.int64)
+        else:
+            tol = p.tolerance * (base_radius if p.tolerance_units == "radius" else 1.0)
+            tol = np.maximum(tol, 1e-300)
+            accel = np.stack([d["accel"] for d in kd])
+            cyl = error_bound_cylinders(self.frac[sel], g, w, accel, tol, max_cyl)
+        pts, counts = evaluate_strands(self.samples.points[sel], self.transforms[sel], g, w,
+                                       self.frac[sel], cyl, tables)
+        radius, color, alpha = strand_attributes(p.seed, self.samples.ids[sel], counts, base_radius, base_color, p)
+        return pts, counts, radius, color, alpha
+
+    def _build(self, guides, weights, parts):
+        pts, counts, radius, color, alpha = parts
+        s = self.samples
+        strands = Strands.from_arrays(pts, counts.astype(np.int32), radius, color, alpha,
+                                      guides[:, 0].astype(np.int32))
+        self._cache = {"pts": pts, "counts": counts, "radius": radius, "color": color, "alpha": alpha}
+        self._result = GroomResult(strands, s.points, self.root_uv, guides.astype(np.int32),
+                                   weights.astype(np.float32), s.ids, s.tri, s.bary)
+        self._guides, self._weights = guides, weights
+        return self._result
+
+    def generate(self):
+        """Full regeneration from the current keys."""
+        guides, weights = self._assign()
+        sel = np.arange(len(self.samples.points))
+        return self._build(guides, weights, self._strands(sel, guides, weights))
+
+    @property
+    def result(self):
+        return self._result if self._result is not None else self.generate()
+
+    def update_keys(self, changes):
+        """Replace keys {index: KeyStrand} and return the new GroomResult. Strands whose old or
+        new guides (with any weight) include a changed key, or whose guides or weights changed
+        (a moved key root moves wisp borders), are recomputed; the others are copied."""
+        if self._result is None:
+            self.generate()
+        if not isinstance(changes, dict):
+            raise InputError("update_keys: expected a mapping {key index: KeyStrand}")
+        for i, k in changes.items():
+            if isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not 0 <= i < len(self.keys):
+                raise InputError(f"update_keys: key index {i!r} out of range [0, {len(self.keys) - 1}]")
+            if not isinstance(k, KeyStrand):
+                raise InputError(f"update_keys[{i}]: expected a groom.KeyStrand, got {type(k).__name__}")
+        old_data = list(self._key_data)
+        for i, k in changes.items():
+            self.keys[i] = k
+            self._key_data[i] = self._prepare_key(k)
+        try:
+            guides, weights = self._assign()
+        except InputError:
+            self._key_data = old_data
+            raise
+        changed = np.array(sorted(changes), np.int64)
+        old_g, old_w = self._guides, self._weights
+        dirty = (np.isin(guides, changed).any(axis=1) | np.isin(old_g, changed).any(axis=1)
+                 | (guides != old_g).any(axis=1) | (weights != old_w).any(axis=1))
+        sel = np.flatnonzero(dirty)
+        return self._build(guides, weights, self._splice(sel, self._strands(sel, guides, weights)))
+
+    def _splice(self, sel, parts):
+        """Full arrays with strands `sel` replaced by `parts`, the others copied."""
+        c = self._cache
+        old_counts = c["counts"]
+        new_counts = old_counts.copy()
+        new_counts[sel] = parts[1]
+        old_off = np.zeros(len(old_counts), np.int64)
+        np.cumsum(old_counts[:-1], out=old_off[1:])
+        new_off = np.zeros(len(new_counts), np.int64)
+        np.cumsum(new_counts[:-1], out=new_off[1:])
+        total = int(new_counts.sum())
+        keep = np.ones(len(new_counts), bool)
+        keep[sel] = False
+        strand = np.repeat(np.arange(len(new_counts)), new_counts)
+        local = np.arange(total) - new_off[strand]
+        from_old = keep[strand]
+        src = old_off[strand[from_old]] + local[from_old]
+        # Rows of the recomputed strands, in the order `parts` lists them.
+        dst_new = np.flatnonzero(~from_old)
+        out = []
+        for name, new in zip(("pts", "radius", "color", "alpha"), (parts[0], parts[2], parts[3], parts[4])):
+            arr = np.empty((total,) + c[name].shape[1:], c[name].dtype)
+            arr[from_old] = c[name][src]
+            arr[dst_new] = new
+            out.append(arr)
+        return out[0], new_counts, out[1], out[2], out[3]
+
+
+def generate(scalp, keys, params=None):
+    """Grow ordinary strands on `scalp` from `keys` (list of KeyStrand) with `params`
+    (GroomParams; defaults when None). Returns a GroomResult."""
+    return Generator(scalp, keys, params or GroomParams()).generate()

@@ -1,0 +1,137 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Key strands (SPEC §3): Bézier curves whose first control point is the root.
+
+Two kinds: `bezier`, one curve of any degree (n+1 control points, the thesis), and
+`cubic`, a piecewise cubic spline with handles `[P0, H0out, H1in, P1, H1out, ...]`
+(3k+1 rows, what Blender artists draw). Evaluation is de Casteljau in float64 on control
+points taken relative to the root, so a head placed 1e4 units from the origin loses nothing.
+"""
+import numpy as np
+
+from hairio import InputError, check_finite
+
+from .frames import rotation_xyz
+
+KINDS = ("bezier", "cubic")
+
+
+def _de_casteljau(ctrl, t):
+    """Points of one Bézier curve (control points (n,3)) at parameters t (M,)."""
+    work = np.broadcast_to(ctrl, (len(t),) + ctrl.shape).copy()
+    tt = t[:, None, None]
+    for r in range(len(ctrl) - 1, 0, -1):
+        work = work[:, :r] + tt * (work[:, 1:r + 1] - work[:, :r])
+    return work[:, 0]
+
+
+class KeyStrand:
+    """points (n,3) absolute positions, point 0 the root; kind 'bezier' | 'cubic';
+    color (3,) linear RGB or None (use the parameters' colour); root_radius or None
+    (use the parameters' radius); group (parting) id."""
+
+    def __init__(self, points, kind="bezier", color=None, root_radius=None, group=0):
+        if kind not in KINDS:
+            raise InputError(f"key strand kind: expected one of {KINDS}, got {kind!r}")
+        p = np.asarray(points)
+        if p.ndim != 2 or p.shape[1] != 3:
+            raise InputError(f"key strand points: expected shape (n, 3), got {p.shape}")
+        if p.dtype.kind not in "fiu":
+            raise InputError(f"key strand points: expected numbers, got dtype {p.dtype}")
+        p = check_finite("key strand points", p.astype(np.float64))
+        if kind == "bezier" and len(p) < 2:
+            raise InputError("key strand points: a Bézier key needs at least 2 control points")
+        if kind == "cubic" and (len(p) < 4 or (len(p) - 1) % 3):
+            raise InputError(f"key strand points: a piecewise cubic key needs 3k+1 rows "
+                             f"[P0, H0out, H1in, P1, ...], got {len(p)}")
+        self.points = p
+        self.kind = kind
+        if color is not None:
+            color = check_finite("key strand color", np.asarray(color, dtype=np.float64))
+            if color.shape != (3,):
+                raise InputError(f"key strand color: expected 3 values (RGB), got shape {color.shape}")
+            color = np.clip(color, 0.0, 1.0)
+        self.color = color
+        if root_radius is not None:
+            root_radius = float(root_radius)
+            if not np.isfinite(root_radius) or root_radius < 0:
+                raise InputError(f"key strand root_radius: expected a finite value >= 0, got {root_radius}")
+        self.root_radius = root_radius
+        if isinstance(group, bool) or not isinstance(group, (int, np.integer)):
+            raise InputError(f"key strand group: expected an integer, got {group!r}")
+        self.group = int(group)
+
+    @property
+    def root(self):
+        return self.points[0]
+
+    @property
+    def num_segments(self):
+        return (len(self.points) - 1) // 3 if self.kind == "cubic" else 1
+
+    def evaluate(self, t):
+        """Positions at curve parameters t in [0, 1] (cubic: segment i covers [i/k, (i+1)/k])."""
+        t = np.clip(np.asarray(t, dtype=np.float64).ravel(), 0.0, 1.0)
+        return self.points[0] + self.evaluate_offsets(t)
+
+    def evaluate_offsets(self, t):
+        """Positions relative to the root (float64): the precise form for far-away heads."""
+        t = np.clip(np.asarray(t, dtype=np.float64).ravel(), 0.0, 1.0)
+        rel = self.points - self.points[0]
+        if self.kind == "bezier":
+            return _de_casteljau(rel, t)
+        k = self.num_segments
+        seg = np.minimum((t * k).astype(np.int64), k - 1)
+        u = t * k - seg
+        out = np.empty((len(t), 3))
+        for i in range(k):  # k segments of one key, not strands: a short loop
+            m = seg == i
+            if m.any():
+                out[m] = _de_casteljau(rel[3 * i:3 * i + 4], u[m])
+        return out
+
+    def arc_length_table(self, samples, dense=None):
+        """Offsets from the root at `samples` points equally spaced in arc length (float64),
+        and the total length. Robust to zero-length curves (all points at the root),
+        repeated control points (stretches of zero speed) and hairpins."""
+        dense = dense or max(2048, 256 * self.num_segments, 8 * samples)
+        t = np.linspace(0.0, 1.0, dense)
+        pts = self.evaluate_offsets(t)
+        step = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        cum = np.concatenate([[0.0], np.cumsum(step)])
+        length = float(cum[-1])
+        scale = float(np.abs(self.points - self.points[0]).max())
+        if not length > 1e-12 * max(scale, 1e-300) or length == 0.0:
+            return np.zeros((samples, 3)), 0.0
+        # Keep strictly increasing arc lengths only: zero-speed stretches would make the
+        # inverse ambiguous (any parameter there gives the same point anyway).
+        keep = np.concatenate([[True], step > 0])
+        target = np.linspace(0.0, length, samples)
+        t_at = np.interp(target, cum[keep], t[keep])
+        return self.evaluate_offsets(t_at), length
+
+    def resample(self, samples):
+        """Absolute points equally spaced in arc length (float64)."""
+        off, _ = self.arc_length_table(samples)
+        return self.points[0] + off
+
+    def length(self):
+        return self.arc_length_table(2)[1]
+
+
+def place_key(profile, root, frame, angles=(0.0, 0.0, 0.0)):
+    """World control points of a key drawn in a root's local frame.
+
+    profile (n,3): control points in local coordinates (x down the head along the main
+    tangent, y along the second tangent, z along the normal); its first row is the root.
+    frame (3,3): columns (main tangent, second tangent, normal), see frames.root_frames.
+    angles: rotations (radians) about the local x, y, z axes, applied x first.
+    Control points transform exactly with the curve (Bézier curves are affine invariant).
+    """
+    prof = check_finite("key profile", np.asarray(profile, dtype=np.float64))
+    if prof.ndim != 2 or prof.shape[1] != 3:
+        raise InputError(f"key profile: expected shape (n, 3), got {prof.shape}")
+    root = check_finite("key root", np.asarray(root, dtype=np.float64).reshape(3))
+    frame = check_finite("key frame", np.asarray(frame, dtype=np.float64).reshape(3, 3))
+    rot = rotation_xyz(np.asarray(angles, dtype=np.float64).reshape(1, 3))[0]
+    local = (prof - prof[0]) @ rot.T
+    return root + local @ frame.T

@@ -1,0 +1,315 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The scalp: a triangle mesh the roots grow from (SPEC §1).
+
+`Scalp` validates its arrays where they enter; everything downstream trusts them.
+Normals: the thesis uses the triangle's own normal inside a triangle (`normal_mode="face"`);
+the default interpolates area-weighted vertex normals barycentrically, which is continuous
+across triangle edges (`normal_mode="interpolated"`).
+"""
+import os
+
+import numpy as np
+
+from hairio import InputError, check_finite
+
+# Below this (relative to the mesh size squared) a triangle counts as having no area:
+# its own normal is noise, so it borrows its vertices' normals instead.
+_DEGENERATE_AREA = 1e-14
+
+
+def _unit(v, fallback):
+    """Normalise rows of v; rows too short to have a direction get `fallback` rows."""
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    ok = n[..., 0] > 1e-300
+    out = np.where(ok[..., None], v / np.where(n > 1e-300, n, 1.0), fallback)
+    return out, ok
+
+
+class Scalp:
+    """Triangle mesh: vertices (V,3) float64, triangles (T,3) int64, optional per-vertex
+    density weight (V,) >= 0, optional UV map (V,2), optional per-vertex group id (V,) int
+    (a parting: a root takes the group of its triangle's nearest vertex)."""
+
+    def __init__(self, vertices, triangles, density=None, uv=None, groups=None):
+        v = np.asarray(vertices)
+        if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0:
+            raise InputError(f"scalp vertices: expected shape (V, 3) with V >= 1, got {v.shape}")
+        if v.dtype.kind not in "fiu":
+            raise InputError(f"scalp vertices: expected numbers, got dtype {v.dtype}")
+        self.vertices = check_finite("scalp vertices", v.astype(np.float64))
+        t = np.asarray(triangles)
+        if t.ndim != 2 or t.shape[1] != 3 or len(t) == 0:
+            raise InputError(f"scalp triangles: expected shape (T, 3) with at least one triangle, got {t.shape}; "
+                             "a scalp needs faces, not only vertices")
+        if t.dtype.kind not in "iu":
+            if t.dtype.kind == "f" and np.all(np.isfinite(t)) and np.all(t == np.round(t)):
+                t = t.astype(np.int64)
+            else:
+                raise InputError(f"scalp triangles: expected integer vertex indices, got dtype {t.dtype}")
+        t = t.astype(np.int64)
+        if t.min() < 0 or t.max() >= len(self.vertices):
+            raise InputError(f"scalp triangles: vertex indices must lie in [0, {len(self.vertices) - 1}], "
+                             f"got range [{t.min()}, {t.max()}]")
+        self.triangles = t
+        self.density = None
+        if density is not None:
+            d = check_finite("scalp density", np.asarray(density, dtype=np.float64))
+            if d.shape != (len(self.vertices),):
+                raise InputError(f"scalp density: expected shape ({len(self.vertices)},), got {d.shape}")
+            if d.min() < 0:
+                raise InputError("scalp density: negative weights; density must be >= 0")
+            self.density = d
+        self.uv = None
+        if uv is not None:
+            uv = check_finite("scalp uv", np.asarray(uv, dtype=np.float64))
+            if uv.shape != (len(self.vertices), 2):
+                raise InputError(f"scalp uv: expected shape ({len(self.vertices)}, 2), got {uv.shape}")
+            self.uv = uv
+        self.groups = None
+        if groups is not None:
+            g = np.asarray(groups)
+            if g.shape != (len(self.vertices),) or g.dtype.kind not in "iu":
+                raise InputError(f"scalp groups: expected integer array of shape ({len(self.vertices)},)")
+            self.groups = g.astype(np.int32)
+        self._compute_normals()
+
+    def _compute_normals(self):
+        p = self.vertices[self.triangles]
+        # Work relative to the mesh centre: a head offset by 1e4 keeps its cross products exact.
+        centre = 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0))
+        p = p - centre
+        cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        area2 = np.linalg.norm(cross, axis=1)
+        self.face_areas = 0.5 * area2
+        size = float(np.ptp(self.vertices, axis=0).max()) or 1.0
+        self.degenerate = self.face_areas <= _DEGENERATE_AREA * size * size
+        # Area-weighted vertex normals: the raw cross product already carries twice the area.
+        acc = np.zeros_like(self.vertices)
+        for c in range(3):
+            np.add.at(acc, self.triangles[:, c], np.where(self.degenerate[:, None], 0.0, cross))
+        up = np.array([0.0, 0.0, 1.0])
+        vn, ok = _unit(acc, up)
+        # A vertex touching only degenerate faces points away from the mesh centre (or up).
+        if not ok.all():
+            radial, _ = _unit(self.vertices - self.vertices.mean(axis=0), up)
+            vn[~ok] = radial[~ok]
+        self.vertex_normals = vn
+        fn, fok = _unit(cross, up)
+        if not fok.all() or self.degenerate.any():
+            borrowed, _ = _unit(vn[self.triangles].sum(axis=1), up)
+            fn = np.where(self.degenerate[:, None] | ~fok[:, None], borrowed, fn)
+        self.face_normals = fn
+
+    @property
+    def num_triangles(self):
+        return len(self.triangles)
+
+    @property
+    def total_area(self):
+        return float(self.face_areas.sum())
+
+    def points_at(self, tri, bary):
+        """Positions at triangle ids (N,) with barycentrics (N,3)."""
+        p = self.vertices[self.triangles[tri]]
+        return np.einsum("nc,ncd->nd", bary, p)
+
+    def normals_at(self, tri, bary, mode="interpolated"):
+        """Unit normals at surface points: 'interpolated' (vertex normals blended, default)
+        or 'face' (the triangle's own normal, the thesis)."""
+        if mode == "face":
+            return self.face_normals[tri].copy()
+        if mode != "interpolated":
+            raise InputError(f"normal_mode: expected 'interpolated' or 'face', got {mode!r}")
+        n = np.einsum("nc,ncd->nd", bary, self.vertex_normals[self.triangles[tri]])
+        # Opposing vertex normals (a fold) can cancel; the face normal is then the honest answer.
+        out, ok = _unit(n, self.face_normals[tri])
+        return out
+
+    def uv_at(self, tri, bary):
+        if self.uv is None:
+            return None
+        return np.einsum("nc,ncd->nd", bary, self.uv[self.triangles[tri]])
+
+    def groups_at(self, tri, bary):
+        """Group id of each surface point: that of the triangle's vertex with the largest weight."""
+        if self.groups is None:
+            return np.zeros(len(tri), np.int32)
+        corner = np.argmax(bary, axis=1)
+        return self.groups[self.triangles[tri, corner]]
+
+    def closest_points(self, points):
+        """Nearest surface point of each query (Q,3): returns (tri (Q,), bary (Q,3), point (Q,3)).
+
+        Brute force over all triangles, one query at a time: meant for a few key roots."""
+        q = check_finite("query points", np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        a, b, c = (self.vertices[self.triangles[:, i]] for i in range(3))
+        tris, barys = [], []
+        for p in q:
+            bary = _closest_on_triangles(p, a, b, c)
+            pts = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
+            i = int(np.argmin(np.einsum("td,td->t", pts - p, pts - p)))
+            tris.append(i)
+            barys.append(bary[i])
+        tri = np.array(tris, np.int64)
+        bary = np.array(barys)
+        return tri, bary, self.points_at(tri, bary)
+
+
+def _closest_on_triangles(p, a, b, c):
+    """Barycentrics of the point of each triangle nearest to p (Ericson, Real-Time Collision
+    Detection §5.1.5), vectorised over triangles; degenerate triangles fall to an edge or vertex."""
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = np.einsum("td,td->t", ab, ap), np.einsum("td,td->t", ac, ap)
+    bp = p - b
+    d3, d4 = np.einsum("td,td->t", ab, bp), np.einsum("td,td->t", ac, bp)
+    cp = p - c
+    d5, d6 = np.einsum("td,td->t", ab, cp), np.einsum("td,td->t", ac, cp)
+    va = d3 * d6 - d5 * d4
+    vb = d5 * d2 - d1 * d6
+    vc = d1 * d4 - d3 * d2
+    n = len(a)
+    out = np.zeros((n, 3))
+    done = np.zeros(n, bool)
+
+    def put(mask, bary):
+        nonlocal done
+        m = mask & ~done
+        out[m] = bary[m] if np.ndim(bary) == 2 else bary
+        done |= m
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        put((d1 <= 0) & (d2 <= 0), np.array([1.0, 0, 0]))
+        put((d3 >= 0) & (d4 <= d3), np.array([0, 1.0, 0]))
+        put((d6 >= 0) & (d5 <= d6), np.array([0, 0, 1.0]))
+        v = np.clip(d1 / (d1 - d3), 0, 1)
+        put((vc <= 0) & (d1 >= 0) & (d3 <= 0), np.stack([1 - v, v, 0 * v], 1))
+        w = np.clip(d2 / (d2 - d6), 0, 1)
+        put((vb <= 0) & (d2 >= 0) & (d6 <= 0), np.stack([1 - w, 0 * w, w], 1))
+        w = np.clip((d4 - d3) / ((d4 - d3) + (d5 - d6)), 0, 1)
+        put((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0), np.stack([0 * w, 1 - w, w], 1))
+        denom = va + vb + vc
+        ok = np.abs(denom) > 0
+        inner = np.stack([va, vb, vc], 1) / np.where(ok, denom, 1.0)[:, None]
+        inner = np.where(ok[:, None] & np.isfinite(inner), inner, np.array([1.0, 0, 0]))
+        put(np.ones(n, bool), inner)
+    return out
+
+
+def default_scalp(rings=13):
+    """A bundled head-shaped scalp made in code: Blender units (metres), Z up, -Y front.
+
+    A cap over the top, back and sides of an ellipsoidal head (half-axes 0.08 m left-right,
+    0.1 m front-back, 0.1 m up) centred at the origin. It is a disc of `rings` concentric
+    rings (6k vertices on ring k, 6·rings² triangles: 1014 for 13) mapped onto the head by an
+    azimuthal projection from the crown, so the crown is an ordinary vertex, not a pole of
+    slivers. The hairline is lower at the back than at the front. UV = the disc, in [0, 1]².
+    """
+    if rings < 1:
+        raise InputError("default_scalp rings: must be >= 1")
+    rho = [np.zeros(1)]
+    az = [np.zeros(1)]
+    for k in range(1, rings + 1):
+        n = 6 * k
+        rho.append(np.full(n, k / rings))
+        az.append(2 * np.pi * np.arange(n) / n)
+    rho, az = np.concatenate(rho), np.concatenate(az)
+    tris = []
+    start = [0]
+    for k in range(1, rings + 1):
+        start.append(start[-1] + (1 if k == 1 else 6 * (k - 1)))
+    for k in range(1, rings + 1):
+        inner_n = 1 if k == 1 else 6 * (k - 1)
+        outer_n = 6 * k
+        i0, o0 = start[k - 1], start[k]
+        if inner_n == 1:
+            for j in range(outer_n):
+                tris.append((i0, o0 + j, o0 + (j + 1) % outer_n))
+            continue
+        # Walk both rings by angle, always advancing the ring whose next vertex comes first.
+        i = j = 0
+        while i < inner_n or j < outer_n:
+            next_i = (i + 1) / inner_n
+            next_j = (j + 1) / outer_n
+            a, b = i0 + i % inner_n, o0 + j % outer_n
+            if j < outer_n and (i >= inner_n or next_j <= next_i):
+                tris.append((a, b, o0 + (j + 1) % outer_n))
+                j += 1
+            else:
+                tris.append((a, b, i0 + (i + 1) % inner_n))
+                i += 1
+    tris = np.array(tris, np.int64)
+    # Hairline: polar angle from the crown, 55° at the front (-Y), 115° at the back (+Y).
+    # Azimuth 0 = +X; the front (-Y) is at -90°.
+    polar_max = np.radians(85.0 + 30.0 * np.sin(az))
+    polar = rho * polar_max
+    d = np.stack([np.sin(polar) * np.cos(az), np.sin(polar) * np.sin(az), np.cos(polar)], 1)
+    verts = d * np.array([0.08, 0.1, 0.1])
+    uv = 0.5 + 0.5 * np.stack([rho * np.cos(az), rho * np.sin(az)], 1)
+    # Counter-clockwise seen from outside: flip any triangle whose normal points inward.
+    p = verts[tris]
+    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    inward = np.einsum("td,td->t", n, p.mean(axis=1)) < 0
+    tris[inward] = tris[inward][:, ::-1]
+    return Scalp(verts, tris, uv=uv)
+
+
+def load_obj(path):
+    """Read a Wavefront .obj: `v`, `vt` and `f` (polygons fan-triangulated; v, v/vt, v//vn,
+    v/vt/vn forms; negative indices count from the end). Returns a Scalp; UVs are kept per
+    vertex when the file gives one UV per position."""
+    path = os.fspath(path)
+    try:
+        with open(path, "r", encoding="utf-8", errors="replace") as f:
+            lines = f.readlines()
+    except OSError as e:
+        raise InputError(f"scalp mesh {path!r}: cannot read it ({e.strerror or e}); check the path") from e
+    verts, uvs, tris, tri_uv = [], [], [], []
+    for no, line in enumerate(lines, 1):
+        parts = line.split()
+        if not parts:
+            continue
+        tag = parts[0]
+        try:
+            if tag == "v":
+                verts.append([float(x) for x in parts[1:4]])
+                if len(verts[-1]) != 3:
+                    raise ValueError("a vertex needs 3 coordinates")
+            elif tag == "vt":
+                uvs.append([float(x) for x in (parts[1:3] + ["0"])[:2]])
+            elif tag == "f":
+                corners = []
+                for item in parts[1:]:
+                    fields = item.split("/")
+                    vi = int(fields[0])
+                    vi = vi - 1 if vi > 0 else len(verts) + vi
+                    ti = None
+                    if len(fields) > 1 and fields[1]:
+                        ti = int(fields[1])
+                        ti = ti - 1 if ti > 0 else len(uvs) + ti
+                    corners.append((vi, ti))
+                for k in range(1, len(corners) - 1):
+                    tri = (corners[0], corners[k], corners[k + 1])
+                    tris.append([c[0] for c in tri])
+                    tri_uv.append([c[1] for c in tri])
+        except ValueError as e:
+            raise InputError(f"scalp mesh {path!r} line {no}: cannot parse {line.strip()!r} ({e})") from e
+    if not verts:
+        raise InputError(f"scalp mesh {path!r}: no vertices ('v' lines); is it an .obj mesh?")
+    if not tris:
+        raise InputError(f"scalp mesh {path!r}: no faces ('f' lines with 3+ corners); a scalp needs triangles")
+    verts = np.array(verts, np.float64)
+    if not np.isfinite(verts).all():
+        bad = int(np.argmax(~np.isfinite(verts).all(axis=1)))
+        raise InputError(f"scalp mesh {path!r}: vertex {bad} has NaN/Inf coordinates; repair the mesh")
+    tris = np.array(tris, np.int64)
+    if tris.min() < 0 or tris.max() >= len(verts):
+        raise InputError(f"scalp mesh {path!r}: a face refers to a vertex that does not exist")
+    uv = None
+    if uvs and all(t is not None for tri in tri_uv for t in tri):
+        uvs = np.array(uvs, np.float64)
+        tuv = np.array(tri_uv, np.int64)
+        if tuv.min() >= 0 and tuv.max() < len(uvs) and np.isfinite(uvs).all():
+            # Per-vertex UV: the last corner using a vertex wins (seams keep one side).
+            uv = np.zeros((len(verts), 2))
+            uv[tris.ravel()] = uvs[tuv.ravel()]
+    return Scalp(verts, tris, uv=uv)

@@ -1,0 +1,126 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Wisps (SPEC §4) and the keys that guide each ordinary strand (SPEC §5).
+
+A strand belongs to the wisp of the key whose ROOT is nearest ("semi-Voronoi"; wisp sizes
+differ). With group ids (a parting), a strand only looks at keys of its own group.
+Each strand gets three guide keys (main, n1, n2) and their weights; see `guide_weights`.
+"""
+import numpy as np
+
+from hairio import InputError
+
+from .params import NEIGHBOUR_MODES
+
+
+def nearest_keys(roots, key_roots, k, root_groups=None, key_groups=None):
+    """The k nearest key roots of every root: (index (S,k) int64, distance (S,k) float64),
+    nearest first; ties go to the lower key index. Keys of another group are never chosen;
+    where a group has fewer than k keys the rest is index -1, distance inf.
+    Chunked over roots so memory stays near 4M distances whatever the key count."""
+    roots = np.asarray(roots, dtype=np.float64)
+    key_roots = np.asarray(key_roots, dtype=np.float64)
+    n_keys = len(key_roots)
+    k_eff = min(k, n_keys)
+    idx = np.full((len(roots), k), -1, np.int64)
+    dist = np.full((len(roots), k), np.inf)
+    chunk = max(1, (1 << 22) // max(n_keys, 1))
+    for lo in range(0, len(roots), chunk):  # chunks of ~4M distances, not strands
+        r = roots[lo:lo + chunk]
+        d = np.sqrt(((r[:, None, :] - key_roots[None, :, :]) ** 2).sum(axis=2))
+        if root_groups is not None:
+            d = np.where(root_groups[lo:lo + chunk, None] == key_groups[None, :], d, np.inf)
+        if k_eff < n_keys:
+            part = np.argpartition(d, k_eff - 1, axis=1)[:, :k_eff]
+            # argpartition is not stable; re-sort the chosen few by (distance, index).
+            part.sort(axis=1)
+            pd = np.take_along_axis(d, part, axis=1)
+            order = np.argsort(pd, axis=1, kind="stable")
+            sel = np.take_along_axis(part, order, axis=1)
+        else:
+            sel = np.argsort(d, axis=1, kind="stable")
+        sd = np.take_along_axis(d, sel, axis=1)
+        sel = np.where(np.isfinite(sd), sel, -1)
+        idx[lo:lo + chunk, :k_eff] = sel
+        dist[lo:lo + chunk, :k_eff] = sd
+    return idx, dist
+
+
+def root_groups_for(scalp, tri, bary, points, params):
+    """Group id per root: the scalp's vertex groups when it has them, else the parting plane
+    of the parameters, else 0."""
+    if scalp.groups is not None:
+        return scalp.groups_at(tri, bary)
+    if params.parting is not None:
+        p = np.asarray(params.parting["point"])
+        n = np.asarray(params.parting["normal"])
+        return ((points - p) @ n > 0).astype(np.int32)
+    return np.zeros(len(points), np.int32)
+
+
+def check_groups(root_groups, key_groups):
+    missing = np.setdiff1d(np.unique(root_groups), np.unique(key_groups))
+    if missing.size:
+        raise InputError(f"key strands: roots fall in group(s) {missing.tolist()} but no key strand has that "
+                         f"group (key groups: {sorted(set(key_groups.tolist()))}); add a key to each group")
+
+
+def _ratio(num, den):
+    """num/den for distances with num <= den; 0/0 = 1 (two keys at one point are equally near)."""
+    safe = np.where(den > 0, den, 1.0)
+    return np.where(den > 0, num / safe, 1.0)
+
+
+def guide_weights(roots, key_roots, mode="root", n_influence=50.0, root_groups=None, key_groups=None):
+    """Guides (S,3) int32 (main, n1, n2 key index) and weights (S,3) float64 summing to 1.
+
+    'root' (reading (b) of SPEC §5): n1, n2 = 2nd and 3rd nearest keys to the strand's root.
+    'key'  (reading (a)): n1, n2 = the two keys nearest the MAIN key's root, fixed per wisp.
+    Both then use the thesis's N-influence: a = (101-N)/d0, b = 1/d1, c = 1/d2, normalised.
+    'interpolate': Blender's Interpolate Curves weighting over the 3 nearest keys with the
+    4th nearest at d_max: w = (d_max - d)/d ∝ 1/d - 1/d_max (d_max = inf when there is no
+    4th key), continuous across wisp borders; n_influence is not used.
+
+    The weights are computed multiplied through by d0, so d0 = 0 gives exactly (1, 0, 0)
+    with no division by zero. A missing neighbour (fewer than 3 keys in the group) repeats
+    the main index with weight 0.
+    """
+    if mode not in NEIGHBOUR_MODES:
+        raise InputError(f"neighbour_mode: expected one of {NEIGHBOUR_MODES}, got {mode!r}")
+    roots = np.asarray(roots, dtype=np.float64)
+    key_roots = np.asarray(key_roots, dtype=np.float64)
+    if key_groups is None:
+        key_groups = np.zeros(len(key_roots), np.int32)
+    if root_groups is None:
+        root_groups = np.zeros(len(roots), np.int32)
+    check_groups(root_groups, key_groups)
+    want = 4 if mode == "interpolate" else 3
+    idx, dist = nearest_keys(roots, key_roots, want, root_groups, key_groups)
+    if mode == "key":
+        # Neighbours of each key among the keys of its own group (excluding itself).
+        kidx, _ = nearest_keys(key_roots, key_roots, 3, key_groups, key_groups)
+        main = idx[:, 0]
+        nb = kidx[main, 1:3]
+        idx = np.concatenate([idx[:, :1], nb], axis=1)
+        safe = np.where(nb >= 0, nb, 0)
+        dnb = np.sqrt(((roots[:, None, :] - key_roots[safe]) ** 2).sum(axis=2))
+        dist = np.concatenate([dist[:, :1], np.where(nb >= 0, dnb, np.inf)], axis=1)
+    d0 = dist[:, :1]
+    present = idx[:, 1:3] >= 0
+    if mode == "interpolate":
+        r = np.where(present, _ratio(d0, np.where(present, dist[:, 1:3], 1.0)), 0.0)
+        inv_max = np.where(idx[:, 3:4] >= 0, _ratio(d0, np.where(idx[:, 3:4] >= 0, dist[:, 3:4], 1.0)), 0.0)
+        w = np.concatenate([1.0 - inv_max, np.where(present, r - inv_max, 0.0)], axis=1)
+        w = np.maximum(w, 0.0)
+        total = w[:, 0:1] + w[:, 1:2] + w[:, 2:3]
+        # All of main and neighbours as far as the 4th key: nothing singles one out; the main wins.
+        flat = total[:, 0] <= 0
+        w[flat] = (1.0, 0.0, 0.0)
+        total[flat] = 1.0
+    else:
+        r = np.where(present, _ratio(d0, np.where(present, dist[:, 1:3], 1.0)), 0.0)
+        w = np.concatenate([np.full_like(d0, 101.0 - n_influence), r], axis=1)
+        total = w[:, 0:1] + w[:, 1:2] + w[:, 2:3]
+    w = w / total
+    idx = idx[:, :3]
+    idx = np.where(idx >= 0, idx, idx[:, :1])
+    return idx.astype(np.int32), w
