@@ -1,0 +1,137 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Strands -> continual cylinders (SPEC §6), whole-array numpy.
+
+Cylinder i of a strand has top P_i, tip P_{i+1}, radius r_i, colour and alpha of point i, and
+is the part of the infinite cylinder of radius r_i around its axis that lies between
+
+    plane 1: through P_i,     normal N1 = P_{i+1} - P_i       keep (p - P_i)·N1 >= 0
+    plane 2: through P_{i+1}, normal N2 = P_{i+2} - P_{i+1}   keep (p - P_{i+1})·N2 <= 0
+
+(the last cylinder of a strand uses its own axis for N2), so consecutive cylinders share a
+plane and never overlap along the strand.
+
+Choices the SPEC leaves open, made here:
+
+* Zero-length segments: a point that repeats its predecessor (closer than `MERGE_EPS`
+  times the scene size) is dropped before cylinders are made, so every axis has a direction
+  and the neighbours of the dropped point share a plane as if it never existed. A strand
+  left with fewer than two distinct points makes no cylinder.
+* Sharp bends: past 90° the shared plane would cut the cylinder into an unbounded piece
+  ((p - P_{i+1})·N2 <= 0 then holds for points far beyond the tip). Where the angle between
+  the two axes exceeds `SHARP_BEND_DEG`, both cylinders end on a plane square to their own
+  axis instead (a flat end cap, like a strand end), which stays bounded.
+* Joint planes vs. end caps: the tracer treats a strand as one solid tube. A ray that enters
+  a cylinder through a plane it shares with its neighbour was already inside the strand, so
+  that entry is no new surface; entering through a strand end (or a sharp-bend cap) is.
+  `flags` bit 0 = plane 1 is a cap, bit 1 = plane 2 is a cap.
+* Past the tip, on the outer side of a bend, a cylinder reaches up to r·tan(angle) beyond
+  P_{i+1}; `extension` records that length so the grid can bound it.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+SHARP_BEND_DEG = 80.0
+_COS_SHARP = np.cos(np.radians(SHARP_BEND_DEG))
+MERGE_EPS = 1e-7
+
+
+@dataclass(frozen=True, eq=False)
+class Cylinders:
+    """Per cylinder (N rows): top, tip (N,3); n2 (N,3) plane-2 normal (unit); radius, alpha (N,);
+    color (N,3); strand (N,) index into the input strands; flags (N,) uint8 (caps, see module);
+    extension (N,) reach past the tip along the axis."""
+    top: np.ndarray
+    tip: np.ndarray
+    n2: np.ndarray
+    radius: np.ndarray
+    color: np.ndarray
+    alpha: np.ndarray
+    strand: np.ndarray
+    flags: np.ndarray
+    extension: np.ndarray
+
+    def __len__(self):
+        return len(self.top)
+
+    @property
+    def axis(self):
+        return self.tip - self.top
+
+    def bounds(self, pad_factor=1.0):
+        """Per-cylinder boxes (lo, hi), each (N,3): the capsule from top to the extended tip,
+        inflated by radius·pad_factor."""
+        axis = self.tip - self.top
+        length = np.sqrt(np.einsum("ij,ij->i", axis, axis))
+        far = self.tip + axis * (self.extension / np.maximum(length, 1e-30))[:, None]
+        r = (self.radius * pad_factor)[:, None]
+        return np.minimum(self.top, far) - r, np.maximum(self.top, far) + r
+
+    def select(self, index):
+        return Cylinders(*(getattr(self, f)[index] for f in _FIELDS))
+
+
+_FIELDS = ("top", "tip", "n2", "radius", "color", "alpha", "strand", "flags", "extension")
+
+
+def _distinct_points(strands):
+    """Mask of points kept: drops points that repeat their predecessor within a strand."""
+    pts = strands.points.astype(np.float64)
+    keep = np.ones(len(pts), bool)
+    if len(pts) < 2:
+        return keep
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    scale = max(float(np.max(hi - lo)), float(np.max(np.abs(pts))) * 1e-3, 1e-30)
+    step = np.linalg.norm(pts[1:] - pts[:-1], axis=1)
+    keep[1:] = step > MERGE_EPS * scale
+    keep[strands.offsets] = True          # a root never repeats anything
+    return keep
+
+
+def strands_to_cylinders(strands):
+    """hairio.Strands -> Cylinders (float32 arrays for the GPU; the reference promotes them)."""
+    counts = strands.counts.astype(np.int64)
+    strand_of_point = np.repeat(np.arange(len(counts)), counts)
+    keep = _distinct_points(strands)
+    pts = strands.points[keep].astype(np.float64)
+    sid = strand_of_point[keep]
+    radius, color, alpha = strands.radius[keep], strands.color[keep], strands.alpha[keep]
+    n = len(pts)
+    if n < 2:
+        return _empty()
+    # Point j starts a cylinder when j+1 belongs to the same strand.
+    starts = np.flatnonzero(sid[:-1] == sid[1:])
+    if not len(starts):
+        return _empty()
+    top, tip = pts[starts], pts[starts + 1]
+    axis = tip - top
+    u1 = axis / np.linalg.norm(axis, axis=1)[:, None]
+    has_next = np.zeros(len(starts), bool)
+    nxt_ok = starts + 2 < n
+    has_next[nxt_ok] = sid[starts[nxt_ok] + 2] == sid[starts[nxt_ok]]
+    u2 = u1.copy()
+    nxt = starts[has_next] + 2
+    d2 = pts[nxt] - pts[nxt - 1]
+    u2[has_next] = d2 / np.linalg.norm(d2, axis=1)[:, None]
+    cosang = np.einsum("ij,ij->i", u1, u2)
+    sharp = has_next & (cosang < _COS_SHARP)
+    u2[sharp] = u1[sharp]
+    cosang = np.where(sharp, 1.0, cosang)
+    # Plane 1 of cylinder k is plane 2 of cylinder k-1 unless k is a strand's first or the
+    # joint is sharp; both of those make it a cap.
+    first = np.ones(len(starts), bool)
+    first[1:] = ~has_next[:-1] | sharp[:-1]
+    flags = first.astype(np.uint8) | ((~has_next | sharp).astype(np.uint8) << 1)
+    r = radius[starts].astype(np.float64)
+    ext = r * np.sqrt(np.maximum(0.0, 1.0 - cosang ** 2)) / np.maximum(cosang, _COS_SHARP)
+    return Cylinders(
+        top=top.astype(np.float32), tip=tip.astype(np.float32), n2=u2.astype(np.float32),
+        radius=r.astype(np.float32), color=np.ascontiguousarray(color[starts], np.float32),
+        alpha=alpha[starts].astype(np.float32), strand=sid[starts].astype(np.int32),
+        flags=flags, extension=ext.astype(np.float32))
+
+
+def _empty():
+    z3 = np.zeros((0, 3), np.float32)
+    z = np.zeros(0, np.float32)
+    return Cylinders(z3, z3, z3, z, z3, z, np.zeros(0, np.int32), np.zeros(0, np.uint8), z)

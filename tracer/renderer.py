@@ -1,0 +1,326 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The GPU tracer: one headless (EGL) OpenGL 3.3 core context per process, scene data in
+float textures, one fragment shader that traces every pixel.
+
+Only `set_strands`/`update_strands` upload; a render with a new camera, light or setting
+sends uniforms and nothing else (`stats["bytes_uploaded"]` proves it).
+"""
+import pathlib
+import time
+
+import numpy as np
+
+from hairio import InputError, Strands
+from .cylinders import strands_to_cylinders
+from .grid import build_grid
+from .settings import GRID_WIDEN_CAP, RenderSettings
+
+TEX_W = 4096       # texels per row of every per-cylinder texture; the shader's texel() agrees
+SHADER_DIR = pathlib.Path(__file__).resolve().parent / "shaders"
+
+_VERTEX = """#version 330 core
+void main() {   // one triangle that covers the screen; the scissor picks the pixels
+    vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
+    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
+}
+"""
+
+_CONTEXT = None
+
+
+def shared_context():
+    """The process's one standalone EGL context (created on first use)."""
+    global _CONTEXT
+    if _CONTEXT is None:
+        import moderngl
+        try:
+            _CONTEXT = moderngl.create_standalone_context(backend="egl", require=330)
+        except Exception as e:   # no EGL, no driver: say what is missing
+            raise RuntimeError(f"tracer: cannot create a headless OpenGL 3.3 context through EGL ({e}); "
+                               "install Mesa's EGL (libegl1) or a GPU driver") from e
+    return _CONTEXT
+
+
+def load_shader(name):
+    return (SHADER_DIR / name).read_text()
+
+
+def _rows(n):
+    return max(1, -(-n // TEX_W))
+
+
+def _pad_rows(a, rows):
+    """Pad a (N, C) array to rows*TEX_W rows (zeros)."""
+    out = np.zeros((rows * TEX_W, a.shape[1]), np.float32)
+    out[:len(a)] = a
+    return out
+
+
+class Renderer:
+    def __init__(self):
+        self.ctx = shared_context()
+        self._programs = {}
+        self._fbos = {}
+        self._tex = {}
+        self.cylinders = None
+        self.grid = None
+        self.strands = None
+        self.all_opaque = True
+        self.stats = {"bytes_uploaded": 0, "uploads": 0, "upload_s": 0.0, "grid_s": 0.0,
+                      "render_s": 0.0, "renders": 0}
+
+    # --- data ---------------------------------------------------------------------------
+    def set_strands(self, strands):
+        """Upload `strands` (hairio.Strands) and build the grid."""
+        if not isinstance(strands, Strands):
+            raise InputError(f"strands: expected hairio.Strands, got {type(strands).__name__}; "
+                             "build one with Strands.from_arrays")
+        t0 = time.perf_counter()
+        self.strands = strands
+        self.cylinders = strands_to_cylinders(strands)
+        t1 = time.perf_counter()
+        self._upload_cylinders(0, len(self.cylinders), full=True)
+        t2 = time.perf_counter()
+        self._build_and_upload_grid()
+        self.stats["cylinders_s"] = t1 - t0
+        self.stats["upload_s"] = t2 - t1 + self.stats.pop("_grid_upload_s")
+        self.stats["num_cylinders"] = len(self.cylinders)
+
+    def update_strands(self, strand_ids, strands):
+        """`strands` is the whole new set; only strands `strand_ids` changed. When their point
+        counts are unchanged, only their cylinders' texture rows are re-uploaded (and the grid
+        is rebuilt, which is cheap); otherwise everything is uploaded again."""
+        if self.strands is None or not isinstance(strands, Strands) \
+                or not np.array_equal(strands.counts, self.strands.counts):
+            self.set_strands(strands)
+            return
+        ids = np.unique(np.asarray(strand_ids, np.int64))
+        if ids.size and (ids[0] < 0 or ids[-1] >= strands.num_strands):
+            raise InputError(f"strand_ids: values must lie in [0, {strands.num_strands}); got {ids.min()}..{ids.max()}")
+        if not ids.size:
+            self.strands = strands
+            return
+        t0 = time.perf_counter()
+        sub = _select_strands(strands, ids)
+        new = strands_to_cylinders(sub)
+        old = self.cylinders
+        per_strand_old = np.bincount(old.strand, minlength=strands.num_strands)
+        first_old = np.concatenate([[0], np.cumsum(per_strand_old)])
+        per_new = np.bincount(new.strand, minlength=len(ids))
+        if not np.array_equal(per_new, per_strand_old[ids]):
+            self.set_strands(strands)    # a zero-length segment appeared or vanished
+            return
+        # Positions of the changed cylinders in the full arrays.
+        dest = np.repeat(first_old[ids], per_new) + (np.arange(len(new)) - np.repeat(
+            np.cumsum(per_new) - per_new, per_new))
+        for f in ("top", "tip", "n2", "radius", "color", "alpha", "flags", "extension"):
+            getattr(old, f)[dest] = getattr(new, f)
+        self.strands = strands
+        t1 = time.perf_counter()
+        rows = np.unique(dest // TEX_W)
+        # Consecutive rows go up in one write.
+        breaks = np.flatnonzero(np.diff(rows) > 1)
+        for a, b in zip(np.concatenate([[0], breaks + 1]), np.concatenate([breaks, [len(rows) - 1]])):
+            self._upload_cylinders(int(rows[a]) * TEX_W, min(len(old), (int(rows[b]) + 1) * TEX_W))
+        t2 = time.perf_counter()
+        self._build_and_upload_grid()
+        self.stats["cylinders_s"] = t1 - t0
+        self.stats["upload_s"] = t2 - t1 + self.stats.pop("_grid_upload_s")
+
+    def _texture(self, name, size, components, dtype, data):
+        old = self._tex.get(name)
+        if old is not None:
+            old.release()
+        if len(size) == 3:
+            tex = self.ctx.texture3d(size, components, data, dtype=dtype)
+        else:
+            tex = self.ctx.texture(size, components, data, dtype=dtype)
+        import moderngl
+        tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self._tex[name] = tex
+        self.stats["bytes_uploaded"] += len(data)
+        return tex
+
+    def _cylinder_blocks(self, a, b):
+        c = self.cylinders
+        return {
+            "tex_top": np.column_stack([c.top[a:b], c.radius[a:b]]),
+            "tex_tip": np.column_stack([c.tip[a:b], c.alpha[a:b]]),
+            "tex_n2": np.column_stack([c.n2[a:b], c.flags[a:b].astype(np.float32)]),
+            "tex_col": np.column_stack([c.color[a:b], np.zeros(b - a, np.float32)]),
+        }
+
+    def _upload_cylinders(self, a, b, full=False):
+        n = len(self.cylinders)
+        self.stats["uploads"] += 1
+        self.all_opaque = bool(n == 0 or self.cylinders.alpha.min() >= 1.0)
+        rows = _rows(n)
+        for name, block in self._cylinder_blocks(a, b).items():
+            block = np.ascontiguousarray(block, np.float32)
+            if full:
+                self._texture(name, (TEX_W, rows), 4, "f4", _pad_rows(block, rows).tobytes())
+            else:
+                r0, r1 = a // TEX_W, _rows(b)
+                data = _pad_rows(block, r1 - r0).tobytes()
+                self._tex[name].write(data, viewport=(0, r0, TEX_W, r1 - r0))
+                self.stats["bytes_uploaded"] += len(data)
+
+    def _build_and_upload_grid(self):
+        t0 = time.perf_counter()
+        self.grid = build_grid(self.cylinders, pad_factor=GRID_WIDEN_CAP)
+        t1 = time.perf_counter()
+        g = self.grid
+        idx = np.zeros(_rows(len(g.indices)) * TEX_W, np.int32)
+        idx[:len(g.indices)] = g.indices
+        self._texture("tex_idx", (TEX_W, _rows(len(g.indices))), 1, "i4", idx.tobytes())
+        cells = np.column_stack([g.cell_start, g.cell_count]).astype(np.int32)
+        self._texture("tex_cell", tuple(int(x) for x in g.dims), 2, "i4", cells.tobytes())
+        self.stats["grid_s"] = t1 - t0
+        self.stats["_grid_upload_s"] = time.perf_counter() - t1
+        self.stats["grid_dims"] = tuple(int(x) for x in g.dims)
+        self.stats["grid_refs"] = len(g.indices)
+        self.stats["cylinders_per_full_cell"], self.stats["full_cell_fraction"] = g.occupancy()
+
+    # --- rendering ----------------------------------------------------------------------
+    def _program(self, settings, camera, layers):
+        key = (layers, settings.shadows and (1 if settings.shadow_mode == "hard" else 2),
+               settings.shading, len(settings.lights), settings.spp_n, settings.min_pixel_width,
+               camera.type, settings.count)
+        prog = self._programs.get(key)
+        if prog is None:
+            defines = {
+                "LAYERS": layers,
+                "SHADOWS": int(key[1] or 0),
+                "SHADING_KK": int(settings.shading == "kajiya-kay"),
+                "NUM_LIGHTS": len(settings.lights),
+                "SPP_N": settings.spp_n,
+                "MIN_PX": int(settings.min_pixel_width),
+                "ORTHO": int(camera.type == "ORTHO"),
+                "COUNT": int(settings.count),
+            }
+            head = "#version 330 core\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items())
+            prog = self.ctx.program(vertex_shader=_VERTEX, fragment_shader=head + load_shader("trace.glsl"))
+            vao = self.ctx.vertex_array(prog, [])
+            prog = (prog, vao)
+            self._programs[key] = prog
+        return prog
+
+    def effective_layers(self, settings):
+        """One layer when every alpha is 1 and nothing lowers it (minimum pixel width does)."""
+        if self.all_opaque and not settings.min_pixel_width:
+            return 1
+        return settings.layers
+
+    def _framebuffer(self, w, h, count):
+        key = (w, h, count)
+        fbo = self._fbos.get(key)
+        if fbo is None:
+            atts = [self.ctx.texture((w, h), 4, dtype="f4")]
+            if count:
+                atts.append(self.ctx.texture((w, h), 4, dtype="f4"))
+            fbo = self.ctx.framebuffer(color_attachments=atts)
+            self._fbos[key] = fbo
+        return fbo
+
+    def screen_bounds(self, camera):
+        """Pixel rectangle (x0, y0, x1, y1), y from the top, that the grid box can cover;
+        None when nothing can be seen."""
+        if self.cylinders is None or len(self.cylinders) == 0:
+            return None
+        lo, hi = self.grid.lo, self.grid.hi
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        w, h = camera.size
+        x, y, depth = camera.project(corners)
+        if camera.type == "PERSP" and np.any(depth <= 1e-9 * (1 + np.abs(corners).max())):
+            return 0, 0, w, h         # the box reaches behind the camera: no projection bound
+        if camera.type == "ORTHO" and np.all(depth < 0):
+            return None
+        x0 = int(np.clip(np.floor(x.min()) - 1, 0, w))
+        x1 = int(np.clip(np.ceil(x.max()) + 1, 0, w))
+        y0 = int(np.clip(np.floor(y.min()) - 1, 0, h))
+        y1 = int(np.clip(np.ceil(y.max()) + 1, 0, h))
+        if x0 >= x1 or y0 >= y1:
+            return None
+        return x0, y0, x1, y1
+
+    def render(self, camera, settings=None):
+        """(H, W, 4) float32 linear RGBA, premultiplied, row 0 = top of the image."""
+        settings = settings or RenderSettings()
+        settings.check()
+        if self.cylinders is None:
+            raise InputError("render: no strands; call set_strands first")
+        t0 = time.perf_counter()
+        w, h = camera.size
+        bg = settings.premultiplied_background()
+        fbo = self._framebuffer(w, h, settings.count)
+        fbo.use()
+        self.ctx.scissor = None
+        fbo.clear(*bg)
+        box = self.screen_bounds(camera)
+        layers = self.effective_layers(settings)
+        counts = np.zeros(4)
+        if box is not None:
+            prog, vao = self._program(settings, camera, layers)
+            self._set_uniforms(prog, camera, settings)
+            x0, y0, x1, y1 = box
+            step = settings.tile
+            for ty in range(y0, y1, step):
+                for tx in range(x0, x1, step):
+                    tw, th = min(step, x1 - tx), min(step, y1 - ty)
+                    # GL's window origin is the bottom-left corner.
+                    self.ctx.scissor = (tx, h - ty - th, tw, th)
+                    vao.render(vertices=3)
+                    if (x1 - x0) * (y1 - y0) > step * step:
+                        self.ctx.finish()
+            self.ctx.scissor = None
+            if settings.count:
+                raw = fbo.read(viewport=(x0, h - y1, x1 - x0, y1 - y0), components=4, dtype="f4", attachment=1)
+                counts = np.frombuffer(raw, np.float32).reshape(-1, 4).sum(axis=0, dtype=np.float64)
+        raw = fbo.read(components=4, dtype="f4", attachment=0)
+        img = np.frombuffer(raw, np.float32).reshape(h, w, 4)[::-1].copy()
+        dt = time.perf_counter() - t0
+        self.stats.update(render_s=dt, renders=self.stats["renders"] + 1, layers_max=layers,
+                          screen_box=box,
+                          traversed_pixels=0 if box is None else (box[2] - box[0]) * (box[3] - box[1]))
+        if settings.count:
+            self.stats.update(shadow_rays=int(counts[0]), layers_traced=int(counts[1]),
+                              cells_visited=int(counts[2]), cylinder_tests=int(counts[3]))
+        return img
+
+    def _set_uniforms(self, prog, camera, settings):
+        g = self.grid
+        for i, name in enumerate(("tex_top", "tex_tip", "tex_n2", "tex_col", "tex_idx", "tex_cell")):
+            self._tex[name].use(location=i)
+            _set(prog, name, i)
+        _set(prog, "grid_lo", tuple(float(x) for x in g.lo))
+        _set(prog, "cell_size", tuple(float(x) for x in g.cell_size))
+        _set(prog, "dims", tuple(int(x) for x in g.dims))
+        _set(prog, "cam_pos", tuple(float(x) for x in camera.position))
+        _set(prog, "cam_rot", tuple(float(x) for x in camera.rotation.T.ravel()))
+        _set(prog, "pixel_size", float(camera.pixel_size))
+        _set(prog, "shift_px", tuple(float(x) for x in camera.shift_px))
+        _set(prog, "image_size", (float(camera.size[0]), float(camera.size[1])))
+        packed = [light.packed() for light in settings.lights]
+        if "light_vec" in prog:
+            prog["light_vec"].write(np.array([p[0] for p in packed], np.float32).tobytes())
+        if "light_col" in prog:
+            prog["light_col"].write(np.array([p[1] for p in packed], np.float32).tobytes())
+        _set(prog, "background", settings.premultiplied_background())
+        _set(prog, "material", (settings.ambient, settings.diffuse, settings.specular, settings.shininess))
+        _set(prog, "mpw_cap", float(settings.min_pixel_width_cap))
+        _set(prog, "t_eps", float(settings.transmittance_eps))
+
+
+def _set(prog, name, value):
+    # The GLSL compiler drops uniforms a variant does not use.
+    if name in prog:
+        prog[name].value = value
+
+
+def _select_strands(strands, ids):
+    """The sub-set of strands `ids` (sorted), as a Strands (already validated data)."""
+    offsets = strands.offsets
+    counts = strands.counts[ids].astype(np.int64)
+    pts = np.repeat(offsets[ids], counts) + (np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts))
+    return Strands(strands.points[pts], strands.counts[ids], strands.radius[pts], strands.color[pts],
+                   strands.alpha[pts], strands.wisp[ids])

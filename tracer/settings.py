@@ -1,0 +1,93 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Lights and render settings shared by the GPU tracer and the reference tracer."""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hairio import InputError
+
+MAX_LIGHTS = 8
+
+
+@dataclass(frozen=True)
+class Light:
+    """kind "directional": `vector` is the direction the light travels (a sun shining down is
+    (0, 0, -1)); kind "point": `vector` is the position. No fall-off with distance: the thesis's
+    Phong model uses a constant light intensity Il = color * intensity."""
+    kind: str = "directional"
+    vector: tuple = (0.4, 0.6, -1.0)
+    color: tuple = (1.0, 1.0, 1.0)
+    intensity: float = 1.0
+
+    def packed(self):
+        """(vec4, rgb) as the shader wants them: w = 1 for a point light."""
+        v = np.asarray(self.vector, np.float64)
+        if self.kind == "directional":
+            v = v / np.linalg.norm(v)
+            return (*v, 0.0), tuple(np.asarray(self.color, np.float64) * self.intensity)
+        return (*v, 1.0), tuple(np.asarray(self.color, np.float64) * self.intensity)
+
+    def check(self):
+        if self.kind not in ("directional", "point"):
+            raise InputError(f"light kind: {self.kind!r}; use 'directional' or 'point'")
+        v = np.asarray(self.vector, np.float64)
+        if v.shape != (3,) or not np.all(np.isfinite(v)):
+            raise InputError(f"light vector: {self.vector}; expected three finite numbers")
+        if self.kind == "directional" and np.linalg.norm(v) == 0:
+            raise InputError("light vector: a directional light needs a non-zero direction")
+        c = np.asarray(self.color, np.float64)
+        if c.shape != (3,) or not np.all(np.isfinite(c)) or not np.isfinite(self.intensity):
+            raise InputError(f"light color/intensity: {self.color}, {self.intensity}; expected finite values")
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    spp: int = 1                      # samples per pixel, a square (1, 4, 9, 16, ...)
+    shadows: bool = True
+    shadow_mode: str = "hard"         # "hard": any hit darkens; "transmittance": product of (1 - alpha)
+    layers: int = 4                   # alpha layers composited front to back
+    shading: str = "kajiya-kay"       # or "phong"
+    lights: tuple = field(default_factory=lambda: (Light(),))
+    background: tuple = (0.0, 0.0, 0.0, 0.0)   # straight RGBA; alpha 0 = transparent
+    min_pixel_width: bool = False
+    min_pixel_width_cap: float = 4.0  # largest r'/r; the grid is built for up to GRID_WIDEN_CAP
+    ambient: float = 0.08
+    diffuse: float = 0.8
+    specular: float = 0.25
+    shininess: float = 40.0
+    transmittance_eps: float = 1e-3   # stop compositing (and shadow products) below this
+    tile: int = 512                   # pixels per side of one draw call (GPU watchdogs)
+    count: bool = False               # write per-pixel work counters into Renderer.stats
+
+    @property
+    def spp_n(self):
+        return int(round(np.sqrt(self.spp)))
+
+    def check(self):
+        if self.spp < 1 or self.spp_n ** 2 != self.spp:
+            raise InputError(f"spp: {self.spp}; use a square number (1, 4, 9, 16, ...) for stratified sampling")
+        if self.shadow_mode not in ("hard", "transmittance"):
+            raise InputError(f"shadow_mode: {self.shadow_mode!r}; use 'hard' or 'transmittance'")
+        if self.shading not in ("phong", "kajiya-kay"):
+            raise InputError(f"shading: {self.shading!r}; use 'phong' or 'kajiya-kay'")
+        if not 1 <= self.layers <= 64:
+            raise InputError(f"layers: {self.layers}; use 1..64")
+        if not 1 <= len(self.lights) <= MAX_LIGHTS:
+            raise InputError(f"lights: {len(self.lights)} given; use 1..{MAX_LIGHTS}")
+        for light in self.lights:
+            light.check()
+        if not 1.0 <= self.min_pixel_width_cap <= GRID_WIDEN_CAP:
+            raise InputError(f"min_pixel_width_cap: {self.min_pixel_width_cap}; use 1..{GRID_WIDEN_CAP}")
+        if len(self.background) != 4 or not np.all(np.isfinite(self.background)):
+            raise InputError(f"background: {self.background}; expected four finite numbers (RGBA)")
+        if self.tile < 16:
+            raise InputError(f"tile: {self.tile}; use >= 16 pixels")
+
+    def premultiplied_background(self):
+        r, g, b, a = (float(x) for x in self.background)
+        return (r * a, g * a, b * a, a)
+
+
+# The grid lists every cylinder with its radius times this factor, so minimum pixel width can
+# widen a radius up to it without hits falling outside the cells the cylinder is listed in.
+GRID_WIDEN_CAP = 8.0

@@ -1,0 +1,316 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+// Ray tracer of continual cylinders (SPEC §7), one fragment per pixel.
+// The host prepends "#version 330 core" and these compile-time switches:
+//   LAYERS        hits composited front to back (1 when every alpha is 1)
+//   SHADOWS       0: no shadow code at all; 1: hard (any hit); 2: transmittance
+//   SHADING_KK    1: Kajiya-Kay, 0: Phong
+//   NUM_LIGHTS    1..MAX
+//   SPP_N         samples per pixel = SPP_N * SPP_N (stratified, jittered by a fixed hash)
+//   MIN_PX        1: widen radii to half a pixel (alpha scaled by r / r')
+//   ORTHO         1: orthographic camera
+//   COUNT         1: write per-pixel work counters to a second target
+
+uniform sampler2D tex_top;    // xyz top, w radius
+uniform sampler2D tex_tip;    // xyz tip, w alpha
+uniform sampler2D tex_n2;     // xyz unit normal of plane 2, w cap flags
+uniform sampler2D tex_col;    // rgb colour
+uniform isampler2D tex_idx;   // cell lists (CSR), cylinder ids
+uniform isampler3D tex_cell;  // per cell: x = first slot, y = count
+
+uniform vec3 grid_lo;
+uniform vec3 cell_size;
+uniform ivec3 dims;
+
+uniform vec3 cam_pos;
+uniform mat3 cam_rot;
+uniform float pixel_size;
+uniform vec2 shift_px;
+uniform vec2 image_size;
+
+uniform vec4 light_vec[NUM_LIGHTS];   // w = 0: xyz is the direction light travels; w = 1: position
+uniform vec3 light_col[NUM_LIGHTS];
+uniform vec4 background;              // premultiplied
+uniform vec4 material;                // ambient, diffuse, specular, shininess
+uniform float mpw_cap;                // largest widening factor r'/r
+uniform float t_eps;                  // stop compositing once transmittance drops below this
+
+layout(location = 0) out vec4 frag_color;
+#if COUNT
+layout(location = 1) out vec4 frag_count;   // shadow rays, layers, cells visited, cylinder tests
+vec4 counter = vec4(0.0);
+#endif
+
+const float BIG = 1e30;
+
+ivec2 texel(int i) { return ivec2(i & 4095, i >> 12); }
+
+// Fixed per-sample hash (lowbias32); the reference tracer computes the same integers.
+uint hash32(uint x) {
+    x ^= x >> 16; x *= 0x7feb352du;
+    x ^= x >> 15; x *= 0x846ca68bu;
+    x ^= x >> 16; return x;
+}
+
+// Ray vs one cut cylinder, treated as a solid: the infinite solid cylinder intersected with
+// the two half-spaces of its planes. Returns the entry distance along the ray (or -1), the
+// surface it enters through (0 side, 1 plane 1, 2 plane 2), and the alpha scale of the
+// minimum pixel width. An entry through a plane shared with the neighbouring cylinder is no
+// surface: the ray was inside the strand already.
+float hit_cylinder(int id, vec3 o, vec3 d, float widen_per_t, float widen_const,
+                   out int surf, out float ascale) {
+    vec4 A4 = texelFetch(tex_top, texel(id), 0);
+    vec4 B4 = texelFetch(tex_tip, texel(id), 0);
+    vec4 N4 = texelFetch(tex_n2, texel(id), 0);
+    vec3 A = A4.xyz, ax = B4.xyz - A4.xyz;
+    // Move the origin to the point of the ray nearest the cylinder's middle: the quadratic
+    // then works with lengths of the cylinder's size, not the camera distance, so float32
+    // keeps its digits for thin, distant hair. The shift is added back at the end.
+    float tc = dot(A + 0.5 * ax - o, d);
+    vec3 w = o + tc * d - A;
+    float r = A4.w;
+    ascale = 1.0;
+#if MIN_PX
+    // Decided once per ray and cylinder, at the shift point's distance.
+    float want = widen_const + widen_per_t * abs(tc);
+    float rw = clamp(want, r, r * mpw_cap);
+    ascale = r / max(rw, 1e-30);
+    r = rw;
+#endif
+    float L2 = dot(ax, ax);
+    float dn = dot(d, ax), wn = dot(w, ax);
+    vec3 dp = d - ax * (dn / L2);
+    vec3 wp = w - ax * (wn / L2);
+    float a = dot(dp, dp), b = dot(dp, wp), c = dot(wp, wp) - r * r;
+    float tin, tout;
+    surf = 0;
+    if (a < 1e-12) {            // parallel to the axis: inside the tube everywhere or nowhere
+        if (c > 0.0) return -1.0;
+        tin = -BIG; tout = BIG;
+    } else {
+        float disc = b * b - a * c;
+        if (disc < 0.0) return -1.0;   // also every grazing miss: no sqrt of a negative
+        float s = sqrt(disc);
+        tin = (-b - s) / a; tout = (-b + s) / a;
+    }
+    // Plane 1 keeps (p - A)·ax >= 0, i.e. t·dn >= -wn.
+    if (dn > 0.0) { float t1 = -wn / dn; if (t1 > tin) { tin = t1; surf = 1; } }
+    else if (dn < 0.0) tout = min(tout, -wn / dn);
+    else if (wn < 0.0) return -1.0;
+    // Plane 2 keeps (p - B)·n2 <= 0, i.e. t·(d·n2) <= (ax - w)·n2.
+    float d2 = dot(d, N4.xyz), w2 = dot(ax - w, N4.xyz);
+    if (d2 < 0.0) { float t2 = w2 / d2; if (t2 > tin) { tin = t2; surf = 2; } }
+    else if (d2 > 0.0) tout = min(tout, w2 / d2);
+    else if (w2 < 0.0) return -1.0;
+    if (tin > tout) return -1.0;
+    int flags = int(N4.w + 0.5);
+    if (surf == 1 && (flags & 1) == 0) return -1.0;
+    if (surf == 2 && (flags & 2) == 0) return -1.0;
+    return tc + tin;
+}
+
+// Slab test against the grid box; false when the ray misses it within [tmin, tmax].
+bool enter_grid(vec3 o, vec3 inv, inout float t0, inout float t1) {
+    vec3 hi = grid_lo + cell_size * vec3(dims);
+    vec3 ta = (grid_lo - o) * inv, tb = (hi - o) * inv;
+    vec3 tn = min(ta, tb), tf = max(ta, tb);
+    t0 = max(t0, max(tn.x, max(tn.y, tn.z)));
+    t1 = min(t1, min(tf.x, min(tf.y, tf.z)));
+    return t0 <= t1;
+}
+
+// Axis zero components get a tiny same-sign stand-in so 1/d stays finite (no inf - inf).
+vec3 safe_inverse(vec3 d) {
+    vec3 s = mix(vec3(1.0), sign(d), notEqual(d, vec3(0.0)));
+    return 1.0 / (s * max(abs(d), vec3(1e-30)));
+}
+
+#if SHADOWS
+// Transmittance toward a light from p (1 = lit). Hard mode stops at the first hit anywhere;
+// transmittance mode multiplies (1 - alpha) of every cylinder hit, each counted once (in the
+// cell that holds its entry point).
+float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin) {
+#if COUNT
+    counter.x += 1.0;
+#endif
+    vec3 inv = safe_inverse(d);
+    float t0 = 0.0, t1 = tmax;
+    if (!enter_grid(p, inv, t0, t1)) return 1.0;
+    vec3 pe = (p + t0 * d - grid_lo) / cell_size;
+    ivec3 cell = clamp(ivec3(floor(pe)), ivec3(0), dims - 1);
+    ivec3 stp = ivec3(sign(d));
+    vec3 tdelta = abs(cell_size * inv);
+    vec3 tnext = (grid_lo + (vec3(cell) + step(0.0, d)) * cell_size - p) * inv;
+    float tcur = t0;
+    float trans = 1.0;
+    int guard = dims.x + dims.y + dims.z + 3;
+    for (int it = 0; it < guard; ++it) {
+        float texit = min(min(tnext.x, tnext.y), min(tnext.z, t1));
+        ivec2 sc = texelFetch(tex_cell, cell, 0).xy;
+#if COUNT
+        counter.z += 1.0; counter.w += float(sc.y);
+#endif
+        for (int k = 0; k < sc.y; ++k) {
+            int id = texelFetch(tex_idx, texel(sc.x + k), 0).x;
+            if (id == own) continue;
+            int surf; float asc;
+            float t = hit_cylinder(id, p, d, 0.0, 0.0, surf, asc);
+#if SHADOWS == 1
+            if (t > tmin && t < tmax) return 0.0;
+#else
+            if (t > tmin && t >= tcur && t <= texit && t < tmax) {
+                trans *= 1.0 - texelFetch(tex_tip, texel(id), 0).w;
+                if (trans < t_eps) return 0.0;
+            }
+#endif
+        }
+        if (texit >= t1) break;
+        tcur = texit;
+        if (tnext.x <= tnext.y && tnext.x <= tnext.z) { cell.x += stp.x; tnext.x += tdelta.x; if (cell.x < 0 || cell.x >= dims.x) break; }
+        else if (tnext.y <= tnext.z) { cell.y += stp.y; tnext.y += tdelta.y; if (cell.y < 0 || cell.y >= dims.y) break; }
+        else { cell.z += stp.z; tnext.z += tdelta.z; if (cell.z < 0 || cell.z >= dims.z) break; }
+    }
+    return trans;
+}
+#endif
+
+vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
+    vec4 A4 = texelFetch(tex_top, texel(id), 0);
+    vec4 B4 = texelFetch(tex_tip, texel(id), 0);
+    vec3 col = texelFetch(tex_col, texel(id), 0).rgb;
+    vec3 ax = B4.xyz - A4.xyz;
+    vec3 T = normalize(ax);
+    vec3 p = o + t * d;
+#if !SHADING_KK
+    vec3 N;
+    if (surf == 0) {
+        // SPEC §7: N = ((top - tip) x (p - tip)) x (top - tip), i.e. the part of p - tip
+        // square to the axis.
+        vec3 q = p - B4.xyz;
+        N = q - T * dot(q, T);
+    } else if (surf == 1) {
+        N = -T;
+    } else {
+        N = texelFetch(tex_n2, texel(id), 0).xyz;
+    }
+    float nl = length(N);
+    N = nl > 0.0 ? N / nl : -d;
+    if (dot(N, d) > 0.0) N = -N;
+#endif
+    vec3 result = material.x * col;
+    for (int l = 0; l < NUM_LIGHTS; ++l) {
+        vec3 L; float dist;
+        if (light_vec[l].w > 0.5) { L = light_vec[l].xyz - p; dist = length(L); L /= max(dist, 1e-30); }
+        else { L = -light_vec[l].xyz; dist = BIG; }
+        float lit = 1.0;
+#if SHADOWS
+        lit = shadow_ray(p, L, dist, id, 1e-3 * A4.w);
+        if (lit <= 0.0) continue;
+#endif
+#if SHADING_KK
+        float tl = dot(T, L), tv = dot(T, d);
+        float sl = sqrt(max(0.0, 1.0 - tl * tl)), sv = sqrt(max(0.0, 1.0 - tv * tv));
+        float diff = sl;
+        float spec = pow(max(0.0, tl * tv + sl * sv), material.w);
+#else
+        float diff = max(dot(N, L), 0.0);
+        vec3 R = reflect(-L, N);
+        float spec = diff > 0.0 ? pow(max(dot(R, -d), 0.0), material.w) : 0.0;
+#endif
+        result += lit * light_col[l] * (material.y * diff * col + material.z * spec);
+    }
+    return result;
+}
+
+// Front-to-back compositing along one primary ray; returns premultiplied RGBA.
+vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
+    vec3 inv = safe_inverse(d);
+    float t0 = 0.0, t1 = BIG;
+    vec3 C = vec3(0.0);
+    float T = 1.0;
+    if (enter_grid(o, inv, t0, t1)) {
+        vec3 pe = (o + t0 * d - grid_lo) / cell_size;
+        ivec3 cell = clamp(ivec3(floor(pe)), ivec3(0), dims - 1);
+        ivec3 stp = ivec3(sign(d));
+        vec3 tdelta = abs(cell_size * inv);
+        vec3 tnext = (grid_lo + (vec3(cell) + step(0.0, d)) * cell_size - o) * inv;
+        float tcur = t0;
+        float tlast = 0.0;
+        int layers = 0;
+        int guard = dims.x + dims.y + dims.z + 3;
+        for (int it = 0; it < guard; ++it) {
+            float texit = min(min(tnext.x, tnext.y), min(tnext.z, t1));
+            ivec2 sc = texelFetch(tex_cell, cell, 0).xy;
+#if COUNT
+            counter.z += 1.0;
+#endif
+            // Take this cell's hits nearest first; a hit outside [tcur, texit] belongs to
+            // another cell the cylinder also lies in.
+            while (sc.y > 0) {
+                float best = texit;
+                int bid = -1, bsurf = 0; float basc = 1.0;
+                for (int k = 0; k < sc.y; ++k) {
+                    int id = texelFetch(tex_idx, texel(sc.x + k), 0).x;
+                    int surf; float asc;
+                    float t = hit_cylinder(id, o, d, widen_per_t, widen_const, surf, asc);
+                    if (t > tlast && t >= tcur && t <= best) { best = t; bid = id; bsurf = surf; basc = asc; }
+                }
+#if COUNT
+                counter.w += float(sc.y);
+#endif
+                if (bid < 0) break;
+                float alpha = texelFetch(tex_tip, texel(bid), 0).w * basc;
+                C += T * alpha * shade(bid, bsurf, o, d, best);
+                T *= 1.0 - alpha;
+                tlast = best;
+                ++layers;
+#if COUNT
+                counter.y += 1.0;
+#endif
+                if (layers >= LAYERS || T < t_eps) { it = guard; break; }
+            }
+            if (it >= guard || texit >= t1) break;
+            tcur = texit;
+            if (tnext.x <= tnext.y && tnext.x <= tnext.z) { cell.x += stp.x; tnext.x += tdelta.x; if (cell.x < 0 || cell.x >= dims.x) break; }
+            else if (tnext.y <= tnext.z) { cell.y += stp.y; tnext.y += tdelta.y; if (cell.y < 0 || cell.y >= dims.y) break; }
+            else { cell.z += stp.z; tnext.z += tdelta.z; if (cell.z < 0 || cell.z >= dims.z) break; }
+        }
+    }
+    return vec4(C + T * background.rgb, 1.0 - T + T * background.a);
+}
+
+void main() {
+    int px = int(gl_FragCoord.x);
+    int py = int(image_size.y) - 1 - int(gl_FragCoord.y);   // row 0 = top
+    vec4 acc = vec4(0.0);
+    for (int s = 0; s < SPP_N * SPP_N; ++s) {
+        vec2 jit = vec2(0.5);
+#if SPP_N > 1
+        uint h = hash32(hash32(hash32(uint(s)) ^ uint(py)) ^ uint(px));
+        vec2 rnd = vec2(float(h >> 8u), float(hash32(h ^ 0x68bc21ebu) >> 8u)) * (1.0 / 16777216.0);
+        jit = (vec2(s % SPP_N, s / SPP_N) + rnd) / float(SPP_N);
+#endif
+        float x = float(px) + jit.x, y = float(py) + jit.y;
+        float u = (x - 0.5 * image_size.x + shift_px.x) * pixel_size;
+        float v = (0.5 * image_size.y - y + shift_px.y) * pixel_size;
+        vec3 o, d;
+        float widen_per_t = 0.0, widen_const = 0.0;
+#if ORTHO
+        o = cam_pos + cam_rot * vec3(u, v, 0.0);
+        d = -cam_rot[2];
+        widen_const = 0.5 * pixel_size;
+#else
+        o = cam_pos;
+        vec3 dc = cam_rot * vec3(u, v, -1.0);
+        float len = length(dc);
+        d = dc / len;
+        // At distance t along this ray the depth is t / len and a pixel spans pixel_size times
+        // that; the minimum width is half of it.
+        widen_per_t = 0.5 * pixel_size / len;
+#endif
+        acc += trace(o, d, widen_per_t, widen_const);
+    }
+    frag_color = acc / float(SPP_N * SPP_N);
+#if COUNT
+    frag_count = counter;
+#endif
+}
