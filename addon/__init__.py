@@ -1,2 +1,30 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Blender glue for key-strand hair: properties, operators, panels, bpy <-> numpy."""
+"""Blender glue for key-strand hair: properties, operators, panels, bpy <-> numpy.
+
+register() walks one `classes` tuple and adds the object property, the live-update
+handlers and the File > Export entries; unregister() removes every one of them and stops
+the preview renderer. Nothing heavy is imported here: groom, tracer and moderngl load
+inside the operators.
+"""
+import bpy
+
+from . import live, operators, panels, preview, properties
+
+classes = properties.CLASSES + operators.CLASSES + panels.CLASSES
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    properties.register_properties()
+    live.register_handlers()
+    bpy.types.TOPBAR_MT_file_export.append(operators.menu_export)
+
+
+def unregister():
+    bpy.types.TOPBAR_MT_file_export.remove(operators.menu_export)
+    live.unregister_handlers()
+    preview.close()
+    properties.unregister_properties()
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,73 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Generate: scalp + key strands -> groom -> the scalp's hair Curves object.
+
+All model logic is groom's; this module reads the scene (scene_data), builds a
+groom.Generator and writes its strands with blender_curves. The generators stay cached
+per scalp (live.py) so a key edit regenerates only the affected wisps.
+"""
+import time
+
+import bpy
+
+from . import blender_curves, scene_data
+from .properties import groom_params
+
+
+def hair_name(scalp):
+    return f"{scalp.name} Hair"
+
+
+def existing_hair(scalp):
+    """The scalp's hair Curves object if it still exists in this file, else None."""
+    hair = scalp.keystrand_hair.hair_object
+    if hair is None or hair.type != 'CURVES' or hair.name not in bpy.data.objects:
+        return None
+    return hair
+
+
+def read_inputs(scalp, depsgraph=None):
+    """(groom.Scalp, [KeyStrand]) of a scalp object; SceneError/InputError on bad input."""
+    return scene_data.read_scalp(scalp, depsgraph), scene_data.read_keys(scalp)
+
+
+def build_generator(scalp_data, keys, settings, count=None):
+    """A groom.Generator and its first GroomResult."""
+    from groom import Generator
+    gen = Generator(scalp_data, keys, groom_params(settings, count))
+    return gen, gen.generate()
+
+
+def write_hair(scalp, strands):
+    """Write strands (scalp space) into the scalp's hair object, creating it on first use."""
+    hair = existing_hair(scalp)
+    collection = None
+    if hair is None and scalp.users_collection:
+        collection = scalp.users_collection[0]
+    hair = blender_curves.strands_to_curves(hair_name(scalp), strands, collection=collection,
+                                            parent=scalp, obj=hair)
+    hair.keystrand_hair.role = 'HAIR'
+    hair.keystrand_hair.scalp = scalp
+    if scalp.keystrand_hair.hair_object != hair:
+        scalp.keystrand_hair.hair_object = hair
+    return hair
+
+
+def generate(scalp, depsgraph=None, count=None):
+    """Full generation for a scalp object. Returns (hair object, GroomResult, timings dict).
+
+    Reads and computes everything before the first write, so an error (SceneError,
+    hairio.InputError) leaves the file untouched.
+    """
+    from . import live
+    settings = scalp.keystrand_hair
+    t0 = time.perf_counter()
+    scalp_data, keys = read_inputs(scalp, depsgraph)
+    t1 = time.perf_counter()
+    gen, result = build_generator(scalp_data, keys, settings, count)
+    t2 = time.perf_counter()
+    if settings.role != 'SCALP':
+        settings.role = 'SCALP'
+    hair = write_hair(scalp, result.strands)
+    t3 = time.perf_counter()
+    live.remember(scalp, scalp_data, keys, gen, result)
+    return hair, result, {"read_s": t1 - t0, "groom_s": t2 - t1, "write_s": t3 - t2, "total_s": t3 - t0}

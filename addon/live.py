@@ -1,0 +1,225 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Live update: regrow only the wisps of the key strands being edited.
+
+A depsgraph handler notes which scalps had a key strand change; a timer does the work
+outside the handler (writing the hair from inside a depsgraph update would re-enter it).
+While edits keep arriving, a lighter generator at the scalp's viewport count is used;
+once edits have stopped for SETTLE_S, the full-count generator catches up, again only
+for the keys that changed (groom.Generator.update_keys). The timer's next interval grows
+with the time the last update took, so the viewport stays responsive on 100,000 strands.
+"""
+import time
+
+import bpy
+from bpy.app.handlers import persistent
+
+from . import scene_data
+
+SETTLE_S = 0.4
+MIN_INTERVAL_S = 0.05
+
+
+class ScalpState:
+    """The cached generators of one scalp (keyed by the scalp object's session_uid)."""
+
+    def __init__(self, scalp_data, keys, full):
+        self.scalp_data = scalp_data
+        self.full = full                       # groom.Generator at the full count
+        self.full_result = None                # its last GroomResult
+        self.full_sig = scene_data.keys_signature(keys)
+        self.view = None                       # groom.Generator at the viewport count
+        self.view_sig = None
+        self.dragging = False
+        self.last_edit = 0.0
+
+
+_states = {}
+_pending = set()
+_timer_on = False
+_last_cost = 0.0
+
+
+def remember(scalp, scalp_data, keys, generator, result):
+    """Called after a full Generate: cache its generator for live updates."""
+    state = ScalpState(scalp_data, keys, generator)
+    state.full_result = result
+    _states[scalp.session_uid] = state
+
+
+def forget(scalp=None):
+    if scalp is None:
+        _states.clear()
+        _pending.clear()
+    else:
+        _states.pop(scalp.session_uid, None)
+        _pending.discard(scalp.session_uid)
+
+
+def _scalp_by_uid(uid):
+    for obj in bpy.data.objects:
+        if obj.session_uid == uid:
+            return obj
+    return None
+
+
+def _changed(sig, old):
+    if old is None or len(sig) != len(old):
+        return None
+    return [i for i, (a, b) in enumerate(zip(sig, old)) if a.shape != b.shape or not (a == b).all()]
+
+
+def _update(gen, sig, old_sig, keys, scalp_data, settings, count):
+    """(generator, GroomResult or None when nothing changed)."""
+    from . import hair
+    changed = _changed(sig, old_sig)
+    if changed is None or gen is None:
+        gen, result = hair.build_generator(scalp_data, keys, settings, count)
+        return gen, result
+    if not changed:
+        return gen, None
+    return gen, gen.update_keys({i: keys[i] for i in changed})
+
+
+def process(now=None, settle=False):
+    """Do the pending live updates now. settle=True also runs the full-count catch-up
+    (used when edits have stopped, and by scripts that need the final hair at once).
+    Returns the number of hair objects written."""
+    from . import hair
+    now = time.monotonic() if now is None else now
+    written = 0
+    for uid in list(_pending):
+        _pending.discard(uid)
+        state = _states.get(uid)
+        scalp = _scalp_by_uid(uid)
+        if state is None or scalp is None or hair.existing_hair(scalp) is None:
+            continue
+        settings = scalp.keystrand_hair
+        try:
+            keys = scene_data.read_keys(scalp)
+        except Exception:
+            # Mid-edit states (a key with one point, all keys deleted) are skipped silently;
+            # Generate reports them properly.
+            continue
+        sig = scene_data.keys_signature(keys)
+        view_count = min(settings.viewport_count, settings.count)
+        try:
+            if view_count >= settings.count:
+                state.full, result = _update(state.full, sig, state.full_sig, keys, state.scalp_data,
+                                             settings, settings.count)
+                state.full_sig = sig
+                if result is not None:
+                    state.full_result = result
+            else:
+                state.view, result = _update(state.view, sig, state.view_sig, keys, state.scalp_data,
+                                             settings, view_count)
+                state.view_sig = sig
+                if result is not None:
+                    state.dragging = True
+        except Exception as e:  # bad parameters mid-edit: keep the last good hair
+            print(f"Key-strand hair: live update skipped ({e})")
+            continue
+        if result is not None:
+            hair.write_hair(scalp, result.strands)
+            state.last_edit = now
+            written += 1
+    for uid, state in list(_states.items()):
+        if state.dragging and (settle or now - state.last_edit >= SETTLE_S):
+            written += _catch_up(uid, state)
+    return written
+
+
+def _catch_up(uid, state):
+    """Bring the full-count hair up to date with the keys after an edit."""
+    from . import hair
+    state.dragging = False
+    scalp = _scalp_by_uid(uid)
+    if scalp is None or hair.existing_hair(scalp) is None:
+        return 0
+    try:
+        keys = scene_data.read_keys(scalp)
+        sig = scene_data.keys_signature(keys)
+        state.full, result = _update(state.full, sig, state.full_sig, keys, state.scalp_data,
+                                     scalp.keystrand_hair, scalp.keystrand_hair.count)
+        state.full_sig = sig
+        if result is None:
+            # Keys are back where they were: the view generator changed the hair object,
+            # so put the last full-count hair back.
+            result = state.full_result
+        state.full_result = result
+    except Exception as e:
+        print(f"Key-strand hair: live update skipped ({e})")
+        return 0
+    hair.write_hair(scalp, result.strands)
+    return 1
+
+
+def _tick():
+    global _timer_on, _last_cost
+    start = time.monotonic()
+    process(start)
+    _last_cost = time.monotonic() - start
+    if _pending or any(s.dragging for s in _states.values()):
+        # Leave the UI at least as much time as the update took.
+        return max(MIN_INTERVAL_S, 1.5 * _last_cost)
+    _timer_on = False
+    return None
+
+
+def _key_scalps(depsgraph):
+    uids = set()
+    for update in depsgraph.updates:
+        ident = update.id.original if update.id is not None else None
+        if isinstance(ident, bpy.types.Object):
+            s = ident.keystrand_hair
+            if s.role == 'KEY' and s.scalp is not None:
+                uids.add(s.scalp.session_uid)
+        elif isinstance(ident, bpy.types.Curve):
+            for obj in bpy.data.objects:
+                if obj.data == ident and obj.keystrand_hair.role == 'KEY' and obj.keystrand_hair.scalp:
+                    uids.add(obj.keystrand_hair.scalp.session_uid)
+    return uids
+
+
+@persistent
+def on_depsgraph_update(scene, depsgraph):
+    global _timer_on
+    if not _states:
+        return
+    uids = {u for u in _key_scalps(depsgraph) if u in _states}
+    if not uids:
+        return
+    live = set()
+    for uid in uids:
+        scalp = _scalp_by_uid(uid)
+        if scalp is not None and scalp.keystrand_hair.live_update:
+            live.add(uid)
+    _pending.update(live)
+    if live and not _timer_on and not bpy.app.background:
+        _timer_on = True
+        bpy.app.timers.register(_tick, first_interval=MIN_INTERVAL_S)
+
+
+@persistent
+def on_load(*_args):
+    forget()
+
+
+HANDLERS = ((bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
+            (bpy.app.handlers.load_pre, on_load))
+
+
+def register_handlers():
+    for handlers, fn in HANDLERS:
+        if fn not in handlers:
+            handlers.append(fn)
+
+
+def unregister_handlers():
+    global _timer_on
+    for handlers, fn in HANDLERS:
+        while fn in handlers:
+            handlers.remove(fn)
+    if bpy.app.timers.is_registered(_tick):
+        bpy.app.timers.unregister(_tick)
+    _timer_on = False
+    forget()

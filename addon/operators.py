@@ -1,0 +1,408 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Operators: Add Key Strand, Generate, Render Preview, presets, export.
+
+Each one checks everything it needs before its first change to the file, so a failure is
+a report in the UI and leaves the scene exactly as it was (and makes no undo step).
+Heavy modules (groom, tracer, moderngl) are imported inside execute(), so enabling the
+extension costs nothing.
+"""
+import os
+import pathlib
+import time
+
+import bpy
+from bpy.props import EnumProperty, FloatVectorProperty, BoolProperty, StringProperty
+from bpy.types import Operator
+from bpy_extras.io_utils import ExportHelper, ImportHelper
+
+from . import scene_data
+from .scene_data import SceneError, find_scalp
+
+EXPORT_FORMATS = (
+    ('npz', "NumPy arrays (.npz)", "Strand arrays (points, counts, radius, color, alpha, wisp)"),
+    ('hair', "Cem Yuksel HAIR (.hair)", "The HAIR file format used by many hair renderers"),
+    ('tfx', "AMD TressFX (.tfx)", "TressFX v4 binary for game engines (strands resampled)"),
+    ('abc', "Alembic (.abc)", "Alembic curves, through Blender's own exporter"),
+    ('usd', "Universal Scene Description (.usd)", "USD BasisCurves, through Blender's own exporter"),
+)
+
+
+def _errors():
+    """The exception types that mean 'the user can fix this': reported, never raised."""
+    from hairio import InputError
+    return (SceneError, InputError)
+
+
+def _poll_scalp(cls, context):
+    if find_scalp(context) is None:
+        cls.poll_message_set("Select a scalp mesh, or one of its key strands or its hair")
+        return False
+    return True
+
+
+def _poll_hair(cls, context):
+    if not _poll_scalp(cls, context):
+        return False
+    from .hair import existing_hair
+    if existing_hair(find_scalp(context)) is None:
+        cls.poll_message_set("Generate the hair first")
+        return False
+    return True
+
+
+def preset_folders():
+    """Folders holding preset .json files: the ones shipped with the extension, then the
+    user's saved ones (in the extension's user folder when installed as an extension)."""
+    folders = [pathlib.Path(__file__).resolve().parents[1] / "presets"]
+    package = __package__.rpartition(".")[0]
+    if package.startswith("bl_ext."):
+        try:
+            folders.append(pathlib.Path(bpy.utils.extension_path_user(package, path="presets", create=False)))
+        except (ValueError, RuntimeError):
+            pass
+    return [f for f in folders if f.is_dir()]
+
+
+def preset_files():
+    """{name: path} of every preset found (a user preset of the same name wins)."""
+    found = {}
+    for folder in preset_folders():
+        for path in sorted(folder.glob("*.json")):
+            found[path.stem] = path
+    return found
+
+
+_preset_items = []
+
+
+def _preset_enum(self, context):
+    # Blender needs the item strings kept alive while the enum is shown.
+    global _preset_items
+    _preset_items = [(name, name.replace("_", " ").title(), str(path)) for name, path in preset_files().items()]
+    return _preset_items or [('NONE', "(no presets)", "No preset files found")]
+
+
+class HAIR_OT_add_key_strand(Operator):
+    """Add a key strand: click on the scalp where it should grow (Esc to cancel)"""
+    bl_idname = "hair.add_key_strand"
+    bl_label = "Add Key Strand"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    location: FloatVectorProperty(name="Location", size=3, subtype='XYZ',
+                                  description="Point on or near the scalp (world space); the key "
+                                              "grows from the nearest surface point")
+
+    @classmethod
+    def poll(cls, context):
+        return _poll_scalp(cls, context)
+
+    def invoke(self, context, event):
+        if context.area is None or context.area.type != 'VIEW_3D':
+            return self.execute(context)
+        context.window_manager.modal_handler_add(self)
+        context.workspace.status_text_set("Click on the scalp to add a key strand; Esc or right-click cancels")
+        return {'RUNNING_MODAL'}
+
+    def modal(self, context, event):
+        if event.type in {'ESC', 'RIGHTMOUSE'} and event.value == 'PRESS':
+            context.workspace.status_text_set(None)
+            return {'CANCELLED'}
+        if event.type == 'LEFTMOUSE' and event.value == 'PRESS':
+            hit = self._raycast(context, event)
+            if hit is None:
+                self.report({'WARNING'}, "Click on the scalp mesh")
+                return {'RUNNING_MODAL'}
+            context.workspace.status_text_set(None)
+            self.location = hit
+            return self.execute(context)
+        return {'PASS_THROUGH'} if event.type in {'MIDDLEMOUSE', 'WHEELUPMOUSE', 'WHEELDOWNMOUSE'} \
+            else {'RUNNING_MODAL'}
+
+    @staticmethod
+    def _raycast(context, event):
+        from bpy_extras import view3d_utils
+        scalp = find_scalp(context)
+        region, rv3d = context.region, context.region_data
+        if scalp is None or region is None or rv3d is None:
+            return None
+        coord = (event.mouse_region_x, event.mouse_region_y)
+        origin = view3d_utils.region_2d_to_origin_3d(region, rv3d, coord)
+        direction = view3d_utils.region_2d_to_vector_3d(region, rv3d, coord)
+        inv = scalp.matrix_world.inverted()
+        o_local = inv @ origin
+        d_local = (inv.to_3x3() @ direction).normalized()
+        evaluated = scalp.evaluated_get(context.evaluated_depsgraph_get())
+        ok, loc, _normal, _face = evaluated.ray_cast(o_local, d_local)
+        return (scalp.matrix_world @ loc) if ok else None
+
+    def execute(self, context):
+        import numpy as np
+        from groom import place_key
+        from groom.frames import root_frames
+        scalp = find_scalp(context)
+        if scalp is None:
+            self.report({'ERROR'}, "Select a scalp mesh first")
+            return {'CANCELLED'}
+        settings = scalp.keystrand_hair
+        try:
+            scalp_data = scene_data.read_scalp(scalp, context.evaluated_depsgraph_get())
+            world = np.append(np.asarray(self.location, np.float64), 1.0)
+            local = (np.linalg.inv(np.array(scalp.matrix_world, np.float64)) @ world)[:3]
+            tri, bary, root = scalp_data.closest_points(local[None])
+            normal = scalp_data.normals_at(tri, bary, settings.normal_mode)
+            frame = root_frames(normal, tuple(settings.up), tuple(settings.front))[0]
+            profile = scene_data.shape_profile(settings.key_shape, settings.key_length)
+            points = place_key(profile, root[0], frame)
+        except _errors() as e:
+            self.report({'ERROR'}, str(e))
+            return {'CANCELLED'}
+        settings.role = 'SCALP'
+        key = scene_data.new_key_object(scalp, points, name=f"{scalp.name} Key")
+        for obj in context.selected_objects:
+            obj.select_set(False)
+        key.select_set(True)
+        context.view_layer.objects.active = key
+        self.report({'INFO'}, f"Added key strand {key.name!r}")
+        return {'FINISHED'}
+
+
+class HAIR_OT_generate(Operator):
+    """Grow the hair on the scalp from its key strands (replaces the scalp's hair)"""
+    bl_idname = "hair.generate"
+    bl_label = "Generate Hair"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        return _poll_scalp(cls, context)
+
+    def execute(self, context):
+        from .hair import generate
+        scalp = find_scalp(context)
+        if scalp is None:
+            self.report({'ERROR'}, "Select a scalp mesh first")
+            return {'CANCELLED'}
+        try:
+            hair, result, t = generate(scalp, context.evaluated_depsgraph_get())
+        except _errors() as e:
+            self.report({'ERROR'}, str(e))
+            return {'CANCELLED'}
+        s = result.strands
+        self.report({'INFO'}, f"Generated {s.num_strands:,} strands ({s.num_points:,} points) in "
+                              f"{t['total_s']:.2f} s (model {t['groom_s']:.2f} s)")
+        return {'FINISHED'}
+
+
+class HAIR_OT_render_preview(Operator):
+    """Render the scene camera's view of the hair with the hair tracer into the image "Hair Preview\""""
+    bl_idname = "hair.render_preview"
+    bl_label = "Render Preview"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        return _poll_scalp(cls, context)
+
+    def execute(self, context):
+        from . import preview
+        from .hair import existing_hair
+        scalp = find_scalp(context)
+        if scalp is None:
+            self.report({'ERROR'}, "Select a scalp mesh first")
+            return {'CANCELLED'}
+        hair = existing_hair(scalp)
+        if hair is None:
+            self.report({'ERROR'}, f"Scalp {scalp.name!r} has no hair yet: press Generate first")
+            return {'CANCELLED'}
+        camera = context.scene.camera
+        if camera is None or camera.type != 'CAMERA':
+            self.report({'ERROR'}, "The scene has no camera: add one and make it the active camera "
+                                   "(Ctrl+Numpad 0 on a camera)")
+            return {'CANCELLED'}
+        t0 = time.perf_counter()
+        try:
+            pixels, t = preview.render(context.scene, hair, camera, scalp.keystrand_hair)
+        except _errors() as e:
+            self.report({'ERROR'}, str(e))
+            return {'CANCELLED'}
+        except preview.RendererDied as e:
+            self.report({'ERROR'}, f"The preview renderer stopped ({e}). Blender is fine; "
+                                   "press Render Preview again to start a new renderer")
+            return {'CANCELLED'}
+        image = preview.write_image(pixels)
+        preview.show_image(context, image)
+        h, w = pixels.shape[:2]
+        self.report({'INFO'}, f"Rendered {w}x{h} in {time.perf_counter() - t0:.2f} s")
+        return {'FINISHED'}
+
+
+class HAIR_OT_load_preset(Operator):
+    """Load a hairstyle onto the scalp: its key strands (replacing the scalp's) and its settings"""
+    bl_idname = "hair.load_preset"
+    bl_label = "Load Preset"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    preset: EnumProperty(name="Preset", items=_preset_enum, description="The hairstyle to load")
+    filepath: StringProperty(name="File", subtype='FILE_PATH', default="",
+                             description="A preset .json file; when set, used instead of Preset")
+    replace: BoolProperty(name="Replace Keys", default=True,
+                          description="Delete the scalp's current key strands first")
+
+    @classmethod
+    def poll(cls, context):
+        return _poll_scalp(cls, context)
+
+    def execute(self, context):
+        from groom import load_preset
+        from .properties import dict_to_settings
+        scalp = find_scalp(context)
+        if scalp is None:
+            self.report({'ERROR'}, "Select a scalp mesh first")
+            return {'CANCELLED'}
+        source = self.filepath or str(preset_files().get(self.preset, ""))
+        if not source:
+            self.report({'ERROR'}, f"Preset {self.preset!r} not found")
+            return {'CANCELLED'}
+        try:
+            preset = load_preset(source)
+            scalp_data = scene_data.read_scalp(scalp, context.evaluated_depsgraph_get())
+            keys = preset.keys_on(scalp_data)
+        except _errors() as e:
+            self.report({'ERROR'}, str(e))
+            return {'CANCELLED'}
+        if self.replace:
+            for obj in scene_data.key_objects(scalp):
+                curve = obj.data
+                bpy.data.objects.remove(obj)
+                if curve.users == 0:
+                    bpy.data.curves.remove(curve)
+        settings = scalp.keystrand_hair
+        settings.role = 'SCALP'
+        dict_to_settings(settings, preset.params.to_dict())
+        for i, key in enumerate(keys):
+            scene_data.key_strand_to_object(scalp, key, name=f"{scalp.name} Key {i:02d}")
+        self.report({'INFO'}, f"Loaded preset {preset.name!r}: {len(keys)} key strands")
+        return {'FINISHED'}
+
+
+class HAIR_OT_save_preset(Operator, ExportHelper):
+    """Save the scalp's key strands and settings as a preset file"""
+    bl_idname = "hair.save_preset"
+    bl_label = "Save Preset"
+    bl_options = {'REGISTER'}
+
+    filename_ext = ".json"
+    filter_glob: StringProperty(default="*.json", options={'HIDDEN'})
+    description: StringProperty(name="Description", default="", description="A line saying what the style is")
+
+    @classmethod
+    def poll(cls, context):
+        return _poll_scalp(cls, context)
+
+    def invoke(self, context, event):
+        package = __package__.rpartition(".")[0]
+        if package.startswith("bl_ext.") and not self.filepath:
+            folder = bpy.utils.extension_path_user(package, path="presets", create=True)
+            self.filepath = os.path.join(folder, "my_hairstyle.json")
+        return ExportHelper.invoke(self, context, event)
+
+    def execute(self, context):
+        from groom import save_preset
+        from .properties import groom_params
+        scalp = find_scalp(context)
+        if scalp is None:
+            self.report({'ERROR'}, "Select a scalp mesh first")
+            return {'CANCELLED'}
+        try:
+            keys = scene_data.read_keys(scalp)
+            params = groom_params(scalp.keystrand_hair)
+            save_preset(self.filepath, keys, params, description=self.description)
+        except _errors() as e:
+            self.report({'ERROR'}, str(e))
+            return {'CANCELLED'}
+        except OSError as e:
+            self.report({'ERROR'}, f"Cannot write {self.filepath}: {e}")
+            return {'CANCELLED'}
+        self.report({'INFO'}, f"Saved preset {self.filepath}")
+        return {'FINISHED'}
+
+
+def export_blender_module():
+    """addon/export_blender.py when present (Alembic/USD through Blender's exporters)."""
+    try:
+        from . import export_blender
+    except ImportError:
+        return None
+    return export_blender
+
+
+class HAIR_OT_export(Operator, ExportHelper):
+    """Export the generated hair to a file"""
+    bl_idname = "hair.export"
+    bl_label = "Export Hair"
+    bl_options = {'REGISTER'}
+
+    filename_ext = ".npz"
+    filter_glob: StringProperty(default="*.npz;*.hair;*.tfx;*.abc;*.usd;*.usda;*.usdc", options={'HIDDEN'})
+    format: EnumProperty(name="Format", items=EXPORT_FORMATS, default='npz',
+                         description="File format; the file name's extension follows it")
+    world_space: BoolProperty(name="World Space", default=True,
+                              description="Write points as placed in the scene (otherwise in the scalp's own space)")
+
+    @classmethod
+    def poll(cls, context):
+        return _poll_hair(cls, context)
+
+    def check(self, context):
+        # Keep the extension in step with the chosen format.
+        self.filename_ext = "." + self.format
+        return ExportHelper.check(self, context)
+
+    def invoke(self, context, event):
+        self.filename_ext = "." + self.format
+        return ExportHelper.invoke(self, context, event)
+
+    def execute(self, context):
+        from .hair import existing_hair
+        scalp = find_scalp(context)
+        hair = existing_hair(scalp) if scalp is not None else None
+        if hair is None:
+            self.report({'ERROR'}, "No generated hair to export: select a scalp and press Generate first")
+            return {'CANCELLED'}
+        path = self.filepath
+        if not path:
+            self.report({'ERROR'}, "No file name given")
+            return {'CANCELLED'}
+        if not path.lower().endswith("." + self.format) and not (
+                self.format == 'usd' and path.lower().endswith((".usda", ".usdc"))):
+            path = os.path.splitext(path)[0] + "." + self.format
+        try:
+            if self.format in ('abc', 'usd'):
+                module = export_blender_module()
+                if module is None:
+                    self.report({'ERROR'}, f"Export to .{self.format} is not available in this version")
+                    return {'CANCELLED'}
+                module.export_hair(context, hair, path, format=self.format)
+            else:
+                from hairio.formats import write_strands
+                from . import preview, blender_curves
+                strands = preview.world_strands(hair) if self.world_space else blender_curves.curves_to_strands(hair)
+                write_strands(path, strands)
+        except _errors() as e:
+            self.report({'ERROR'}, str(e))
+            return {'CANCELLED'}
+        except OSError as e:
+            self.report({'ERROR'}, f"Cannot write {path}: {e}")
+            return {'CANCELLED'}
+        self.report({'INFO'}, f"Exported {path}")
+        return {'FINISHED'}
+
+
+def menu_export(self, context):
+    for fmt, label, _desc in EXPORT_FORMATS:
+        op = self.layout.operator(HAIR_OT_export.bl_idname, text=f"Key-Strand Hair: {label}")
+        op.format = fmt
+
+
+CLASSES = (HAIR_OT_add_key_strand, HAIR_OT_generate, HAIR_OT_render_preview, HAIR_OT_load_preset,
+           HAIR_OT_save_preset, HAIR_OT_export)

@@ -1,0 +1,141 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Panels: a "Hair" tab in the 3D Viewport sidebar (N) and in the Image Editor sidebar."""
+from bpy.types import Panel
+
+from .scene_data import find_scalp, key_objects
+
+
+class _HairPanel:
+    bl_region_type = 'UI'
+    bl_category = "Hair"
+
+    @classmethod
+    def poll(cls, context):
+        return find_scalp(context) is not None
+
+
+class VIEW3D_PT_keystrand_hair(_HairPanel, Panel):
+    bl_space_type = 'VIEW_3D'
+    bl_label = "Key-Strand Hair"
+
+    @classmethod
+    def poll(cls, context):
+        return True
+
+    def draw(self, context):
+        layout = self.layout
+        scalp = find_scalp(context)
+        if scalp is None:
+            layout.label(text="Select a scalp mesh", icon='INFO')
+            return
+        s = scalp.keystrand_hair
+        layout.label(text=scalp.name, icon='MESH_DATA')
+        row = layout.row(align=True)
+        row.operator("hair.load_preset", icon='PRESET')
+        row.operator("hair.save_preset", text="", icon='FILE_TICK')
+        layout.separator()
+        col = layout.column(align=True)
+        col.prop(s, "key_shape")
+        col.prop(s, "key_length")
+        col.operator("hair.add_key_strand", icon='CURVE_BEZCURVE')
+        layout.label(text=f"{len(key_objects(scalp))} key strands")
+        layout.separator()
+        col = layout.column(align=True)
+        col.prop(s, "count")
+        col.prop(s, "viewport_count")
+        col.prop(s, "live_update")
+        layout.operator("hair.generate", icon='OUTLINER_OB_CURVES')
+        layout.operator("hair.export", icon='EXPORT')
+
+
+class VIEW3D_PT_keystrand_hair_shape(_HairPanel, Panel):
+    bl_space_type = 'VIEW_3D'
+    bl_label = "Shape"
+    bl_parent_id = "VIEW3D_PT_keystrand_hair"
+
+    def draw(self, context):
+        s = find_scalp(context).keystrand_hair
+        col = self.layout.column()
+        col.use_property_split = True
+        for name in ("min_length", "max_length", "tidiness", "theta_max", "n_influence", "neighbour_mode",
+                     "intelligence", "seed", "sampling_mode", "normal_mode", "up", "front"):
+            col.prop(s, name)
+
+
+class VIEW3D_PT_keystrand_hair_look(_HairPanel, Panel):
+    bl_space_type = 'VIEW_3D'
+    bl_label = "Thickness and Colour"
+    bl_parent_id = "VIEW3D_PT_keystrand_hair"
+
+    def draw(self, context):
+        s = find_scalp(context).keystrand_hair
+        col = self.layout.column()
+        col.use_property_split = True
+        for name in ("radius", "radius_mode", "taper_start", "color", "color_variation",
+                     "color_variation_point", "alpha_start", "alpha_tip", "resolution_mode",
+                     "points_per_strand", "tolerance", "tolerance_units"):
+            col.prop(s, name)
+
+
+class VIEW3D_PT_keystrand_hair_key(_HairPanel, Panel):
+    bl_space_type = 'VIEW_3D'
+    bl_label = "Active Key Strand"
+    bl_parent_id = "VIEW3D_PT_keystrand_hair"
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        return obj is not None and obj.keystrand_hair.role == 'KEY'
+
+    def draw(self, context):
+        k = context.active_object.keystrand_hair
+        col = self.layout.column()
+        col.use_property_split = True
+        col.prop(k, "use_key_color")
+        sub = col.column()
+        sub.active = k.use_key_color
+        sub.prop(k, "key_color")
+        col.prop(k, "key_radius")
+        col.prop(k, "key_group")
+
+
+def draw_render_settings(layout, s):
+    col = layout.column()
+    col.use_property_split = True
+    for name in ("preview_size", "preview_samples", "preview_shading", "preview_shadows",
+                 "preview_shadow_mode", "preview_layers", "preview_min_pixel_width",
+                 "preview_scene_lights", "preview_in_process"):
+        col.prop(s, name)
+
+
+class VIEW3D_PT_keystrand_hair_preview(_HairPanel, Panel):
+    bl_space_type = 'VIEW_3D'
+    bl_label = "Preview Render"
+    bl_parent_id = "VIEW3D_PT_keystrand_hair"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        draw_render_settings(self.layout, find_scalp(context).keystrand_hair)
+        self.layout.operator("hair.render_preview", icon='RENDER_STILL')
+
+
+class IMAGE_PT_keystrand_hair_preview(_HairPanel, Panel):
+    bl_space_type = 'IMAGE_EDITOR'
+    bl_label = "Hair Preview"
+
+    @classmethod
+    def poll(cls, context):
+        return True
+
+    def draw(self, context):
+        scalp = find_scalp(context)
+        if scalp is None:
+            self.layout.label(text="Select a scalp mesh", icon='INFO')
+            return
+        self.layout.label(text=scalp.name, icon='MESH_DATA')
+        draw_render_settings(self.layout, scalp.keystrand_hair)
+        self.layout.operator("hair.render_preview", icon='RENDER_STILL')
+
+
+CLASSES = (VIEW3D_PT_keystrand_hair, VIEW3D_PT_keystrand_hair_shape, VIEW3D_PT_keystrand_hair_look,
+           VIEW3D_PT_keystrand_hair_key, VIEW3D_PT_keystrand_hair_preview, IMAGE_PT_keystrand_hair_preview)

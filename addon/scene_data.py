@@ -1,0 +1,242 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Blender objects -> the arrays groom takes, and key strand curve objects <-> groom.KeyStrand.
+
+Everything is read in the scalp object's local space (the space groom works in and the
+generated hair is stored in): mesh arrays come out with `foreach_get`, key strands are
+carried into scalp space by one 4x4 matrix each.
+"""
+import numpy as np
+import bpy
+
+
+class SceneError(Exception):
+    """A problem with the scene the user can fix; the message says how."""
+
+
+def find_scalp(context):
+    """The scalp the user means: the active mesh, or the scalp of the active key strand or hair."""
+    obj = context.active_object if context is not None else None
+    if obj is None:
+        return None
+    role = obj.keystrand_hair.role
+    if role in ('KEY', 'HAIR'):
+        scalp = obj.keystrand_hair.scalp
+        return scalp if scalp is not None and scalp.type == 'MESH' else None
+    if obj.type == 'MESH':
+        return obj
+    return None
+
+
+def key_objects(scalp):
+    """The key strand objects of a scalp, in a stable order (by name): index i is key i."""
+    keys = [o for o in bpy.data.objects
+            if o.type == 'CURVE' and o.keystrand_hair.role == 'KEY' and o.keystrand_hair.scalp == scalp]
+    return sorted(keys, key=lambda o: o.name)
+
+
+def _matrix(m):
+    return np.array(m, dtype=np.float64).reshape(4, 4)
+
+
+def read_scalp(obj, depsgraph=None):
+    """groom.Scalp of a mesh object, in its local space, with modifiers applied when a
+    depsgraph is given. Optional point attributes: float `hair_density` (root density
+    weight) and int `hair_group` (parting groups). Raises SceneError without faces."""
+    from groom import Scalp
+    if obj is None or obj.type != 'MESH':
+        raise SceneError("Select a scalp mesh (or one of its key strands) first")
+    evaluated = depsgraph is not None
+    source = obj.evaluated_get(depsgraph) if evaluated else obj
+    mesh = source.to_mesh() if evaluated else obj.data
+    try:
+        n_v = len(mesh.vertices)
+        mesh.calc_loop_triangles()
+        n_t = len(mesh.loop_triangles)
+        if n_t == 0:
+            raise SceneError(f"Scalp {obj.name!r} has no faces: hair grows from faces, "
+                             "so give the mesh a surface (e.g. fill it or use a sphere)")
+        vertices = np.empty(n_v * 3, np.float64)
+        mesh.vertices.foreach_get("co", vertices)
+        triangles = np.empty(n_t * 3, np.int32)
+        mesh.loop_triangles.foreach_get("vertices", triangles)
+        uv = None
+        if mesh.uv_layers.active is not None and len(mesh.loops):
+            loop_uv = np.empty(len(mesh.loops) * 2, np.float64)
+            mesh.uv_layers.active.uv.foreach_get("vector", loop_uv)
+            loop_vertex = np.empty(len(mesh.loops), np.int32)
+            mesh.loops.foreach_get("vertex_index", loop_vertex)
+            # Per-vertex UV: a vertex on a seam takes one of its loops' UVs.
+            uv = np.zeros((n_v, 2))
+            uv[loop_vertex] = loop_uv.reshape(-1, 2)
+        density = _point_attribute(mesh, "hair_density", 'FLOAT', np.float64)
+        groups = _point_attribute(mesh, "hair_group", 'INT', np.int32)
+    finally:
+        if evaluated:
+            source.to_mesh_clear()
+    return Scalp(vertices.reshape(-1, 3), triangles.reshape(-1, 3).astype(np.int64),
+                 density=density, uv=uv, groups=groups)
+
+
+def _point_attribute(mesh, name, data_type, dtype):
+    attr = mesh.attributes.get(name)
+    if attr is None or attr.domain != 'POINT' or attr.data_type != data_type:
+        return None
+    out = np.empty(len(mesh.vertices), dtype)
+    attr.data.foreach_get("value", out)
+    return out
+
+
+def key_control_points(key_obj, scalp):
+    """(points (n,3) in scalp space, kind) of a key strand's first spline."""
+    curve = key_obj.data
+    if not curve.splines:
+        raise SceneError(f"Key strand {key_obj.name!r} has no spline; delete it or draw one")
+    spline = curve.splines[0]
+    if spline.type == 'BEZIER':
+        n = len(spline.bezier_points)
+        if n < 2:
+            raise SceneError(f"Key strand {key_obj.name!r} needs at least 2 points")
+        co, left, right = (np.empty(n * 3, np.float64) for _ in range(3))
+        spline.bezier_points.foreach_get("co", co)
+        spline.bezier_points.foreach_get("handle_left", left)
+        spline.bezier_points.foreach_get("handle_right", right)
+        co, left, right = co.reshape(n, 3), left.reshape(n, 3), right.reshape(n, 3)
+        # groom's piecewise cubic layout: P0, H0out, H1in, P1, H1out, H2in, P2, ...
+        local = np.empty((3 * (n - 1) + 1, 3))
+        local[0::3] = co
+        local[1::3] = right[:-1]
+        local[2::3] = left[1:]
+        kind = "cubic"
+    else:
+        n = len(spline.points)
+        if n < 2:
+            raise SceneError(f"Key strand {key_obj.name!r} needs at least 2 points")
+        co = np.empty(n * 4, np.float64)
+        spline.points.foreach_get("co", co)
+        local = co.reshape(n, 4)[:, :3]
+        kind = "bezier"
+    to_scalp = np.linalg.inv(_matrix(scalp.matrix_world)) @ _matrix(key_obj.matrix_world)
+    return local @ to_scalp[:3, :3].T + to_scalp[:3, 3], kind
+
+
+def read_keys(scalp):
+    """groom.KeyStrand list of the scalp's key strands (scalp space); raises SceneError
+    when there are none."""
+    from groom import KeyStrand
+    objs = key_objects(scalp)
+    if not objs:
+        raise SceneError(f"Scalp {scalp.name!r} has no key strands: add one with Add Key Strand "
+                         "or load a preset")
+    keys = []
+    for obj in objs:  # a handful of keys, not strands
+        keys.append(key_from_object(obj, scalp, KeyStrand))
+    return keys
+
+
+def key_from_object(obj, scalp, key_class=None):
+    if key_class is None:
+        from groom import KeyStrand as key_class
+    points, kind = key_control_points(obj, scalp)
+    s = obj.keystrand_hair
+    return key_class(points, kind=kind,
+                     color=tuple(s.key_color) if s.use_key_color else None,
+                     root_radius=s.key_radius if s.key_radius > 0 else None,
+                     group=int(s.key_group))
+
+
+def cubic_handles(points):
+    """Handles of a smooth piecewise cubic through `points` (n,3) (Catmull-Rom tangents,
+    one-sided at the ends): (left (n,3), right (n,3))."""
+    p = np.asarray(points, np.float64)
+    tangent = np.empty_like(p)
+    tangent[1:-1] = (p[2:] - p[:-2]) / 2.0
+    tangent[0] = p[1] - p[0]
+    tangent[-1] = p[-1] - p[-2]
+    return p - tangent / 3.0, p + tangent / 3.0
+
+
+def new_key_object(scalp, points, name="Key Strand", collection=None, handles=None):
+    """A Bézier curve object through `points` (n,3, scalp space), parented to the scalp
+    (identity parent inverse: its coordinates are the scalp's) and registered as its key.
+
+    handles: (left, right) arrays, or None for smooth Catmull-Rom handles. For a groom
+    KeyStrand of kind 'cubic' pass its own handles to keep its exact shape.
+    """
+    points = np.asarray(points, np.float64)
+    left, right = cubic_handles(points) if handles is None else handles
+    curve = bpy.data.curves.new(name, 'CURVE')
+    curve.dimensions = '3D'
+    spline = curve.splines.new('BEZIER')
+    spline.bezier_points.add(len(points) - 1)
+    bp = spline.bezier_points
+    bp.foreach_set("co", points.astype(np.float32).ravel())
+    bp.foreach_set("handle_left", np.asarray(left, np.float32).ravel())
+    bp.foreach_set("handle_right", np.asarray(right, np.float32).ravel())
+    # FREE keeps the handles exactly where they were put; the artist can change the type.
+    for p in bp:  # a key has a few points, not a hot path
+        p.handle_left_type = 'FREE'
+        p.handle_right_type = 'FREE'
+    obj = bpy.data.objects.new(name, curve)
+    if collection is None:
+        collection = scalp.users_collection[0] if scalp.users_collection else bpy.context.scene.collection
+    collection.objects.link(obj)
+    obj.parent = scalp
+    obj.matrix_parent_inverse.identity()
+    obj.keystrand_hair.role = 'KEY'
+    obj.keystrand_hair.scalp = scalp
+    return obj
+
+
+def key_strand_to_object(scalp, key, name="Key Strand", collection=None):
+    """A key curve object from a groom.KeyStrand (scalp space); 'bezier' keys of any
+    degree are drawn through points sampled on the curve."""
+    if key.kind == "cubic":
+        p = key.points
+        co = p[0::3]
+        right = np.vstack([p[1::3], [2 * co[-1] - p[-2]]])
+        left = np.vstack([[2 * co[0] - p[1]], p[2::3]])
+        obj = new_key_object(scalp, co, name, collection, handles=(left, right))
+    else:
+        samples = key.evaluate(np.linspace(0.0, 1.0, max(4, len(key.points) + 2)))
+        obj = new_key_object(scalp, samples, name, collection)
+    s = obj.keystrand_hair
+    if key.color is not None:
+        s.use_key_color = True
+        s.key_color = tuple(float(c) for c in key.color)
+    if key.root_radius is not None:
+        s.key_radius = float(key.root_radius)
+    s.key_group = int(key.group)
+    return obj
+
+
+def shape_profile(shape, length):
+    """Control points (n,3) of a key shape in a root's local frame (x down the head,
+    y across it, z out of the scalp), first row the root, scaled to `length`."""
+    s = np.linspace(0.0, 1.0, 9)
+    if shape == 'STRAIGHT':
+        # Lift off the scalp, then fall down the head.
+        p = np.stack([s, np.zeros_like(s), 0.12 * np.sin(np.pi * np.minimum(s * 1.5, 1.0)) * (1 - 0.5 * s)], 1)
+        p[1] = (0.0, 0.0, 0.06)
+    elif shape == 'WAVY':
+        s = np.linspace(0.0, 1.0, 13)
+        p = np.stack([s, 0.07 * np.sin(4 * np.pi * s) * np.minimum(s * 4, 1.0),
+                      0.1 * np.sin(np.pi * np.minimum(s * 1.5, 1.0))], 1)
+    elif shape == 'CURLY':
+        s = np.linspace(0.0, 1.0, 33)
+        turn = 6 * np.pi * s
+        ramp = np.minimum(s * 5, 1.0)
+        p = np.stack([0.6 * s, 0.08 * np.sin(turn) * ramp, 0.08 * (1 - np.cos(turn)) * ramp + 0.05 * ramp], 1)
+    elif shape == 'SWEPT':
+        p = np.stack([-0.35 * s * s, np.zeros_like(s), s], 1)
+    else:
+        raise SceneError(f"Unknown key shape {shape!r}")
+    p -= p[0]
+    arc = float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+    return p * (length / arc)
+
+
+def keys_signature(keys):
+    """A cheap fingerprint of each key (for telling which keys an edit changed)."""
+    return [np.concatenate([k.points.ravel(), np.asarray(k.color if k.color is not None else (-1, -1, -1)),
+                            [k.root_radius if k.root_radius is not None else -1.0, k.group]])
+            for k in keys]
