@@ -1,0 +1,224 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Alembic and USD export of a hair Curves object through Blender's own exporters.
+
+`export_curves_object` never touches the user's scene: it copies the Curves datablock,
+bakes the object's world matrix, the scale and the axis choice into the copy's points and
+radii (so the file holds final coordinates and widths with identity transforms), links it
+alone into a temporary scene, runs `wm.alembic_export` / `wm.usd_export` there on a
+temporary file name, renames it into place, and removes everything it created.
+
+What the files hold (verified by tests/hairio/test_io_blender_export.py):
+- Alembic: one ICurves, linear (POLY), `width` per point = 2 * radius, nVertices per curve.
+  Blender's Alembic exporter always converts to Y up ((x, y, z) -> (x, z, -y)); axis="y-up"
+  keeps that (Unreal's groom import default conversion, Rotation X 90 and Scale Y -1, then
+  brings it to Unreal's Z-up left-handed frame); axis="z-up" pre-rotates so the file holds
+  Blender's Z-up coordinates (import into Unreal with Rotation 0, Scale Y -1).
+  Unreal is in centimetres: pass scale=100 for a scene in metres; points and widths are both
+  scaled in the file.
+  Limitation: Blender writes no other curve attributes to Alembic (checked in Blender 5.0:
+  only `width`), and no maintained Alembic Python library installs from the package index
+  here (PyAlembic is not published there; the `alembic` package is an unrelated database
+  tool). So groom_guide, groom_group_id, groom_root_uv, groom_color, groom_closest_guides,
+  groom_guide_weights and groom_version_* are not in our .abc. Workaround in Unreal: import
+  with "Generate guides" (guides and closest-guide weights are then built by Unreal), let it
+  compute root UVs, split hair groups into separate objects (each Alembic object becomes a
+  group), and set the color in the groom material; or export USD, which carries them.
+- USD: a BasisCurves prim, type "linear", curveVertexCounts, per-vertex `widths`
+  (= 2 * radius), and every attribute of `attributes` as a primvar of the same name
+  (hairio.unreal.groom_attributes). Orientation and units are left to Blender's USD options
+  so the stage stays self-describing: axis="y-up" sets upAxis Y with a root rotation,
+  scale s sets metersPerUnit = 1/s with a root scale.
+
+Run as a script (what `python -m groom export --format abc|usd` does, in a subprocess so the
+command-line packages never import bpy):
+
+    python addon/export_blender.py STRANDS.npz OUT.abc [--scale 100] [--axis y-up]
+"""
+import contextlib
+import os
+import sys
+import tempfile
+
+import numpy as np
+import bpy
+
+FORMATS = {"abc": (".abc",), "usd": (".usd", ".usda", ".usdc")}
+AXES = {"abc": ("y-up", "z-up"), "usd": ("z-up", "y-up")}
+
+# Blender's Alembic writer maps (x, y, z) -> (x, z, -y); its inverse, applied first, makes
+# the file hold Blender's own Z-up coordinates.
+_ALEMBIC_KEEP_Z_UP = np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], np.float64)
+
+
+class ExportError(ValueError):
+    """Bad export request: the message names the input and the fix."""
+
+
+def _check(format, path, axis, scale):
+    if format not in FORMATS:
+        raise ExportError(f"format: {format!r}; choose 'abc' or 'usd'")
+    ext = os.path.splitext(os.fspath(path))[1].lower()
+    if ext not in FORMATS[format]:
+        raise ExportError(f"{path}: a {format} file must end in {' or '.join(FORMATS[format])}")
+    axis = AXES[format][0] if axis is None else axis
+    if axis not in AXES[format]:
+        raise ExportError(f"axis: {axis!r} for {format}; choose one of {', '.join(AXES[format])}")
+    scale = float(scale)
+    if not np.isfinite(scale) or scale <= 0:
+        raise ExportError(f"scale: {scale} is not a positive finite number")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise ExportError(f"{path}: output folder {folder!r} does not exist; create it first")
+    return ext, axis, scale
+
+
+def _bake(data, matrix, width_scale, attributes):
+    """Make the Curves datablock `data` (a copy) POLY, apply `matrix` to its points, scale
+    its radii by `width_scale`, add the generic `attributes`."""
+    n_p = len(data.points)
+    if len(data.curves):
+        data.set_types(type='POLY')
+    if n_p:
+        pos = np.empty(n_p * 3, np.float32)
+        data.attributes["position"].data.foreach_get("vector", pos)
+        pos = pos.reshape(n_p, 3).astype(np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
+        data.attributes["position"].data.foreach_set("vector", pos.astype(np.float32).ravel())
+        radius = np.full(n_p, 0.0, np.float32)
+        attr = data.attributes.get("radius")
+        if attr is not None and attr.domain == 'POINT' and attr.data_type == 'FLOAT':
+            attr.data.foreach_get("value", radius)
+        else:
+            attr = data.attributes.new("radius", 'FLOAT', 'POINT')
+            radius[:] = 0.005  # Blender's own default hair radius when none is stored
+        attr.data.foreach_set("value", radius * np.float32(width_scale))
+    for name, (domain, data_type, values) in (attributes or {}).items():
+        old = data.attributes.get(name)
+        if old is not None:
+            data.attributes.remove(old)
+        attr = data.attributes.new(name, data_type, domain)
+        key = "vector" if data_type in ('FLOAT_VECTOR', 'FLOAT2') else (
+            "color" if data_type == 'FLOAT_COLOR' else "value")
+        attr.data.foreach_set(key, np.ascontiguousarray(values).ravel())
+    data.update_tag()
+
+
+def export_curves_object(obj, path, format="abc", scale=1.0, axis=None, attributes=None):
+    """Export the hair Curves object `obj` to `path` as Alembic ("abc") or USD ("usd").
+
+    scale: multiplies points and widths (100 turns metres into Unreal's centimetres).
+    axis: abc "y-up" (default, Blender's Alembic convention) or "z-up"; usd "z-up" (default)
+    or "y-up". attributes: {name: (domain, data type, array)} extra Curves attributes, e.g.
+    hairio.unreal.groom_attributes(...); USD writes them as primvars, Alembic drops them.
+    The file appears complete or not at all; the open scene is left exactly as it was.
+    Returns the path written.
+    """
+    if obj is None or obj.type != 'CURVES':
+        raise ExportError(f"obj: expected a hair Curves object, got "
+                          f"{'nothing' if obj is None else obj.type}")
+    ext, axis, scale = _check(format, path, axis, scale)
+    world = np.array(obj.matrix_world, np.float64)
+    # Widths scale with the object's uniform scale (its volume scale's cube root).
+    width_scale = abs(np.linalg.det(world[:3, :3])) ** (1.0 / 3.0)
+    matrix = world.copy()
+    if format == "abc":
+        conv = scale * (_ALEMBIC_KEEP_Z_UP if axis == "z-up" else np.eye(3))
+        matrix[:3, :] = conv @ world[:3, :]
+        width_scale *= scale
+    folder = os.path.dirname(os.path.abspath(path))
+    fd, tmp_path = tempfile.mkstemp(prefix=".tmp-", suffix=ext, dir=folder)
+    os.close(fd)
+    created = []
+    # The file names its prims after the object and its data: lend both names to the copies
+    # while exporting, and give them back afterwards.
+    name, data_name = obj.name, obj.data.name
+    try:
+        data = obj.data.copy()
+        created.append(data)
+        _bake(data, matrix, width_scale, attributes)
+        obj.name = name + ".hair-export-original"
+        obj.data.name = data_name + ".hair-export-original"
+        data.name = data_name
+        tmp_obj = bpy.data.objects.new(name, data)
+        created.append(tmp_obj)
+        scene = bpy.data.scenes.new(".hair-export")
+        created.append(scene)
+        scene.collection.objects.link(tmp_obj)
+        scene.frame_start = scene.frame_end = scene.frame_current = bpy.context.scene.frame_current
+        view_layer = scene.view_layers[0]
+        with bpy.context.temp_override(scene=scene, view_layer=view_layer):
+            if format == "abc":
+                result = bpy.ops.wm.alembic_export(
+                    filepath=tmp_path, check_existing=False, selected=False,
+                    start=scene.frame_current, end=scene.frame_current, global_scale=1.0,
+                    export_custom_properties=False, as_background_job=False,
+                    evaluation_mode='RENDER', init_scene_frame_range=False)
+            else:
+                units = {1.0: 'METERS', 100.0: 'CENTIMETERS', 1000.0: 'MILLIMETERS'}.get(scale, 'CUSTOM')
+                unit_opts = dict(convert_scene_units=units, meters_per_unit=1.0 / scale)
+                result = bpy.ops.wm.usd_export(
+                    filepath=tmp_path, check_existing=False, selected_objects_only=False,
+                    export_animation=False, export_materials=False,
+                    convert_orientation=(axis == "y-up"), export_global_up_selection='Y',
+                    export_global_forward_selection='NEGATIVE_Z',
+                    evaluation_mode='RENDER', **unit_opts)
+        if 'FINISHED' not in result or os.path.getsize(tmp_path) == 0:
+            raise RuntimeError(f"Blender's {format} exporter did not finish ({result})")
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp made it private; exports are ordinary files
+        os.replace(tmp_path, path)
+        return os.fspath(path)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp_path)
+        for block in reversed(created):
+            _remove(block)
+        obj.name = name
+        obj.data.name = data_name
+
+
+def _remove(block):
+    if isinstance(block, bpy.types.Scene):
+        bpy.data.scenes.remove(block)
+    elif isinstance(block, bpy.types.Object):
+        bpy.data.objects.remove(block)
+    else:
+        bpy.data.hair_curves.remove(block)
+
+
+def main(argv=None):
+    """Script entry: read strands, build a Curves object in an empty scene, export."""
+    import argparse
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    if root not in sys.path:
+        sys.path.insert(0, root)
+    from hairio import InputError
+    from hairio.formats import read_strands
+    from hairio.unreal import groom_attributes
+    from addon.blender_curves import strands_to_curves
+
+    ap = argparse.ArgumentParser(prog="export_blender", description="Alembic/USD export through Blender")
+    ap.add_argument("input")
+    ap.add_argument("out")
+    ap.add_argument("--format", choices=sorted(FORMATS))
+    ap.add_argument("--scale", type=float, default=1.0)
+    ap.add_argument("--axis")
+    ap.add_argument("--root-uv", help=".npy (S, 2) root UVs for groom_root_uv")
+    ap.add_argument("--no-groom-attributes", action="store_true")
+    args = ap.parse_args(argv)
+    fmt = args.format or ("abc" if args.out.lower().endswith(".abc") else "usd")
+    try:
+        strands = read_strands(args.input)
+        root_uv = np.load(args.root_uv) if args.root_uv else None
+        attrs = None if args.no_groom_attributes else groom_attributes(strands, root_uv=root_uv)
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        obj = strands_to_curves("hair", strands, collection=bpy.context.scene.collection)
+        export_curves_object(obj, args.out, fmt, scale=args.scale, axis=args.axis, attributes=attrs)
+    except (InputError, ExportError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
