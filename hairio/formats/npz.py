@@ -20,13 +20,13 @@ def sidecar_path(path):
     return os.fspath(path) + ".json"
 
 
-def sidecar(strands, units="m", up="Z", front="-Y", source=None, extra=None):
+def sidecar(strands, units="m", up="Z", front="-Y", source=None, extra=None, handedness="right"):
     """The sidecar's content as a dict (JSON-ready)."""
     meta = {
         "format": "keystrand-hair strands npz",
         "arrays": list(NPZ_NAMES),
         "units": units,
-        "axes": {"up": up, "front": front, "handedness": "right"},
+        "axes": {"up": up, "front": front, "handedness": handedness},
         "counts": {"strands": int(strands.num_strands), "points": int(strands.num_points),
                    "segments": int(strands.num_segments)},
         "tool": {"name": TOOL_NAME, "version": TOOL_VERSION},
@@ -37,11 +37,12 @@ def sidecar(strands, units="m", up="Z", front="-Y", source=None, extra=None):
     return meta
 
 
-def write_npz(path, strands, units="m", up="Z", front="-Y", source=None, extra=None, write_sidecar=True):
+def write_npz(path, strands, units="m", up="Z", front="-Y", source=None, extra=None, write_sidecar=True,
+              handedness="right"):
     """Write the SPEC §0 arrays to `path` and the sidecar to `path`.json, atomically: both
     are complete on their temporary names before either replaces a file."""
     s = check_strands(strands)
-    text = json.dumps(sidecar(s, units, up, front, source, extra), indent=2) + "\n"
+    text = json.dumps(sidecar(s, units, up, front, source, extra, handedness), indent=2) + "\n"
     if not write_sidecar:
         s.save_npz(path)
         return

@@ -1,0 +1,184 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""`python -m groom export`: strands to the files game engines read.
+
+    python -m groom export INPUT --format hair|tfx|npz|data|abc|usd --out FILE
+        [--vertices-per-strand N] [--pinned K] [--pin-tip] [--guides KEYS.npz]
+        [--root-uv UV.npy] [--scale S] [--axis AXIS] [--no-flip-v] [--pad-strands]
+        [--shuffle-seed N] [--units U]
+
+INPUT is any strand file we read (.npz, .hair, .tfx, .data). The .hair/.tfx/.npz/.data writers
+are numpy; abc and usd run Blender's exporters (bpy) in a subprocess, so this module never
+imports bpy. Bad input prints one line naming the problem, exits 2 and writes nothing.
+Also runnable as `python -m hairio.cli export ...` or `python -m hairio.cli ...`.
+"""
+import argparse
+import importlib.util
+import os
+import pathlib
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+from .validate import InputError
+
+NUMPY_FORMATS = ("hair", "tfx", "npz", "data")
+BLENDER_FORMATS = ("abc", "usd")
+EXTENSIONS = {".hair": "hair", ".tfx": "tfx", ".npz": "npz", ".data": "data", ".abc": "abc",
+              ".usd": "usd", ".usda": "usd", ".usdc": "usd"}
+BLENDER_AXES = {"abc": ("y-up", "z-up"), "usd": ("z-up", "y-up")}
+UNITS = {1.0: "m", 100.0: "cm", 1000.0: "mm"}
+EXPORT_SCRIPT = pathlib.Path(__file__).resolve().parents[1] / "addon" / "export_blender.py"
+
+
+def export_file(input_path, out, format=None, vertices_per_strand=32, pinned=2, pin_tip=False,
+                guides=None, root_uv=None, scale=1.0, axis=None, flip_v=True, pad_strands=False,
+                shuffle_seed=None, units=None, guides_out=None):
+    """Export the strands in `input_path` to `out`; returns the list of files written.
+    The command line's engine, callable from benchmarks. Raises InputError for bad input."""
+    from .formats import (AXES, convert_strands, read_strands, spherical_root_uv, write_hair,
+                          write_npz, write_tfx, write_tfx_pair, write_usc)
+    from .formats.tressfx import guides_path_for
+
+    out = os.fspath(out)
+    if format is None:
+        ext = os.path.splitext(out)[1].lower()
+        if ext not in EXTENSIONS:
+            raise InputError(f"--out {out}: cannot tell the format from {ext or 'no extension'!r}; "
+                             f"pass --format {'|'.join(NUMPY_FORMATS + BLENDER_FORMATS)}")
+        format = EXTENSIONS[ext]
+    if format not in NUMPY_FORMATS + BLENDER_FORMATS:
+        raise InputError(f"--format {format}: choose one of {', '.join(NUMPY_FORMATS + BLENDER_FORMATS)}")
+    if guides is not None and format != "tfx":
+        raise InputError("--guides: separate guide files are a TressFX convention; use it with --format tfx")
+    folder = os.path.dirname(os.path.abspath(out))
+    if not os.path.isdir(folder):
+        raise InputError(f"--out {out}: folder {folder!r} does not exist; create it first")
+    scale = float(scale)
+    if not np.isfinite(scale) or scale <= 0:
+        raise InputError(f"--scale {scale}: must be a positive number")
+    if format in BLENDER_FORMATS:
+        axis = BLENDER_AXES[format][0] if axis is None else axis
+        if axis not in BLENDER_AXES[format]:
+            raise InputError(f"--axis {axis}: for {format} choose one of {', '.join(BLENDER_AXES[format])}")
+        return _export_with_blender(input_path, out, format, scale, axis, root_uv)
+    axis = "none" if axis is None else axis
+    if axis not in AXES:
+        raise InputError(f"--axis {axis}: choose one of {', '.join(AXES)}")
+
+    strands = read_strands(input_path)
+    if format == "tfx":
+        uv = _load_root_uv(root_uv, strands.num_strands)
+        # The projection needs the head's own up/front, so it runs before any axis change.
+        if uv is None:
+            uv = spherical_root_uv(strands.points[strands.offsets])
+        opts = dict(vertices_per_strand=vertices_per_strand, pinned=pinned, pin_tip=pin_tip,
+                    root_uv=uv, flip_v=flip_v, pad_strands=pad_strands, shuffle_seed=shuffle_seed)
+        strands = convert_strands(strands, axis, scale)
+        if guides is None:
+            write_tfx(out, strands, **opts)
+            return [out]
+        keys = read_strands(guides)
+        key_uv = spherical_root_uv(keys.points[keys.offsets])
+        keys = convert_strands(keys, axis, scale)
+        return list(write_tfx_pair(out, strands, keys, guides_out or guides_path_for(out),
+                                   guide_root_uv=key_uv, **opts))
+    strands = convert_strands(strands, axis, scale)
+    if format == "hair":
+        write_hair(out, strands)
+    elif format == "data":
+        write_usc(out, strands)
+    else:
+        up = {"none": "Z", "y-up": "Y", "unreal": "Z", "directx": "Y"}[axis]
+        handed = "left" if axis in ("unreal", "directx") else "right"
+        write_npz(out, strands, units=units or UNITS.get(scale, f"{1 / scale:g} m"), up=up,
+                  front={"none": "-Y", "y-up": "+Z", "unreal": "+Y", "directx": "-Z"}[axis],
+                  source=os.path.basename(os.fspath(input_path)), handedness=handed)
+        return [out, out + ".json"]
+    return [out]
+
+
+def _load_root_uv(path, num_strands):
+    if path is None:
+        return None
+    try:
+        uv = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as e:
+        raise InputError(f"--root-uv {path}: cannot read a .npy array ({e})") from e
+    if uv.shape != (num_strands, 2):
+        raise InputError(f"--root-uv {path}: shape {uv.shape}, expected ({num_strands}, 2), one UV per strand")
+    return uv
+
+
+def _export_with_blender(input_path, out, format, scale, axis, root_uv):
+    """Run addon/export_blender.py under this Python (which has the bpy module)."""
+    if not os.path.isfile(input_path):
+        raise InputError(f"{input_path}: no such file")
+    if importlib.util.find_spec("bpy") is None:
+        raise InputError(f"--format {format} needs Blender's Python module (pip install bpy) in "
+                         f"{sys.executable}; or export from Blender with File > Export")
+    if not EXPORT_SCRIPT.is_file():
+        raise InputError(f"--format {format}: {EXPORT_SCRIPT} is missing; run from a full checkout")
+    cmd = [sys.executable, str(EXPORT_SCRIPT), os.fspath(input_path), out, "--format", format,
+           "--scale", repr(scale), "--axis", axis]
+    if root_uv is not None:
+        cmd += ["--root-uv", os.fspath(root_uv)]
+    run = subprocess.run(cmd, capture_output=True, text=True)
+    if run.returncode != 0:
+        lines = [ln for ln in run.stderr.strip().splitlines() if ln.strip()]
+        message = lines[-1] if lines else f"exit status {run.returncode}"
+        raise InputError(f"{format} export failed: {message.removeprefix('error: ')}")
+    return [out]
+
+
+def build_parser(prog="groom export"):
+    ap = argparse.ArgumentParser(prog=prog, description="Export strands for game engines and DCC tools.")
+    ap.add_argument("input", help="strands: .npz (SPEC §0), .hair, .tfx or .data")
+    ap.add_argument("--out", required=True, help="output file")
+    ap.add_argument("--format", choices=NUMPY_FORMATS + BLENDER_FORMATS,
+                    help="default: from the --out extension")
+    ap.add_argument("--vertices-per-strand", type=int, default=32, metavar="N",
+                    help="tfx: 4, 8, 16, 32 or 64 vertices per strand (arc-length resampling)")
+    ap.add_argument("--pinned", type=int, default=2, metavar="K", help="tfx: root vertices pinned (inverse mass 0)")
+    ap.add_argument("--pin-tip", action="store_true", help="tfx: also pin each tip")
+    ap.add_argument("--guides", metavar="KEYS", help="tfx: key strands, written to OUT_guides.tfx")
+    ap.add_argument("--guides-out", metavar="FILE", help="tfx: where the guides go")
+    ap.add_argument("--root-uv", metavar="UV.npy", help="(S, 2) root UVs from the scalp's UV map")
+    ap.add_argument("--scale", type=float, default=1.0, help="multiply points and widths (100: metres to cm)")
+    ap.add_argument("--axis", help="hair/tfx/npz/data: none|y-up|unreal|directx (default none); "
+                                   "abc: y-up|z-up (default y-up); usd: z-up|y-up (default z-up)")
+    ap.add_argument("--no-flip-v", action="store_true", help="tfx: keep V as is (default flips it for DirectX)")
+    ap.add_argument("--pad-strands", action="store_true", help="tfx: pad the strand count to a multiple of 64")
+    ap.add_argument("--shuffle-seed", type=int, help="tfx: shuffle strands for TressFX's LOD")
+    ap.add_argument("--units", help="npz sidecar: units name (default from --scale: m, cm, mm)")
+    return ap
+
+
+def export_main(argv=None, prog="groom export"):
+    """The `export` command; returns the exit status (0 done, 2 bad input, nothing written)."""
+    args = build_parser(prog).parse_args(argv)
+    t0 = time.perf_counter()
+    try:
+        written = export_file(args.input, args.out, args.format, args.vertices_per_strand, args.pinned,
+                              args.pin_tip, args.guides, args.root_uv, args.scale, args.axis,
+                              not args.no_flip_v, args.pad_strands, args.shuffle_seed, args.units,
+                              args.guides_out)
+    except InputError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:
+        print(f"error: {args.out}: cannot write ({e})", file=sys.stderr)
+        return 2
+    dt = time.perf_counter() - t0
+    for path in written:
+        print(f"wrote {path} ({os.path.getsize(path)} bytes)")
+    print(f"export took {dt:.3f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    argv = sys.argv[1:]
+    if argv[:1] == ["export"]:
+        argv = argv[1:]
+    sys.exit(export_main(argv, prog="python -m hairio.cli export"))
