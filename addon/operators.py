@@ -382,16 +382,17 @@ class HAIR_OT_export(Operator, ExportHelper):
                 if module is None:
                     self.report({'ERROR'}, f"Export to .{self.format} is not available in this version")
                     return {'CANCELLED'}
-                module.export_hair(context, hair, path, format=self.format)
+                # Always world space: Blender's exporters bake the object's matrix.
+                module.export_curves_object(hair, path, format=self.format)
             else:
                 from hairio.formats import write_strands
                 from . import preview, blender_curves
                 strands = preview.world_strands(hair) if self.world_space else blender_curves.curves_to_strands(hair)
                 write_strands(path, strands)
-        except _errors() as e:
+        except _errors() + (ValueError,) as e:
             self.report({'ERROR'}, str(e))
             return {'CANCELLED'}
-        except OSError as e:
+        except (OSError, RuntimeError) as e:
             self.report({'ERROR'}, f"Cannot write {path}: {e}")
             return {'CANCELLED'}
         self.report({'INFO'}, f"Exported {path}")

@@ -116,6 +116,10 @@ def key_control_points(key_obj, scalp):
         local = co.reshape(n, 4)[:, :3]
         kind = "bezier"
     to_scalp = np.linalg.inv(_matrix(scalp.matrix_world)) @ _matrix(key_obj.matrix_world)
+    if np.allclose(to_scalp, np.eye(4), rtol=0.0, atol=1e-9):
+        # A key parented as Add Key Strand does it: its coordinates are the scalp's, exactly
+        # (the round trip through the inverse would add float noise to every point).
+        return local, kind
     return local @ to_scalp[:3, :3].T + to_scalp[:3, 3], kind
 
 

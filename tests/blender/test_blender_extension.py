@@ -1,0 +1,123 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The extension package: what the zip holds, that Blender's installer takes it, that
+enabling is cheap, and that disabling leaves nothing behind."""
+import os
+import pathlib
+import subprocess
+import sys
+import tomllib
+import zipfile
+
+import pytest
+import bpy
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+
+
+def test_zip_holds_the_extension_and_every_listed_wheel_but_no_tests(extension_zip):
+    path, validator = extension_zip
+    with open(ROOT / "blender_manifest.toml", "rb") as f:
+        manifest = tomllib.load(f)
+    assert path.name == f"{manifest['id']}-{manifest['version']}.zip"
+    assert validator == "blender", "Blender's own manifest validator was not used"
+    with zipfile.ZipFile(path) as z:
+        names = set(z.namelist())
+    assert {"blender_manifest.toml", "__init__.py", "addon/__init__.py", "addon/blender_curves.py"} <= names
+    for wheel in manifest["wheels"]:
+        assert wheel.removeprefix("./") in names
+    platforms = " ".join(manifest["wheels"])
+    for tag in ("manylinux", "win_amd64", "macosx_11_0_arm64"):
+        assert f"moderngl-5.13.0-cp311-cp311-{tag}" in platforms
+        assert f"glcontext-3.1.0-cp311-cp311-{tag}" in platforms
+    assert not [n for n in names if n.startswith(("tests/", "benchmarks/")) or "__pycache__" in n]
+
+
+def test_project_wheel_carries_the_pure_packages(extension_zip, tmp_path):
+    path, _ = extension_zip
+    with zipfile.ZipFile(path) as z:
+        wheel = next(n for n in z.namelist() if n.startswith("wheels/keystrand_hair-"))
+        z.extract(wheel, tmp_path)
+    with zipfile.ZipFile(tmp_path / wheel) as w:
+        names = set(w.namelist())
+    for package in ("groom", "tracer", "hairio", "hairio/formats"):
+        assert f"{package}/__init__.py" in names
+    assert any(n.startswith("tracer/shaders/") for n in names), "the tracer's shaders are missing"
+    assert any(n.endswith(".dist-info/RECORD") for n in names)
+
+
+def test_own_schema_check_rejects_a_broken_manifest(builder, tmp_path):
+    good = {"schema_version": "1.0.0", "id": "keystrand_hair", "version": "0.1.0", "name": "X",
+            "tagline": "Hair", "maintainer": "M", "type": "add-on", "blender_version_min": "4.2.0",
+            "license": ["SPDX:GPL-3.0-or-later"], "permissions": {"files": "Import and export hair files"}}
+    builder.check_manifest(good, tmp_path)
+    for broken, message in ((dict(good, id="key-strand"), "id"),
+                            (dict(good, blender_version_min="4.2"), "blender_version_min"),
+                            (dict(good, license=["GPL"]), "license"),
+                            (dict(good, permissions={"files": ""}), "permissions"),
+                            (dict(good, wheels=["./wheels/missing.whl"]), "wheels")):
+        with pytest.raises(builder.BuildError, match=message):
+            builder.check_manifest(broken, tmp_path)
+
+
+def test_installer_unpacked_the_wheels_into_the_extensions_site_packages(extension):
+    site = pathlib.Path(bpy.utils.user_resource('EXTENSIONS')) / ".local" / "lib" / \
+        f"python{sys.version_info.major}.{sys.version_info.minor}" / "site-packages"
+    for package in ("groom", "tracer", "hairio", "moderngl", "glcontext"):
+        assert (site / package / "__init__.py").is_file() or (site / package).is_dir(), package
+    assert pathlib.Path(extension.__file__).is_relative_to(pathlib.Path(os.environ["BLENDER_USER_RESOURCES"]))
+
+
+def test_enabling_imports_nothing_heavy(extension_zip):
+    """Enable the built extension in a fresh process: groom, tracer and moderngl stay unloaded."""
+    code = f"""
+import os, sys, bpy
+bpy.context.preferences.extensions.repos.new(name="t", module="t", custom_directory=os.path.join(os.environ["BLENDER_USER_RESOURCES"], "r"), source='USER')
+assert bpy.ops.extensions.package_install_files(filepath={str(extension_zip[0])!r}, repo="t", enable_on_install=True) == {{'FINISHED'}}
+assert hasattr(bpy.types.Object, "keystrand_hair")
+print("HEAVY", sorted(m for m in ("groom", "tracer", "moderngl", "tracer.renderer") if m in sys.modules))
+"""
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(pathlib.Path(os.environ["BLENDER_USER_RESOURCES"]) / "fresh"))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "HEAVY []" in proc.stdout, proc.stdout
+
+
+def test_disabling_leaves_no_class_handler_property_or_menu_entry(extension, ext_enable):
+    enable, disable = ext_enable
+    module_name = extension.__name__
+    ours = lambda f: getattr(f, "__module__", "").startswith(module_name)  # noqa: E731
+    assert hasattr(bpy.types, "HAIR_OT_generate") and hasattr(bpy.types.Object, "keystrand_hair")
+    assert any(ours(f) for f in bpy.app.handlers.depsgraph_update_post)
+    disable()
+    try:
+        leftovers = [name for name in dir(bpy.types) if name.startswith(("HAIR_OT_", "VIEW3D_PT_keystrand",
+                                                                         "IMAGE_PT_keystrand"))]
+        assert leftovers == []
+        assert not hasattr(bpy.types.Object, "keystrand_hair")
+        assert "HairSettings" not in dir(bpy.types)
+        for name in dir(bpy.app.handlers):
+            handlers = getattr(bpy.app.handlers, name)
+            if isinstance(handlers, list):
+                assert not [f for f in handlers if ours(f)], name
+        assert not [f for f in bpy.types.TOPBAR_MT_file_export._dyn_ui_initialize() if ours(f)]
+        assert not hasattr(bpy.ops.hair, "generate") or not _operator_exists("hair.generate")
+    finally:
+        enable()
+    assert hasattr(bpy.types.Object, "keystrand_hair")
+
+
+def _operator_exists(idname):
+    try:
+        getattr(bpy.ops.hair, idname.split(".")[1]).get_rna_type()
+        return True
+    except (KeyError, AttributeError):
+        return False
+
+
+@pytest.mark.skipif(not os.environ.get("BLENDER") or os.environ.get("KEYSTRAND_IN_BLENDER"),
+                    reason="set BLENDER=/path/to/blender to run these tests inside a Blender executable too")
+def test_the_same_tests_pass_inside_blender_background():
+    runner = ROOT / "tests" / "blender" / "run_in_blender.py"
+    proc = subprocess.run([os.environ["BLENDER"], "--background", "--factory-startup", "--python", str(runner),
+                           "--", "-q", "-p", "no:cacheprovider"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]

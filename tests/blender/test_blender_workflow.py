@@ -1,0 +1,331 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The artist's path through the installed extension: keys by surface point, Generate,
+live update, Render Preview, presets, export, each checked against a direct call of the
+pure packages on arrays read here independently of the extension."""
+import importlib
+import json
+
+import numpy as np
+import pytest
+import bpy
+
+from blender_scene import activate, make_camera, make_scalp
+
+KEY_POINTS = [(0.0, 0.0, 0.1), (0.07, 0.0, 0.07), (-0.07, 0.0, 0.07), (0.0, -0.07, 0.07), (0.0, 0.07, 0.07)]
+
+
+def ext_module(extension, name):
+    return importlib.import_module(f"{extension.__name__}.addon.{name}")
+
+
+def add_keys(scalp, points=KEY_POINTS, shape='STRAIGHT'):
+    scalp.keystrand_hair.key_shape = shape
+    for p in points:
+        activate(scalp)
+        assert bpy.ops.hair.add_key_strand(location=p) == {'FINISHED'}
+    activate(scalp)
+    return sorted((o for o in bpy.data.objects if o.type == 'CURVE'), key=lambda o: o.name)
+
+
+def read_scalp_arrays(obj):
+    """groom.Scalp from the mesh, read here with foreach_get (not through the extension)."""
+    from groom import Scalp
+    mesh = obj.data
+    mesh.calc_loop_triangles()
+    v = np.empty(len(mesh.vertices) * 3)
+    mesh.vertices.foreach_get("co", v)
+    t = np.empty(len(mesh.loop_triangles) * 3, np.int64)
+    mesh.loop_triangles.foreach_get("vertices", t)
+    return Scalp(v.reshape(-1, 3), t.reshape(-1, 3))
+
+
+def read_key(obj):
+    """groom.KeyStrand of a Bézier key object whose coordinates are the scalp's."""
+    from groom import KeyStrand
+    bp = obj.data.splines[0].bezier_points
+    co = np.array([p.co for p in bp], float)
+    left = np.array([p.handle_left for p in bp], float)
+    right = np.array([p.handle_right for p in bp], float)
+    rows = [co[0]]
+    for i in range(1, len(co)):
+        rows += [right[i - 1], left[i], co[i]]
+    return KeyStrand(np.array(rows), kind="cubic")
+
+
+def params_of(scalp, **overrides):
+    """GroomParams with the values Blender holds (its float properties are float32, so
+    0.7 reads back as 0.699999988: the direct call must use the same numbers)."""
+    import dataclasses
+    from groom import GroomParams
+    s = scalp.keystrand_hair
+    values = {}
+    for field in dataclasses.fields(GroomParams):
+        if field.name in s.bl_rna.properties:
+            v = getattr(s, field.name)
+            values[field.name] = tuple(v) if hasattr(v, "__len__") and not isinstance(v, str) else v
+    values.update(overrides)
+    return GroomParams(**values)
+
+
+def curves_arrays(obj):
+    c = obj.data
+    offsets = np.empty(len(c.curves) + 1, np.int32)
+    c.curve_offset_data.foreach_get("value", offsets)
+    n = len(c.points)
+    out = {"counts": np.diff(offsets)}
+    for name, width, key in (("position", 3, "vector"), ("radius", 1, "value"), ("color", 4, "color"),
+                             ("alpha", 1, "value")):
+        a = np.empty(n * width, np.float32)
+        c.attributes[name].data.foreach_get(key, a)
+        out[name] = a.reshape(n, width) if width > 1 else a
+    wisp = np.empty(len(c.curves), np.int32)
+    c.attributes["wisp"].data.foreach_get("value", wisp)
+    out["wisp"] = wisp
+    return out
+
+
+def test_add_key_strand_grows_a_bezier_key_from_the_nearest_surface_point(clean):
+    scalp = make_scalp()
+    keys = add_keys(scalp, [(0.0, 0.0, 0.13), (0.1, 0.0, 0.0)])
+    assert len(keys) == 2
+    surface = read_scalp_arrays(scalp)
+    for key in keys:
+        assert key.data.splines[0].type == 'BEZIER' and len(key.data.splines[0].bezier_points) >= 4
+        assert key.parent == scalp and key.keystrand_hair.role == 'KEY' and key.keystrand_hair.scalp == scalp
+        root = np.array(key.data.splines[0].bezier_points[0].co)
+        _, _, nearest = surface.closest_points(root[None])
+        assert np.linalg.norm(nearest[0] - root) < 1e-6, "the key's root is not on the scalp"
+    # The key asked for at (0, 0, 0.13) roots at the top of the sphere and starts outward.
+    top = keys[0].data.splines[0].bezier_points
+    assert np.allclose(top[0].co, (0.0, 0.0, 0.1), atol=2e-3)
+    assert top[1].co.z > top[0].co.z
+
+
+def test_generate_writes_the_curves_groom_computes(clean):
+    from groom import generate
+    scalp = make_scalp()
+    keys = add_keys(scalp)
+    s = scalp.keystrand_hair
+    s.count, s.seed, s.tidiness = 1500, 3, 0.7
+    assert bpy.ops.hair.generate() == {'FINISHED'}
+    hair = s.hair_object
+    assert hair is not None and hair.type == 'CURVES' and hair.parent == scalp
+    assert hair.keystrand_hair.role == 'HAIR'
+    expected = generate(read_scalp_arrays(scalp), [read_key(k) for k in keys],
+                        params_of(scalp)).strands
+    assert params_of(scalp).tidiness == pytest.approx(0.7) and params_of(scalp).count == 1500
+    got = curves_arrays(hair)
+    assert len(got["counts"]) == 1500 == expected.num_strands
+    np.testing.assert_array_equal(got["counts"], expected.counts)
+    np.testing.assert_array_equal(got["position"], expected.points)
+    np.testing.assert_array_equal(got["radius"], expected.radius)
+    np.testing.assert_array_equal(got["color"][:, :3], expected.color)
+    np.testing.assert_array_equal(got["alpha"], expected.alpha)
+    np.testing.assert_array_equal(got["wisp"], expected.wisp)
+
+
+def test_generate_again_refills_the_same_hair_object(clean):
+    scalp = make_scalp()
+    add_keys(scalp)
+    scalp.keystrand_hair.count = 300
+    bpy.ops.hair.generate()
+    first = scalp.keystrand_hair.hair_object
+    scalp.keystrand_hair.count = 500
+    activate(scalp)
+    bpy.ops.hair.generate()
+    assert scalp.keystrand_hair.hair_object == first
+    assert len(first.data.curves) == 500
+    assert len([o for o in bpy.data.objects if o.type == 'CURVES']) == 1
+
+
+def test_settings_mirror_every_groom_parameter_with_its_default(clean):
+    import dataclasses
+    from groom import GroomParams
+    scalp = make_scalp()
+    s = scalp.keystrand_hair
+    skipped = {"parting"}  # partings come from the mesh's `hair_group` attribute instead
+    for field in dataclasses.fields(GroomParams):
+        if field.name in skipped:
+            continue
+        assert field.name in s.bl_rna.properties, f"no setting for GroomParams.{field.name}"
+        prop = s.bl_rna.properties[field.name]
+        assert prop.description, f"setting {field.name} has no tooltip"
+        value = getattr(s, field.name)
+        default = getattr(GroomParams(), field.name)
+        if isinstance(default, tuple):
+            assert np.allclose(tuple(value), default, atol=1e-6), field.name
+        elif isinstance(default, (str, bool)):
+            assert value == default, field.name
+        else:
+            assert value == pytest.approx(default, rel=1e-6), field.name
+
+
+def test_live_update_regrows_only_the_edited_keys_wisps(clean):
+    from groom import generate
+    live = ext_module(clean, "live")
+    scalp = make_scalp()
+    keys = add_keys(scalp)
+    s = scalp.keystrand_hair
+    s.count, s.viewport_count = 1200, 400
+    bpy.ops.hair.generate()
+    before = curves_arrays(s.hair_object)
+    # Drag the tip of key 1 sideways, as an artist would in edit mode.
+    tip = keys[1].data.splines[0].bezier_points[-1]
+    tip.co.y += 0.05
+    tip.handle_left.y += 0.05
+    tip.handle_right.y += 0.05
+    keys[1].data.update_tag()
+    bpy.context.view_layer.update()
+    assert live.process(settle=False) == 1
+    params = params_of(scalp, count=400)
+    during = curves_arrays(s.hair_object)
+    new_keys = [read_key(k) for k in keys]
+    scalp_arrays = read_scalp_arrays(scalp)
+    expected_view = generate(scalp_arrays, new_keys, params).strands
+    np.testing.assert_array_equal(during["position"], expected_view.points)
+    # Once the edit settles, the full count comes back, equal to a full regeneration.
+    assert live.process(settle=True) == 1
+    after = curves_arrays(s.hair_object)
+    expected = generate(scalp_arrays, new_keys, params_of(scalp)).strands
+    np.testing.assert_array_equal(after["counts"], expected.counts)
+    np.testing.assert_array_equal(after["position"], expected.points)
+    # Strands that no key-1 weight touches kept their points.
+    touched = np.isin(generate(scalp_arrays, new_keys, params_of(scalp)).guides, [1]).any(axis=1)
+    off_b = np.concatenate([[0], np.cumsum(before["counts"])])
+    off_a = np.concatenate([[0], np.cumsum(after["counts"])])
+    for i in np.flatnonzero(~touched)[:50]:
+        np.testing.assert_array_equal(before["position"][off_b[i]:off_b[i + 1]],
+                                      after["position"][off_a[i]:off_a[i + 1]])
+    assert touched.any() and (~touched).any()
+
+
+def test_render_preview_fills_the_image_with_the_tracer_s_pixels(clean):
+    from groom import generate
+    from tracer import Camera, RenderSettings, Renderer
+    scalp = make_scalp()
+    keys = add_keys(scalp)
+    s = scalp.keystrand_hair
+    s.count, s.preview_size, s.radius = 800, 96, 4e-4
+    bpy.ops.hair.generate()
+    cam = make_camera()
+    activate(scalp)
+    assert bpy.ops.hair.render_preview() == {'FINISHED'}
+    image = bpy.data.images["Hair Preview"]
+    w, h = image.size
+    r = bpy.context.scene.render
+    assert (w, h) == (96, round(96 * r.resolution_y / r.resolution_x))
+    pixels = np.empty(w * h * 4, np.float32)
+    image.pixels.foreach_get(pixels)
+    got = pixels.reshape(h, w, 4)[::-1]
+    strands = generate(read_scalp_arrays(scalp), [read_key(k) for k in keys],
+                       params_of(scalp)).strands
+    camera = Camera.from_blender(np.array(cam.matrix_world), (w, h), lens=cam.data.lens,
+                                 sensor_width=cam.data.sensor_width, sensor_height=cam.data.sensor_height,
+                                 sensor_fit=cam.data.sensor_fit)
+    renderer = Renderer()
+    renderer.set_strands(strands)
+    expected = renderer.render(camera, RenderSettings())
+    assert expected[..., 3].max() > 0.5, "the test camera does not see the hair"
+    np.testing.assert_allclose(got, expected, atol=1e-5)
+
+
+def test_moving_the_camera_re_renders_without_re_uploading(clean):
+    preview = ext_module(clean, "preview")
+    scalp = make_scalp()
+    add_keys(scalp)
+    scalp.keystrand_hair.count, scalp.keystrand_hair.preview_size = 300, 48
+    bpy.ops.hair.generate()
+    cam = make_camera()
+    activate(scalp)
+    bpy.ops.hair.render_preview()
+    renderer = preview.current_renderer()
+    calls = []
+    original = renderer.set_strands
+    renderer.set_strands = lambda strands: (calls.append(1), original(strands))
+    try:
+        cam.location.x += 0.05
+        bpy.context.view_layer.update()
+        assert bpy.ops.hair.render_preview() == {'FINISHED'}
+        assert preview.current_renderer() is renderer and calls == []
+        # New hair is uploaded.
+        scalp.keystrand_hair.seed = 9
+        bpy.ops.hair.generate()
+        bpy.ops.hair.render_preview()
+        assert calls == [1]
+    finally:
+        del renderer.set_strands
+
+
+@pytest.mark.parametrize("fmt", ["npz", "hair", "tfx"])
+def test_export_writes_the_hair_in_world_space(clean, tmp_path, fmt):
+    from hairio.formats import read_strands
+    scalp = make_scalp()
+    add_keys(scalp)
+    scalp.keystrand_hair.count = 200
+    bpy.ops.hair.generate()
+    scalp.location = (1.0, 2.0, 3.0)
+    bpy.context.view_layer.update()
+    path = tmp_path / f"hair.{fmt}"
+    assert bpy.ops.hair.export(filepath=str(path), format=fmt) == {'FINISHED'}
+    back = read_strands(str(path))
+    assert back.num_strands == 200
+    hair = curves_arrays(scalp.keystrand_hair.hair_object)
+    # Roots (point 0 of every strand) moved with the scalp.
+    roots = back.points[np.concatenate([[0], np.cumsum(back.counts)[:-1]])]
+    expected_roots = hair["position"][np.concatenate([[0], np.cumsum(hair["counts"])[:-1]])] + (1.0, 2.0, 3.0)
+    np.testing.assert_allclose(roots, expected_roots, atol=1e-5)
+
+
+@pytest.mark.parametrize("fmt", ["abc", "usd"])
+def test_export_through_blender_s_exporters_leaves_the_scene_alone(clean, tmp_path, fmt):
+    from blender_scene import scene_snapshot
+    scalp = make_scalp()
+    add_keys(scalp)
+    scalp.keystrand_hair.count = 100
+    bpy.ops.hair.generate()
+    before = scene_snapshot()
+    path = tmp_path / f"hair.{fmt}"
+    assert bpy.ops.hair.export(filepath=str(path), format=fmt) == {'FINISHED'}
+    assert path.is_file() and path.stat().st_size > 0
+    assert scene_snapshot() == before
+
+
+def test_export_menu_lists_every_format(clean):
+    draw_funcs = bpy.types.TOPBAR_MT_file_export._dyn_ui_initialize()
+    ours = [f for f in draw_funcs if getattr(f, "__module__", "").startswith(clean.__name__)]
+    assert len(ours) == 1
+
+
+def test_load_preset_creates_its_keys_and_settings(clean):
+    from groom import load_preset
+    scalp = make_scalp()
+    add_keys(scalp, KEY_POINTS[:1])
+    preset_path = clean.__path__[0] + "/presets/wavy.json"
+    preset = load_preset(preset_path)
+    activate(scalp)
+    assert bpy.ops.hair.load_preset(preset='wavy') == {'FINISHED'}
+    keys = [o for o in bpy.data.objects if o.keystrand_hair.role == 'KEY']
+    assert len(keys) == len(preset.key_specs), "the old key was not replaced"
+    assert scalp.keystrand_hair.count == preset.params.count
+    assert scalp.keystrand_hair.n_influence == pytest.approx(preset.params.n_influence)
+
+
+def test_save_preset_round_trips_keys_and_settings(clean, tmp_path):
+    scalp = make_scalp()
+    keys = add_keys(scalp, KEY_POINTS[:3], shape='WAVY')
+    scalp.keystrand_hair.tidiness = 0.42
+    scalp.keystrand_hair.count = 777
+    path = tmp_path / "mine.json"
+    assert bpy.ops.hair.save_preset(filepath=str(path)) == {'FINISHED'}
+    data = json.loads(path.read_text())
+    assert data["params"]["tidiness"] == pytest.approx(0.42) and data["params"]["count"] == 777
+    old = [read_key(k).points for k in keys]
+    # Load it onto a fresh scalp: same keys, same settings.
+    other = make_scalp("Other")
+    assert bpy.ops.hair.load_preset(filepath=str(path)) == {'FINISHED'}
+    new = sorted((o for o in bpy.data.objects if o.keystrand_hair.role == 'KEY' and o.keystrand_hair.scalp == other),
+                 key=lambda o: o.name)
+    assert len(new) == 3
+    for a, b in zip(old, [read_key(k).points for k in new]):
+        np.testing.assert_allclose(a, b, atol=1e-6)
+    assert other.keystrand_hair.count == 777
