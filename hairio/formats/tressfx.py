@@ -163,14 +163,18 @@ def resample_strands(strands, vertices_per_strand):
     if s.num_strands == 0:
         return s
     a, f, _ = _arc_positions(s, n)
+    b = a + 1
 
-    def lerp(v):
-        v = v.astype(np.float64)
-        ff = f.reshape((-1,) + (1,) * (v.ndim - 1))
-        return v[a] * (1.0 - ff) + v[a + 1] * ff
+    def lerp(v, dtype):
+        # Points in float64 (their error is what we report); radius and colors in float32.
+        v0 = np.take(v, a, axis=0).astype(dtype, copy=False)
+        dv = np.take(v, b, axis=0).astype(dtype, copy=False) - v0
+        ff = f.astype(dtype).reshape((-1,) + (1,) * (v.ndim - 1))
+        return v0 + dv * ff
 
-    return type(s).from_arrays(lerp(s.points), np.full(s.num_strands, n, np.int32), lerp(s.radius),
-                               lerp(s.color), np.clip(lerp(s.alpha), 0, 1), s.wisp)
+    return type(s).from_arrays(lerp(s.points, np.float64), np.full(s.num_strands, n, np.int32),
+                               lerp(s.radius, np.float32), lerp(s.color, np.float32),
+                               np.clip(lerp(s.alpha, np.float32), 0, 1), s.wisp)
 
 
 def resampling_error(strands, vertices_per_strand):
