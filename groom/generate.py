@@ -57,11 +57,14 @@ class Generator:
     """Incremental generator. `generate()` gives the full result; `update_keys({i: KeyStrand})`
     replaces keys and returns the new result, recomputing only affected strands."""
 
-    def __init__(self, scalp, keys, params):
+    def __init__(self, scalp, keys, params, samples=None):
+        """samples: optional sampling.RootSamples to grow from instead of sampling
+        params.count roots (measurements place roots where they need them)."""
         self.keys = _check_inputs(scalp, keys, params)
         self.scalp, self.params = scalp, params
         p = params
-        samples = sample_roots(scalp, p.count, p.seed, p.sampling_mode)
+        if samples is None:
+            samples = sample_roots(scalp, p.count, p.seed, p.sampling_mode)
         self.samples = samples
         normals = scalp.normals_at(samples.tri, samples.bary, p.normal_mode)
         self.frames = root_frames(normals, p.up, p.front)
@@ -91,6 +94,16 @@ class Generator:
         key_groups = np.array([d["group"] for d in kd], np.int32)
         return guide_weights(self.samples.points, key_roots, self.params.neighbour_mode,
                              self.params.n_influence, self.root_groups, key_groups)
+
+    def evaluate(self, sel, cylinders):
+        """Points of strands `sel` at the given cylinder counts (S,) (measurement: e.g. 64x
+        dense samples of the exact curve). Returns (points (P,3) float64, counts (S,))."""
+        if self._result is None:
+            self.generate()
+        sel = np.asarray(sel, np.int64)
+        tables = np.stack([d["table"] for d in self._key_data])
+        return evaluate_strands(self.samples.points[sel], self.transforms[sel], self._guides[sel],
+                                self._weights[sel], self.frac[sel], np.asarray(cylinders, np.int64), tables)
 
     def _strands(self, sel, guides, weights):
         """Points and attributes of the strands `sel` (indices into the roots), in that order."""

@@ -32,10 +32,11 @@ class GroomParams:
     tidiness         1 = every strand keeps its key's orientation; 0 = angles up to theta_max
     theta_max        largest random rotation about each root axis at tidiness 0
     n_influence      N in [0, 100]: 0/1 ≈ follow the main key, 100 = plain inverse distance
-    neighbour_mode   'root' (2nd and 3rd nearest key to the strand's root; default, the
-                     smoother by measurement, see interpolate.py), 'key' (the two keys
-                     nearest the main key's root), 'interpolate' (Blender's Interpolate
-                     Curves weighting (d_max - d)/d over 3 keys + 1; ignores n_influence)
+    neighbour_mode   'interpolate' (default: Blender's Interpolate Curves weighting, sharpened
+                     by n_influence; no seam at wisp borders, the smoothest by measurement,
+                     see measure.py), 'root' (thesis reading (b): 2nd and 3rd nearest keys to
+                     the strand's root) or 'key' (reading (a): the two keys nearest the main
+                     key's root)
     intelligence     True: each strand carries its key's shape into its own root frame
     resolution_mode  'adaptive' (fewest points within `tolerance`) or 'fixed'
     points_per_strand  points of every strand in 'fixed' mode, the most in 'adaptive'
@@ -60,7 +61,7 @@ class GroomParams:
     tidiness: float = 0.9
     theta_max: float = 0.5
     n_influence: float = 50.0
-    neighbour_mode: str = "root"
+    neighbour_mode: str = "interpolate"
     intelligence: bool = True
     resolution_mode: str = "adaptive"
     points_per_strand: int = 32

@@ -70,7 +70,13 @@ def _ratio(num, den):
     return np.where(den > 0, num / safe, 1.0)
 
 
-def guide_weights(roots, key_roots, mode="root", n_influence=50.0, root_groups=None, key_groups=None):
+def interpolate_sharpness(n_influence):
+    """Exponent γ = 1 + (100 - N)/20 applied to the 'interpolate' weights (1 at N = 100,
+    6 at N = 0)."""
+    return 1.0 + (100.0 - float(n_influence)) / 20.0
+
+
+def guide_weights(roots, key_roots, mode="interpolate", n_influence=50.0, root_groups=None, key_groups=None):
     """Guides (S,3) int32 (main, n1, n2 key index) and weights (S,3) float64 summing to 1.
 
     'root' (reading (b) of SPEC §5): n1, n2 = 2nd and 3rd nearest keys to the strand's root.
@@ -78,7 +84,9 @@ def guide_weights(roots, key_roots, mode="root", n_influence=50.0, root_groups=N
     Both then use the thesis's N-influence: a = (101-N)/d0, b = 1/d1, c = 1/d2, normalised.
     'interpolate': Blender's Interpolate Curves weighting over the 3 nearest keys with the
     4th nearest at d_max: w = (d_max - d)/d ∝ 1/d - 1/d_max (d_max = inf when there is no
-    4th key), continuous across wisp borders; n_influence is not used.
+    4th key), continuous across wisp borders. N-influence enters continuously as an exponent,
+    w^γ with γ = interpolate_sharpness(N) (γ = 1 at N = 100: Blender's weights exactly;
+    larger γ for smaller N keeps strands closer to their nearest key without a seam).
 
     The weights are computed multiplied through by d0, so d0 = 0 gives exactly (1, 0, 0)
     with no division by zero. A missing neighbour (fewer than 3 keys in the group) repeats
@@ -110,7 +118,7 @@ def guide_weights(roots, key_roots, mode="root", n_influence=50.0, root_groups=N
         r = np.where(present, _ratio(d0, np.where(present, dist[:, 1:3], 1.0)), 0.0)
         inv_max = np.where(idx[:, 3:4] >= 0, _ratio(d0, np.where(idx[:, 3:4] >= 0, dist[:, 3:4], 1.0)), 0.0)
         w = np.concatenate([1.0 - inv_max, np.where(present, r - inv_max, 0.0)], axis=1)
-        w = np.maximum(w, 0.0)
+        w = np.maximum(w, 0.0) ** interpolate_sharpness(n_influence)
         total = w[:, 0:1] + w[:, 1:2] + w[:, 2:3]
         # All of main and neighbours as far as the 4th key: nothing singles one out; the main wins.
         flat = total[:, 0] <= 0

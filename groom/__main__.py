@@ -1,0 +1,80 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Command line: grow a preset hairstyle, or export strands to another format.
+
+    python -m groom generate --preset NAME [--scalp MESH.obj] [--count N] [--seed S] --out FILE.npz
+    python -m groom export ...   (see `python -m groom export --help`)
+
+Bad input exits 2 with a message naming it; no partial output file is ever written.
+"""
+import argparse
+import sys
+import time
+
+from hairio import InputError
+
+
+def _parser():
+    p = argparse.ArgumentParser(prog="python -m groom", description=__doc__.split("\n\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+    g = sub.add_parser("generate", help="grow a preset hairstyle and write the strands as .npz")
+    g.add_argument("--preset", required=True, help="preset name (see --list) or a preset .json file")
+    g.add_argument("--scalp", help="scalp mesh (.obj); default: the bundled head")
+    g.add_argument("--count", type=int, help="number of strands (overrides the preset)")
+    g.add_argument("--seed", type=int, help="random seed (overrides the preset)")
+    g.add_argument("--out", required=True, help="output .npz file (SPEC §0 arrays)")
+    sub.add_parser("export", help="convert strands between formats", add_help=False)
+    sub.add_parser("list", help="list the bundled presets")
+    return p
+
+
+def generate_main(args):
+    from . import default_scalp, generate, load_obj, load_preset
+    if not args.out.lower().endswith(".npz"):
+        raise InputError(f"--out {args.out!r}: the output must be a .npz file")
+    if args.count is not None and args.count < 1:
+        raise InputError(f"--count {args.count}: must be at least 1")
+    if args.seed is not None and args.seed < 0:
+        raise InputError(f"--seed {args.seed}: must be >= 0")
+    preset = load_preset(args.preset)
+    scalp = load_obj(args.scalp) if args.scalp else default_scalp()
+    changes = {k: v for k, v in (("count", args.count), ("seed", args.seed)) if v is not None}
+    params = preset.params.replace(**changes) if changes else preset.params
+    start = time.perf_counter()
+    result = generate(scalp, preset.keys_on(scalp), params)
+    elapsed = time.perf_counter() - start
+    s = result.strands
+    try:
+        s.save_npz(args.out)
+    except OSError as e:
+        raise InputError(f"--out {args.out!r}: cannot write it ({e})") from e
+    print(f"{preset.name}: {s.num_strands} strands, {s.num_points} points, {s.num_segments} cylinders "
+          f"in {elapsed:.3f} s -> {args.out}")
+    return 0
+
+
+def main(argv=None):
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "export":
+        # Imported only here, so `generate` works without the exporter installed.
+        try:
+            from hairio.cli import export_main
+        except ModuleNotFoundError as e:
+            if e.name != "hairio.cli":
+                raise
+            print("error: export: this installation has no hairio.cli exporter", file=sys.stderr)
+            return 2
+        return export_main(argv[1:])
+    args = _parser().parse_args(argv)
+    try:
+        if args.command == "list":
+            from .presets import list_presets
+            print("\n".join(list_presets()))
+            return 0
+        return generate_main(args)
+    except InputError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
