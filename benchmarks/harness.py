@@ -1,0 +1,280 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Timing, machine description and report pieces shared by every benchmark section.
+
+Rules this module enforces so no section has to remember them (SPEC §8):
+  * a time is the median of at least five runs after one untimed warm-up;
+  * a comparison against an anchor is a ratio of two medians taken in the same process run;
+  * every figure is written next to the machine, the versions and the settings it came from.
+"""
+import contextlib
+import io
+import json
+import os
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hairio import atomic_write
+
+MIN_RUNS = 5
+
+
+@dataclass
+class Timing:
+    """Wall-clock seconds of repeated runs of one job; `median` is the figure we report."""
+    runs: list
+
+    @property
+    def median(self):
+        return statistics.median(self.runs)
+
+    @property
+    def spread(self):
+        """(min, max) so a reader can see how noisy the machine was."""
+        return min(self.runs), max(self.runs)
+
+    def __str__(self):
+        return fmt_time(self.median)
+
+
+def measure(job, runs=MIN_RUNS, warmup=1, before=None):
+    """Time `job()` `runs` times after `warmup` untimed calls; `before()` runs untimed each time.
+
+    `before` exists for anchors whose caches must be invalidated (a depsgraph tag, a camera
+    move) without charging that to the job. Returns (Timing, result of the last call).
+    """
+    runs = max(int(runs), MIN_RUNS)
+    result = None
+    for _ in range(warmup):
+        if before:
+            before()
+        result = job()
+    times = []
+    for _ in range(runs):
+        if before:
+            before()
+        t0 = time.perf_counter()
+        result = job()
+        times.append(time.perf_counter() - t0)
+    return Timing(times), result
+
+
+def once(job):
+    """Seconds of one call (for first-use costs that cannot be repeated, e.g. a first upload)."""
+    t0 = time.perf_counter()
+    result = job()
+    return time.perf_counter() - t0, result
+
+
+def fmt_time(seconds):
+    if seconds is None or not np.isfinite(seconds):
+        return "n/a"
+    if seconds < 1e-3:
+        return f"{seconds * 1e6:.0f} µs"
+    if seconds < 1.0:
+        return f"{seconds * 1e3:.1f} ms"
+    return f"{seconds:.2f} s"
+
+
+def fmt_num(x, digits=3):
+    if x is None:
+        return "n/a"
+    if isinstance(x, (int, np.integer)):
+        return f"{int(x):,}"
+    x = float(x)
+    if not np.isfinite(x):
+        return str(x)
+    if x == 0:
+        return "0"
+    if abs(x) >= 1e4 or abs(x) < 1e-3:
+        return f"{x:.{digits - 1}e}"
+    return f"{x:.{digits}g}"
+
+
+def ratio(a, b):
+    return float("nan") if not b else a / b
+
+
+def table(header, rows):
+    """A Markdown table; cells are formatted already or formatted with fmt_num."""
+    def cell(v):
+        if isinstance(v, str):
+            return v
+        if isinstance(v, Timing):
+            return str(v)
+        return fmt_num(v)
+    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    out += ["| " + " | ".join(cell(v) for v in row) + " |" for row in rows]
+    return "\n".join(out)
+
+
+# ----------------------------------------------------------------------------- machine
+
+def cpu_model():
+    with contextlib.suppress(OSError):
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.lower().startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    return platform.processor() or platform.machine()
+
+
+def gl_renderer():
+    """GL renderer string of the headless context the tracer would get (probed in a child
+    process so a broken driver cannot take the benchmark down)."""
+    code = ("import moderngl; c = moderngl.create_standalone_context(backend='egl'); "
+            "print(c.info['GL_RENDERER'], '|', c.info['GL_VERSION'])")
+    try:
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+        if out.returncode == 0 and out.stdout.strip():
+            return out.stdout.strip().splitlines()[-1]
+        return "unavailable (" + (out.stderr.strip().splitlines() or ["no output"])[-1][:120] + ")"
+    except (OSError, subprocess.TimeoutExpired) as e:
+        return f"unavailable ({e})"
+
+
+def package_version(name):
+    try:
+        from importlib.metadata import version
+        return version(name)
+    except Exception:  # a missing package is a fact for the report, not an error
+        return "not installed"
+
+
+def git_commit():
+    try:
+        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        out = subprocess.run(["git", "-C", root, "rev-parse", "--short", "HEAD"],
+                             capture_output=True, text=True, timeout=10)
+        dirty = subprocess.run(["git", "-C", root, "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=10)
+        return out.stdout.strip() + (" (with uncommitted changes)" if dirty.stdout.strip() else "")
+    except (OSError, subprocess.TimeoutExpired):
+        return "unknown"
+
+
+def machine_info():
+    return {
+        "cpu": cpu_model(),
+        "cores": os.cpu_count(),
+        "memory_gb": round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30, 1),
+        "gl_renderer": gl_renderer(),
+        "os": platform.platform(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "bpy": package_version("bpy"),
+        "moderngl": package_version("moderngl"),
+        "matplotlib": package_version("matplotlib"),
+        "hypothesis": package_version("hypothesis"),
+        "commit": git_commit(),
+        "date_utc": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+    }
+
+
+def hwm_mb():
+    """Peak resident memory of this process so far, in MiB.
+
+    /proc/self/status VmHWM belongs to this process's own address space; getrusage's
+    ru_maxrss would not do: Linux carries it over from the parent across fork and exec."""
+    with contextlib.suppress(OSError):
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def run_child(code, timeout=600):
+    """Run Python `code` in a fresh interpreter at the repository root; it must print one JSON
+    line last. Used for peak-memory figures (a fresh process has no earlier peak to hide)."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=timeout, cwd=root)
+    if out.returncode != 0:
+        raise RuntimeError("child failed: " + (out.stderr.strip().splitlines() or ["?"])[-1][:300])
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+# ----------------------------------------------------------------------------- sections
+
+class NotMeasured(Exception):
+    """Raised by a section (or a part of one) whose code under test is not there yet."""
+
+
+@dataclass
+class Section:
+    """What one report section collects while it runs."""
+    key: str
+    title: str
+    mode: str
+    outdir: str
+    parts: list = field(default_factory=list)
+    figures: list = field(default_factory=list)
+    data: dict = field(default_factory=dict)
+    started: float = field(default_factory=time.perf_counter)
+
+    def text(self, s):
+        self.parts.append(s.strip("\n"))
+
+    def table(self, header, rows, caption=None):
+        if caption:
+            self.parts.append(caption)
+        self.parts.append(table(header, rows))
+
+    def not_measured(self, what, reason):
+        self.parts.append(f"*{what}: not measured: {reason}*")
+
+    def settings(self, **kw):
+        self.parts.append("Settings: " + ", ".join(f"`{k}={v}`" for k, v in kw.items()))
+
+    def elapsed(self):
+        return time.perf_counter() - self.started
+
+    def figure(self, fig, name, caption):
+        """Save a matplotlib figure beside the report (atomically) and link it."""
+        path = os.path.join(self.outdir, name)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+        with atomic_write(path) as f:
+            f.write(buf.getvalue())
+        import matplotlib.pyplot as plt
+        plt.close(fig)
+        self.figures.append(name)
+        self.parts.append(f"![{caption}]({name})\n\n*{caption}*")
+
+    def image(self, rgba, name):
+        """Save an (H,W,3|4) linear image as an sRGB PNG beside the report."""
+        import matplotlib.image as mpimg
+        path = os.path.join(self.outdir, name)
+        buf = io.BytesIO()
+        mpimg.imsave(buf, to_srgb8(rgba), format="png")
+        with atomic_write(path) as f:
+            f.write(buf.getvalue())
+        self.figures.append(name)
+        return name
+
+    def markdown(self):
+        return "\n\n".join(self.parts)
+
+
+def to_srgb8(rgba):
+    """Linear float RGBA → sRGB uint8, composited over white so transparent hair reads on paper."""
+    a = np.asarray(rgba, np.float64)
+    rgb = a[..., :3]
+    if a.shape[-1] == 4:
+        alpha = np.clip(a[..., 3:4], 0, 1)
+        rgb = rgb + (1 - alpha)   # premultiplied colour over a white background
+    rgb = np.clip(rgb, 0, 1)
+    srgb = np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * np.power(rgb, 1 / 2.4) - 0.055)
+    return (np.clip(srgb, 0, 1) * 255 + 0.5).astype(np.uint8)
+
+
+def write_text_atomic(path, text):
+    with atomic_write(path, "w") as f:
+        f.write(text)

@@ -1,0 +1,56 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Switches the tracer has no public setting for, turned from outside for measurement only.
+
+The tracer chooses its grid resolution and always skips pixels outside the hair's screen
+box and extra layers when all alpha is 1; to show what each choice is worth, the benchmark
+replaces the one function that decides it, for the duration of a `with` block.
+"""
+import contextlib
+
+import numpy as np
+
+
+@contextlib.contextmanager
+def grid_scale(scale):
+    """Build every grid with `scale` times the tracer's own cells per axis."""
+    from tracer import renderer as rmod
+    from tracer.grid import build_grid, choose_resolution  # noqa: F401  (choose_resolution: documents intent)
+    original = rmod.build_grid
+
+    def scaled(cylinders, pad_factor=1.0, dims=None):
+        auto = build_grid(cylinders, pad_factor=pad_factor) if dims is None else None
+        d = np.asarray(auto.dims if dims is None else dims, np.float64)
+        d = np.clip(np.round(d * scale), 1, 1024).astype(np.int64)
+        return build_grid(cylinders, pad_factor=pad_factor, dims=d)
+
+    rmod.build_grid = scaled
+    try:
+        yield
+    finally:
+        rmod.build_grid = original
+
+
+@contextlib.contextmanager
+def no_screen_bounds(renderer):
+    """Trace every pixel of the image, not only the hair's projected box."""
+    def whole(camera):
+        empty = renderer.cylinders is None or len(renderer.cylinders) == 0
+        return None if empty else (0, 0, camera.size[0], camera.size[1])
+
+    renderer.screen_bounds = whole
+    try:
+        yield
+    finally:
+        del renderer.screen_bounds
+
+
+@contextlib.contextmanager
+def all_layers(renderer):
+    """Composite `settings.layers` layers even when every alpha is 1."""
+    original = renderer.effective_layers
+    renderer.effective_layers = lambda settings: settings.layers
+    try:
+        yield
+    finally:
+        del renderer.effective_layers
+        assert renderer.effective_layers.__func__ is original.__func__

@@ -1,0 +1,63 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The report's sections, in report order. Each module has `run(sec, cfg)`."""
+import importlib
+import time
+import traceback
+
+from benchmarks.harness import NotMeasured, Section
+
+SECTIONS = [
+    ("generation", "Generation: groom against Blender's Interpolate Curves"),
+    ("geometry", "Geometry: cylinders per strand, time against error"),
+    ("rendering", "Rendering: time against image error"),
+    ("anchors", "Anchors: the tracer against Blender Cycles"),
+    ("scaling", "Scaling: strand count, image size, hair length, cost model"),
+    ("skips", "Skips: on and off, with proof the output is unchanged"),
+    ("stress", "Stress: SPEC §9 cases and randomised scenes"),
+    ("gpu", "GPU"),
+    ("integration", "Extension and export figures (issues 4 and 5)"),
+]
+
+
+def run_section(key, cfg, outdir, budget):
+    """Run one section in this process and return what the report needs (JSON-able)."""
+    title = dict(SECTIONS)[key]
+    sec = Section(key, title, cfg.mode, outdir)
+    sec.budget = float(budget)
+    summary = []
+    sec.summary = summary
+    status = "ok"
+    try:
+        module = importlib.import_module(f"benchmarks.sections.{key}")
+        module.run(sec, cfg)
+    except NotMeasured as e:
+        sec.text(f"*not measured: {e}*")
+        summary.append(f"not measured: {e}")
+        status = "not measured"
+    except Exception as e:  # one broken section must not take the report down; say why
+        tb = traceback.format_exc()
+        print(tb, flush=True)
+        last = tb.strip().splitlines()[-3:]
+        sec.text(f"*not measured: the section failed with `{type(e).__name__}: {e}`*\n\n```\n"
+                 + "\n".join(last) + "\n```")
+        summary.append(f"FAILED: {type(e).__name__}: {e}")
+        status = "failed"
+    return {"markdown": sec.markdown(), "figures": sec.figures, "summary": summary,
+            "status": status, "data": sec.data}
+
+
+def over_budget(sec, fraction=1.0):
+    """True once the section has used `fraction` of its soft time budget."""
+    return sec.elapsed() > fraction * sec.budget
+
+
+def require(module_name, what):
+    """Import `module_name` or raise NotMeasured naming what is missing."""
+    try:
+        return importlib.import_module(module_name)
+    except ImportError as e:
+        raise NotMeasured(f"{what} is not available yet ({e})") from e
+
+
+def now():
+    return time.perf_counter()
