@@ -8,7 +8,7 @@ from hairio import InputError
 from hairio.formats import AXES, convert_points, convert_strands
 from hairio.unreal import groom_attributes
 
-from conftest import make_wavy
+from hairio_scenes import make_wavy
 
 FRONT, UP, RIGHT = np.array([0, -1.0, 0]), np.array([0, 0, 1.0]), np.array([1.0, 0, 0])
 

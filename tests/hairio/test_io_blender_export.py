@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import make_wavy
+from hairio_scenes import make_wavy
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 

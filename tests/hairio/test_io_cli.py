@@ -13,7 +13,7 @@ import pytest
 from hairio.cli import export_main
 from hairio.formats import read_strands, resample_strands
 
-from conftest import make_wavy
+from hairio_scenes import make_wavy
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 

@@ -11,7 +11,7 @@ from hairio.formats import (load_tfx, loaded_strand_count, read_strands, read_tf
                             resampling_error, resampling_errors, spherical_root_uv, write_tfx,
                             write_tfx_pair)
 
-from conftest import make_wavy
+from hairio_scenes import make_wavy
 
 
 def parse_tfx(path):

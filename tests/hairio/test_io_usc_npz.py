@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from hairio import InputError, Strands
-from hairio.formats import (read_sidecar, read_strands, read_usc, write_npz, write_strands, write_usc)
+from hairio.formats import read_sidecar, read_strands, read_usc, write_strands, write_usc
 
 
 def parse_usc(path):
