@@ -77,6 +77,7 @@ class Generator:
         self._key_data = [self._prepare_key(k) for k in self.keys]
         self._result = None
         self._cache = None
+        self.last_recomputed = 0  # strands recomputed by the last update_keys
 
     def _prepare_key(self, key):
         tri, bary, _ = self.scalp.closest_points(key.root[None])
@@ -177,6 +178,7 @@ class Generator:
         dirty = (np.isin(guides, changed).any(axis=1) | np.isin(old_g, changed).any(axis=1)
                  | (guides != old_g).any(axis=1) | (weights != old_w).any(axis=1))
         sel = np.flatnonzero(dirty)
+        self.last_recomputed = len(sel)
         return self._build(guides, weights, self._splice(sel, self._strands(sel, guides, weights)))
 
     def _splice(self, sel, parts):

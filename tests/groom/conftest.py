@@ -10,7 +10,7 @@ def scalp():
     return default_scalp()
 
 
-def curl_key(root, normal=(0.0, 0.0, 1.0), length=0.08, group=0):
+def _curl_key(root, normal=(0.0, 0.0, 1.0), length=0.08, group=0):
     """A curved Bézier key growing along `normal` and bending toward +x."""
     root = np.asarray(root, float)
     n = np.asarray(normal, float) / np.linalg.norm(normal)
@@ -21,7 +21,7 @@ def curl_key(root, normal=(0.0, 0.0, 1.0), length=0.08, group=0):
     return KeyStrand(np.array(pts), group=group)
 
 
-def keys_around(scalp, count=6, group=None):
+def _keys_around(scalp, count=6, group=None):
     """`count` keys on the default scalp, spread over the cap, each along its surface normal."""
     d = np.array([[0, 0, 1], [0.6, 0, 0.8], [-0.6, 0, 0.8], [0, 0.7, 0.7], [0.5, 0.5, 0.7],
                   [-0.5, 0.5, 0.7], [0, -0.5, 0.85], [0.9, 0.2, 0.3], [-0.9, 0.2, 0.3], [0, 0.9, 0.1]], float)
@@ -31,10 +31,20 @@ def keys_around(scalp, count=6, group=None):
     keys = []
     for i, (p, n) in enumerate(zip(pts, normals)):
         g = 0 if group is None else int(group(p))
-        keys.append(curl_key(p, n, length=0.05 + 0.01 * i, group=g))
+        keys.append(_curl_key(p, n, length=0.05 + 0.01 * i, group=g))
     return keys
 
 
 @pytest.fixture
 def small_params():
     return GroomParams(count=2000, seed=3)
+
+
+@pytest.fixture
+def curl_key():
+    return _curl_key
+
+
+@pytest.fixture
+def keys_around():
+    return _keys_around

@@ -1,0 +1,247 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+import numpy as np
+import pytest
+
+from groom import Generator, GroomParams, KeyStrand, Scalp, generate
+from groom.measure import strand_errors
+from groom.sampling import RootSamples
+from hairio import InputError
+
+
+
+def _same(a, b):
+    for name in ("points", "counts", "radius", "color", "alpha", "wisp"):
+        np.testing.assert_array_equal(getattr(a.strands, name), getattr(b.strands, name), err_msg=name)
+    np.testing.assert_array_equal(a.guides, b.guides)
+    np.testing.assert_array_equal(a.guide_weights, b.guide_weights)
+
+
+def test_result_has_the_documented_arrays(scalp, small_params, keys_around):
+    r = generate(scalp, keys_around(scalp), small_params)
+    s = r.strands
+    assert s.num_strands == small_params.count
+    assert r.roots.shape == (s.num_strands, 3) and r.root_uv.shape == (s.num_strands, 2)
+    assert r.guides.shape == (s.num_strands, 3) and r.guides.dtype == np.int32
+    assert r.guide_weights.shape == (s.num_strands, 3) and r.guide_weights.dtype == np.float32
+    np.testing.assert_array_equal(s.wisp, r.guides[:, 0])
+    # Point 0 of every strand is its root.
+    np.testing.assert_allclose(s.points[s.offsets], r.roots, atol=1e-6)
+    for a in (s.points, s.radius, s.color, s.alpha):
+        assert np.isfinite(a).all()
+
+
+def test_generation_is_deterministic_for_a_seed(scalp, small_params, keys_around):
+    keys = keys_around(scalp)
+    _same(generate(scalp, keys, small_params), generate(scalp, keys, small_params))
+    other = generate(scalp, keys, small_params.replace(seed=small_params.seed + 1))
+    assert not np.array_equal(other.roots, generate(scalp, keys, small_params).roots)
+
+
+@pytest.mark.parametrize("mode", ["interpolate", "root", "key"])
+@pytest.mark.parametrize("resolution", ["adaptive", "fixed"])
+def test_incremental_update_equals_full_regeneration(scalp, mode, resolution, keys_around):
+    params = GroomParams(count=3000, seed=1, neighbour_mode=mode, resolution_mode=resolution,
+                         color_variation_point=(0.02, 0.02, 0.02))
+    keys = keys_around(scalp, 8)
+    gen = Generator(scalp, keys, params)
+    gen.generate()
+    # Reshape key 2 (same root), then move key 5's root (wisp borders move).
+    reshaped = KeyStrand(keys[2].points + [[0, 0, 0], [0.01, 0, 0], [0, 0.02, 0], [0.01, 0.01, 0]])
+    inc = gen.update_keys({2: reshaped})
+    assert 0 < gen.last_recomputed < params.count
+    keys[2] = reshaped
+    _same(inc, generate(scalp, keys, params))
+    moved = KeyStrand(keys[5].points + [0.01, -0.01, 0])
+    inc = gen.update_keys({5: moved})
+    keys[5] = moved
+    _same(inc, generate(scalp, keys, params))
+
+
+def test_tidiness_one_means_no_rotation(scalp, curl_key):
+    key = curl_key([0, 0, 0.1])
+    base = dict(count=500, seed=2, min_length=1.0, max_length=1.0, resolution_mode="fixed", theta_max=0.6)
+    shapes = {}
+    for tidy in (1.0, 0.5):
+        gen = Generator(scalp, [key], GroomParams(tidiness=tidy, **base))
+        s = gen.generate().strands
+        pts = s.points.astype(np.float64).reshape(500, -1, 3) - gen.result.roots[:, None]
+        # Each strand's shape in its own root frame: identical for all strands iff no rotation.
+        shapes[tidy] = np.einsum("skd,sde->ske", pts, gen.frames)
+    spread = {t: np.abs(v - v[0]).max() for t, v in shapes.items()}
+    assert spread[1.0] < 1e-6
+    assert spread[0.5] > 1e-3
+
+
+def _local_shapes(gen):
+    s = gen.result.strands
+    pts = s.points.astype(np.float64).reshape(s.num_strands, -1, 3) - gen.result.roots[:, None]
+    return np.einsum("skd,sde->ske", pts, gen.frames)
+
+
+def test_untidy_rotation_angles_stay_within_theta_max(scalp, curl_key):
+    base = dict(count=400, seed=4, theta_max=0.3, min_length=1, max_length=1, resolution_mode="fixed")
+    key = curl_key([0, 0, 0.1])
+    ref = Generator(scalp, [key], GroomParams(tidiness=1.0, **base))
+    ref.generate()
+    messy = Generator(scalp, [key], GroomParams(tidiness=0.25, **base))
+    messy.generate()
+    p, q = _local_shapes(ref)[0], _local_shapes(messy)
+    limit = 0.75 * 0.3
+    angles = []
+    for shape in q[:100]:  # recover each strand's rotation (Kabsch) and its x, y, z angles
+        u, _, vt = np.linalg.svd(p.T @ shape)
+        fix = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])  # a planar key allows a mirror
+        r = vt.T @ fix @ u.T
+        angles.append([np.arctan2(r[2, 1], r[2, 2]), -np.arcsin(r[2, 0]), np.arctan2(r[1, 0], r[0, 0])])
+    angles = np.abs(np.array(angles))
+    assert angles.max() <= limit + 1e-6
+    assert (angles.max(axis=0) > 0.8 * limit).all()
+
+
+def test_strand_lengths_fall_within_min_and_max(scalp, curl_key):
+    key = curl_key([0, 0, 0.1], length=0.1)
+    full = key.length()
+    p = GroomParams(count=2000, seed=5, min_length=0.4, max_length=0.7, resolution_mode="fixed",
+                    points_per_strand=200, tidiness=0.5)
+    s = generate(scalp, [key], p).strands
+    pts = s.points.astype(np.float64).reshape(2000, 200, 3)
+    length = np.linalg.norm(np.diff(pts, axis=1), axis=2).sum(axis=1) / full
+    assert length.min() >= 0.4 - 1e-3 and length.max() <= 0.7 + 1e-4
+    assert length.min() < 0.41 and length.max() > 0.69
+
+
+def test_lengths_are_trimmed_not_scaled(scalp):
+    # A tight curl trimmed to half its length keeps its curl: the short strand lies on the long one.
+    key = KeyStrand(np.array([[0, 0, 0.1], [0.02, 0, 0.11], [0.02, 0.02, 0.12], [0, 0.02, 0.13],
+                              [0, 0, 0.14]]), kind="bezier")
+    common = dict(count=50, seed=6, tidiness=1.0, resolution_mode="fixed", points_per_strand=400)
+    long = generate(scalp, [key], GroomParams(min_length=1, max_length=1, **common)).strands
+    short = generate(scalp, [key], GroomParams(min_length=0.5, max_length=0.5, **common)).strands
+    a = long.points.reshape(50, 400, 3)[0].astype(np.float64)
+    b = short.points.reshape(50, 400, 3)[0].astype(np.float64)
+    d = np.linalg.norm(b[:, None] - a[None], axis=2).min(axis=1)
+    assert d.max() < 2e-4
+
+
+def test_intelligence_off_translates_the_key_shape(scalp, curl_key):
+    key = curl_key([0, 0, 0.1])
+    p = GroomParams(count=300, seed=7, intelligence=False, tidiness=1.0, min_length=1, max_length=1,
+                    resolution_mode="fixed")
+    r = generate(scalp, [key], p)
+    offs = r.strands.points.astype(np.float64).reshape(300, -1, 3) - r.roots[:, None]
+    np.testing.assert_allclose(offs, np.broadcast_to(offs[0], offs.shape), atol=1e-6)
+    q = generate(scalp, [key], p.replace(intelligence=True))
+    offs_i = q.strands.points.astype(np.float64).reshape(300, -1, 3) - q.roots[:, None]
+    assert np.abs(offs_i - offs_i[0]).max() > 1e-2
+
+
+@pytest.mark.parametrize("units, tol", [("scene", 2e-4), ("scene", 2e-5), ("radius", 1.0)])
+def test_adaptive_resolution_meets_its_tolerance(scalp, units, tol, keys_around):
+    keys = keys_around(scalp, 6)
+    keys.append(KeyStrand(np.array([[0.0, 0.05, 0.087], [0.0, 0.1, 0.12]])))  # a straight one
+    p = GroomParams(count=300, seed=8, tolerance=tol, tolerance_units=units, points_per_strand=200,
+                    radius=1e-4)
+    gen = Generator(scalp, keys, p)
+    s = gen.generate().strands
+    limit = tol * (1e-4 if units == "radius" else 1.0)
+    err = strand_errors(gen)
+    assert err.max() <= limit * (1 + 1e-3) + 1e-7
+    cyl = s.counts - 1
+    assert cyl.min() < cyl.max()   # the resolution does adapt per strand
+    assert cyl.max() < 199         # and no strand hit the cap
+
+
+def test_fixed_resolution_gives_every_strand_the_same_count(scalp, keys_around):
+    s = generate(scalp, keys_around(scalp), GroomParams(count=100, resolution_mode="fixed",
+                                                       points_per_strand=26)).strands
+    assert (s.counts == 26).all()
+
+
+def test_radius_color_and_alpha_profiles(scalp, keys_around):
+    p = GroomParams(count=200, seed=9, resolution_mode="fixed", points_per_strand=11, radius=2e-4,
+                    radius_mode="linear", color=(0.5, 0.5, 0.5), color_variation=(0.1, 0.0, 0.0),
+                    alpha_start=0.6, alpha_tip=0.2)
+    s = generate(scalp, keys_around(scalp), p).strands
+    r = s.radius.reshape(200, 11)
+    np.testing.assert_allclose(r[:, 0], 2e-4, rtol=1e-6)
+    np.testing.assert_allclose(r[:, -1], 0, atol=1e-12)
+    assert (np.diff(r, axis=1) <= 0).all()
+    c = s.color.reshape(200, 11, 3)
+    assert np.abs(c[:, :, 0] - 0.5).max() <= 0.1 + 1e-6 and np.abs(c[:, :, 0] - 0.5).max() > 0.05
+    np.testing.assert_allclose(c[:, :, 1], 0.5, atol=1e-6)
+    a = s.alpha.reshape(200, 11)
+    np.testing.assert_allclose(a[:, :7], 1.0)
+    np.testing.assert_allclose(a[:, -1], 0.2, atol=1e-6)
+    const = generate(scalp, keys_around(scalp), p.replace(radius_mode="constant")).strands
+    np.testing.assert_allclose(const.radius, 2e-4, rtol=1e-6)
+
+
+# --- SPEC §9 stress cases ------------------------------------------------------------------
+
+def _samples_at(scalp, points):
+    tri, bary, pts = scalp.closest_points(np.asarray(points, float))
+    return RootSamples(pts, tri, bary, np.arange(len(pts)))
+
+
+def test_roots_on_the_crown_and_on_key_roots_give_finite_strands(scalp, keys_around):
+    keys = keys_around(scalp, 5)
+    crown = [0, 0, 0.1]
+    pts = [crown] + [k.root for k in keys]
+    p = GroomParams(tidiness=1.0, min_length=1, max_length=1, resolution_mode="fixed")
+    with np.errstate(divide="raise", invalid="raise", over="raise"):
+        gen = Generator(scalp, keys, p, samples=_samples_at(scalp, pts))
+        r = gen.generate()
+    assert np.isfinite(r.strands.points).all()
+    # A strand on a key root (d = 0) is that key, resampled.
+    k0 = r.strands.points.reshape(len(pts), -1, 3)[1].astype(np.float64)
+    ref = keys[0].resample(4000)
+    d = np.linalg.norm(k0[:, None] - ref[None], axis=2).min(axis=1)
+    assert d.max() < 1e-5
+    np.testing.assert_array_equal(r.guide_weights[1:, 0], 1.0)
+
+
+def test_two_coincident_keys_and_one_key_only_give_finite_strands(scalp, curl_key):
+    a = curl_key([0, 0, 0.1])
+    b = curl_key([0, 0, 0.1], length=0.03)
+    for keys in ([a], [a, b], [a, b, a]):
+        r = generate(scalp, keys, GroomParams(count=500))
+        assert np.isfinite(r.strands.points).all()
+        assert np.isfinite(r.guide_weights).all()
+
+
+def test_zero_area_and_sliver_triangles_in_the_scalp_give_finite_strands(curl_key):
+    v = np.array([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0.2, 0, 0], [0.1, 1e-12, 0], [0.3, 0, 0]], float)
+    s = Scalp(v, [[0, 1, 2], [1, 3, 5], [0, 3, 4], [2, 2, 2]])
+    r = generate(s, [curl_key([0.02, 0.02, 0])], GroomParams(count=400))
+    assert np.isfinite(r.strands.points).all()
+
+
+@pytest.mark.parametrize("scale, offset", [(1.0, 1e4), (1e-3, 0.0), (1e3, 0.0)])
+def test_moved_and_scaled_heads_give_the_same_hair_moved_and_scaled(scalp, scale, offset, keys_around):
+    keys = keys_around(scalp, 5)
+    p = GroomParams(count=400, seed=3, resolution_mode="fixed", radius=1e-4)
+    ref = generate(scalp, keys, p)
+    moved = Scalp(scalp.vertices * scale + offset, scalp.triangles, uv=scalp.uv)
+    moved_keys = [KeyStrand(k.points * scale + offset) for k in keys]
+    r = generate(moved, moved_keys, p.replace(radius=1e-4 * scale))
+    pts = r.strands.points.astype(np.float64)
+    assert np.isfinite(pts).all()
+    expect = ref.strands.points.astype(np.float64) * scale + offset
+    # float32 output: allow its rounding at the new magnitude, nothing more.
+    tol = 4 * np.finfo(np.float32).eps * (0.4 * scale + offset)
+    assert np.abs(pts - expect).max() <= tol
+    np.testing.assert_array_equal(r.guides, ref.guides)
+
+
+def test_non_finite_key_points_are_rejected_naming_the_array():
+    with pytest.raises(InputError, match="key strand points"):
+        KeyStrand(np.array([[0, 0, 0], [np.inf, 0, 0]]))
+
+
+def test_bad_inputs_to_generate_are_clear_errors(scalp, curl_key):
+    with pytest.raises(InputError, match="keys"):
+        generate(scalp, [], GroomParams(count=10))
+    with pytest.raises(InputError, match="keys\\[0\\]"):
+        generate(scalp, [np.zeros((3, 3))], GroomParams(count=10))
+    with pytest.raises(InputError, match="group"):
+        generate(scalp, [curl_key([0, 0, 0.1], group=1)], GroomParams(count=10))
