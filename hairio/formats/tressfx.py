@@ -183,7 +183,11 @@ def resampling_error(strands, vertices_per_strand):
     The resampled vertices lie on the original polyline, so the error is how far the
     original points lie from the resampled one: each original point at arc length s is
     measured to the resampled segment that covers s (the correspondence resampling
-    defines). Returns dict(max=, mean=, per_strand=(S,) max), in scene units."""
+    defines). Each stretch of the original between two resampled vertices then stays in a
+    tube of that radius around their chord, so the max is also a bound on the distance
+    from any point of either strand to the other (both ways). The resampled points are
+    the float32 ones the file stores. Returns dict(max=, mean=, per_strand=(S,) max), in
+    scene units."""
     s = check_strands(strands)
     n = int(vertices_per_strand)
     if s.num_strands == 0:
