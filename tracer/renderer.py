@@ -66,6 +66,9 @@ class Renderer:
         self.grid = None
         self.strands = None
         self.all_opaque = True
+        # The grid lists cylinders with their true radius until a render asks for minimum
+        # pixel width; then it is rebuilt once with radii widened by GRID_WIDEN_CAP and kept.
+        self._grid_pad = 1.0
         self.stats = {"bytes_uploaded": 0, "uploads": 0, "upload_s": 0.0, "grid_s": 0.0,
                       "render_s": 0.0, "renders": 0}
 
@@ -168,7 +171,7 @@ class Renderer:
 
     def _build_and_upload_grid(self):
         t0 = time.perf_counter()
-        self.grid = build_grid(self.cylinders, pad_factor=GRID_WIDEN_CAP)
+        self.grid = build_grid(self.cylinders, pad_factor=self._grid_pad)
         t1 = time.perf_counter()
         g = self.grid
         idx = np.zeros(_rows(len(g.indices)) * TEX_W, np.int32)
@@ -251,6 +254,11 @@ class Renderer:
         if self.cylinders is None:
             raise InputError("render: no strands; call set_strands first")
         t0 = time.perf_counter()
+        if settings.min_pixel_width and self._grid_pad < GRID_WIDEN_CAP:
+            self._grid_pad = GRID_WIDEN_CAP
+            self._build_and_upload_grid()
+            self.stats.pop("_grid_upload_s")
+            self.stats["grid_rebuilds"] = self.stats.get("grid_rebuilds", 0) + 1
         w, h = camera.size
         bg = settings.premultiplied_background()
         fbo = self._framebuffer(w, h, settings.count)

@@ -1,0 +1,209 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""An out-of-process renderer: Blender talks to it, so a GL or driver crash never takes
+Blender down and Blender's own GL context is never touched.
+
+`python -m tracer.worker` reads requests from stdin and answers on stdout, each message an
+8-byte little-endian length followed by a pickle: a request is (command, args), an answer is
+("ok", value) or ("error", kind, message). Commands: set_strands, update_strands, render,
+stats, quit. Only the parent that spawned the worker writes to its stdin; pickle is used
+because both ends are this package.
+"""
+import os
+import pickle
+import queue
+import struct
+import subprocess
+import sys
+import threading
+
+_HEADER = struct.Struct("<Q")
+
+
+class WorkerError(RuntimeError):
+    """The worker died, timed out or failed; the next call starts a fresh one."""
+
+
+def _read_exact(stream, n):
+    buf = bytearray()
+    while len(buf) < n:
+        chunk = stream.read(n - len(buf))
+        if not chunk:
+            raise EOFError("stream closed")
+        buf += chunk
+    return bytes(buf)
+
+
+def read_message(stream):
+    (n,) = _HEADER.unpack(_read_exact(stream, _HEADER.size))
+    return pickle.loads(_read_exact(stream, n))
+
+
+def write_message(stream, obj):
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    stream.write(_HEADER.pack(len(data)) + data)
+    stream.flush()
+
+
+def serve(inp, out):
+    """The worker's loop: one Renderer, the scene kept between requests."""
+    from hairio import InputError
+    from .renderer import Renderer
+    renderer = None
+    while True:
+        try:
+            command, args = read_message(inp)
+        except EOFError:
+            return
+        if command == "quit":
+            write_message(out, ("ok", None))
+            return
+        try:
+            if renderer is None:
+                renderer = Renderer()
+            if command == "set_strands":
+                value = renderer.set_strands(*args)
+            elif command == "update_strands":
+                value = renderer.update_strands(*args)
+            elif command == "render":
+                value = renderer.render(*args)
+            elif command == "stats":
+                value = dict(renderer.stats)
+            else:
+                raise ValueError(f"unknown command {command!r}")
+            write_message(out, ("ok", value))
+        except InputError as e:
+            write_message(out, ("error", "InputError", str(e)))
+        except Exception as e:  # report, keep serving: the scene may still be good
+            write_message(out, ("error", type(e).__name__, str(e)))
+
+
+class WorkerClient:
+    """Same API as Renderer (set_strands, update_strands, render, stats, close), served by a
+    child process. Any death or time-out raises WorkerError and the next call restarts the
+    worker (re-sending the last strands so a render still has its scene)."""
+
+    def __init__(self, python=sys.executable, extra_sys_path=(), timeout=120.0, env=None):
+        self.python = python
+        self.extra_sys_path = tuple(extra_sys_path)
+        self.timeout = timeout
+        self.env = env
+        self._proc = None
+        self._answers = None
+        self._strands = None
+
+    # --- process management -----------------------------------------------------------
+    def _start(self):
+        package_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        env = dict(os.environ if self.env is None else self.env)
+        paths = [package_root, *self.extra_sys_path]
+        if env.get("PYTHONPATH"):
+            paths.append(env["PYTHONPATH"])
+        env["PYTHONPATH"] = os.pathsep.join(paths)
+        self._proc = subprocess.Popen([self.python, "-m", "tracer.worker"], stdin=subprocess.PIPE,
+                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+        self._answers = queue.Queue()
+        self._stderr = []
+        proc, answers = self._proc, self._answers
+
+        def pump():   # a reader thread, so a silent worker cannot block the caller forever
+            try:
+                while True:
+                    answers.put(read_message(proc.stdout))
+            except Exception as e:
+                answers.put(("dead", str(e)))
+
+        def drain():
+            for line in proc.stderr:
+                self._stderr.append(line.decode(errors="replace"))
+                del self._stderr[:-20]
+
+        threading.Thread(target=pump, daemon=True).start()
+        threading.Thread(target=drain, daemon=True).start()
+
+    def _kill(self):
+        proc, self._proc = self._proc, None
+        if proc is not None and proc.poll() is None:
+            proc.kill()
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                pass
+
+    def _call(self, command, *args, timeout=None):
+        fresh = self._proc is None or self._proc.poll() is not None
+        if fresh:
+            self._kill()
+            self._start()
+            if command not in ("set_strands", "quit") and self._strands is not None:
+                self._exchange("set_strands", (self._strands,), timeout)
+        return self._exchange(command, args, timeout)
+
+    def _exchange(self, command, args, timeout):
+        try:
+            write_message(self._proc.stdin, (command, args))
+            answer = self._answers.get(timeout=self.timeout if timeout is None else timeout)
+        except queue.Empty:
+            self._kill()
+            raise WorkerError(f"tracer worker: no answer to {command!r} within "
+                              f"{self.timeout if timeout is None else timeout:.0f} s; it was stopped "
+                              "and will restart on the next call") from None
+        except (BrokenPipeError, OSError) as e:
+            self._kill()
+            raise WorkerError(f"tracer worker died before {command!r} ({e}); "
+                              f"its last words: {''.join(self._stderr[-5:]).strip()!r}") from None
+        if answer[0] == "ok":
+            return answer[1]
+        if answer[0] == "dead":
+            self._kill()
+            raise WorkerError(f"tracer worker died during {command!r}; "
+                              f"its last words: {''.join(self._stderr[-5:]).strip()!r}")
+        _, kind, message = answer
+        if kind == "InputError":
+            from hairio import InputError
+            raise InputError(message)
+        raise WorkerError(f"tracer worker: {kind}: {message}")
+
+    # --- the Renderer API -------------------------------------------------------------
+    def set_strands(self, strands):
+        self._strands = strands
+        return self._call("set_strands", strands)
+
+    def update_strands(self, strand_ids, strands):
+        self._strands = strands
+        return self._call("update_strands", strand_ids, strands)
+
+    def render(self, camera, settings=None):
+        return self._call("render", camera, settings)
+
+    @property
+    def stats(self):
+        return self._call("stats")
+
+    @property
+    def pid(self):
+        return None if self._proc is None else self._proc.pid
+
+    def close(self):
+        if self._proc is not None and self._proc.poll() is None:
+            try:
+                self._exchange("quit", (), 10)
+            except Exception:
+                pass
+        self._kill()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def main():
+    # Answers go to the real stdout only; anything the GL stack prints goes to stderr.
+    out = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
+    os.dup2(sys.stderr.fileno(), sys.stdout.fileno())
+    serve(sys.stdin.buffer, out)
+
+
+if __name__ == "__main__":
+    main()
