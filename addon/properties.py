@@ -77,14 +77,15 @@ class HairSettings(PropertyGroup):
                              description="The largest random turn of a hair when Tidiness is 0")
     n_influence: FloatProperty(name="N-Influence", default=50.0, min=0.0, max=100.0,
                                description="How much neighbouring key strands pull on a hair: "
-                                           "0 = follow the nearest key only, 100 = blend evenly by distance")
+                                           "0 = follow the nearest key only, 100 = blend evenly by distance "
+                                           "(also sharpens or softens Smooth Blend)")
     neighbour_mode: EnumProperty(
-        name="Neighbours", default='root',
-        items=(('root', "Nearest to Hair", "Blend with the 2nd and 3rd nearest keys to each hair (smoothest)"),
+        name="Neighbours", default='interpolate',
+        items=(('interpolate', "Smooth Blend", "Blend the nearest keys by distance, as Blender's "
+                                               "Interpolate Curves node does (no seams between clumps)"),
+               ('root', "Nearest to Hair", "Blend with the 2nd and 3rd nearest keys to each hair"),
                ('key', "Nearest to Key", "Blend with the two keys nearest the main key (the thesis; "
-                                        "can show seams between clumps)"),
-               ('interpolate', "Blender Style", "Weights like Blender's Interpolate Curves node "
-                                                "(ignores N-Influence)")),
+                                        "can show seams between clumps)")),
         description="Which key strands a hair blends between")
     intelligence: BoolProperty(name="Follow Scalp", default=True,
                                description="On: each hair turns with the scalp under it, so one key "

@@ -329,3 +329,42 @@ def test_save_preset_round_trips_keys_and_settings(clean, tmp_path):
     for a, b in zip(old, [read_key(k).points for k in new]):
         np.testing.assert_allclose(a, b, atol=1e-6)
     assert other.keystrand_hair.count == 777
+
+
+def test_render_preview_out_of_process_matches_and_survives_a_killed_worker(clean, monkeypatch):
+    import os
+    import signal
+    preview = ext_module(clean, "preview")
+    scalp = make_scalp()
+    add_keys(scalp)
+    s = scalp.keystrand_hair
+    s.count, s.preview_size, s.radius = 400, 48, 4e-4
+    bpy.ops.hair.generate()
+    make_camera()
+
+    def render():
+        activate(scalp)
+        assert bpy.ops.hair.render_preview() == {'FINISHED'}
+        image = bpy.data.images["Hair Preview"]
+        px = np.empty(len(image.pixels), np.float32)
+        image.pixels.foreach_get(px)
+        return px
+
+    in_process = render()
+    monkeypatch.setenv("KEYSTRAND_PREVIEW_IN_PROCESS", "0")
+    try:
+        out_of_process = render()
+        worker = preview.current_renderer()
+        assert type(worker).__name__ == "WorkerClient" and worker.pid not in (None, os.getpid())
+        np.testing.assert_allclose(out_of_process, in_process, atol=1e-6)
+        assert in_process.reshape(-1, 4)[:, 3].max() > 0.5
+        # The worker dies between renders (and is gone): the next Render Preview starts a
+        # fresh one. A death in the middle of a render is the error case in test_blender_errors.
+        old_pid = worker.pid
+        os.kill(old_pid, signal.SIGKILL)
+        worker._proc.wait(timeout=10)
+        again = render()
+        assert preview.current_renderer().pid != old_pid
+        np.testing.assert_allclose(again, in_process, atol=1e-6)
+    finally:
+        preview.close()
