@@ -102,6 +102,30 @@ def strands_to_curves(name, strands, collection=None, parent=None, obj=None):
     return obj
 
 
+def ensure_hair_material(obj, name="Key-Strand Hair"):
+    """Give a hair Curves object without materials one that renders its `color` attribute
+    (Principled Hair BSDF, direct colouring), so Cycles and EEVEE show the groomed colours."""
+    if len(obj.data.materials):
+        return obj.data.materials[0]
+    mat = bpy.data.materials.get(name)
+    if mat is None:
+        mat = bpy.data.materials.new(name)
+        if bpy.app.version < (5, 0, 0):  # node trees are always on from 5.0 (use_nodes deprecated)
+            mat.use_nodes = True
+        nodes, links = mat.node_tree.nodes, mat.node_tree.links
+        nodes.clear()
+        out = nodes.new("ShaderNodeOutputMaterial")
+        bsdf = nodes.new("ShaderNodeBsdfHairPrincipled")
+        bsdf.parametrization = 'COLOR'
+        attr = nodes.new("ShaderNodeAttribute")
+        attr.attribute_name = "color"
+        attr.location, bsdf.location, out.location = (-400, 0), (-150, 0), (150, 0)
+        links.new(attr.outputs["Color"], bsdf.inputs["Color"])
+        links.new(bsdf.outputs[0], out.inputs["Surface"])
+    obj.data.materials.append(mat)
+    return mat
+
+
 def curves_to_strands(obj):
     """The strands of a hair Curves object (or its Curves datablock) as hairio.Strands.
 

@@ -43,8 +43,11 @@ def write_hair(scalp, strands):
     collection = None
     if hair is None and scalp.users_collection:
         collection = scalp.users_collection[0]
+    new = hair is None
     hair = blender_curves.strands_to_curves(hair_name(scalp), strands, collection=collection,
                                             parent=scalp, obj=hair)
+    if new:
+        blender_curves.ensure_hair_material(hair)
     hair.keystrand_hair.role = 'HAIR'
     hair.keystrand_hair.scalp = scalp
     if scalp.keystrand_hair.hair_object != hair:

@@ -188,13 +188,24 @@ def write_image(pixels):
 
 
 def show_image(context, image):
-    """Show the image in an Image Editor of the current screen; True when one was found."""
-    screen = getattr(context, "screen", None)
-    if screen is None:
+    """Show the image in an Image Editor: one of the open windows' if there is one, else a
+    new window turned into an Image Editor. True when it is shown (never in background mode)."""
+    wm = context.window_manager
+    for window in (wm.windows if wm is not None else ()):
+        for area in window.screen.areas:
+            if area.type == 'IMAGE_EDITOR':
+                area.spaces.active.image = image
+                area.tag_redraw()
+                return True
+    if bpy.app.background or context.window is None:
         return False
-    for area in screen.areas:
-        if area.type == 'IMAGE_EDITOR':
+    before = set(wm.windows[:])
+    if bpy.ops.wm.window_new() != {'FINISHED'}:
+        return False
+    for window in wm.windows:
+        if window not in before:
+            area = max(window.screen.areas, key=lambda a: a.width * a.height)
+            area.type = 'IMAGE_EDITOR'
             area.spaces.active.image = image
-            area.tag_redraw()
             return True
     return False

@@ -111,6 +111,9 @@ def test_generate_writes_the_curves_groom_computes(clean):
     hair = s.hair_object
     assert hair is not None and hair.type == 'CURVES' and hair.parent == scalp
     assert hair.keystrand_hair.role == 'HAIR'
+    material = hair.data.materials[0]
+    attribute_nodes = [n for n in material.node_tree.nodes if n.type == 'ATTRIBUTE']
+    assert [n.attribute_name for n in attribute_nodes] == ["color"], "the material does not show the hair colour"
     expected = generate(read_scalp_arrays(scalp), [read_key(k) for k in keys],
                         params_of(scalp)).strands
     assert params_of(scalp).tidiness == pytest.approx(0.7) and params_of(scalp).count == 1500
