@@ -130,9 +130,13 @@ class WorkerClient:
                 pass
 
     def _call(self, command, *args, timeout=None):
-        fresh = self._proc is None or self._proc.poll() is not None
-        if fresh:
+        if self._proc is not None and self._proc.poll() is not None:
+            code = self._proc.returncode
             self._kill()
+            raise WorkerError(f"tracer worker exited (code {code}) since the last call; "
+                              f"its last words: {''.join(self._stderr[-5:]).strip()!r}. "
+                              "The next call starts a fresh one")
+        if self._proc is None:
             self._start()
             if command not in ("set_strands", "quit") and self._strands is not None:
                 self._exchange("set_strands", (self._strands,), timeout)

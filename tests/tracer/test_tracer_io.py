@@ -1,0 +1,137 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""PNG writer, command line, worker process."""
+import os
+import signal
+import struct
+import sys
+import time
+import zlib
+
+import numpy as np
+import pytest
+
+from hairio import InputError, Strands
+from tracer import Camera, RenderSettings
+from tracer.__main__ import main
+from tracer.png import encode_png, linear_to_srgb, to_srgb8, write_png
+from tracer.worker import WorkerClient, WorkerError
+
+from tracer_scenes import curls
+
+
+def _decode_png(data):
+    """Minimal decoder for what encode_png writes (filter 0 rows), to check round trips."""
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    pos, idat, size = 8, b"", None
+    while pos < len(data):
+        (n,) = struct.unpack(">I", data[pos:pos + 4])
+        kind, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + n]
+        assert zlib.crc32(kind + body) & 0xFFFFFFFF == struct.unpack(">I", data[pos + 8 + n:pos + 12 + n])[0]
+        if kind == b"IHDR":
+            size = struct.unpack(">II", body[:8])
+        elif kind == b"IDAT":
+            idat += body
+        pos += 12 + n
+    w, h = size
+    raw = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(h, 1 + 4 * w)
+    assert np.all(raw[:, 0] == 0)
+    return raw[:, 1:].reshape(h, w, 4)
+
+
+def test_srgb_transfer_function():
+    assert linear_to_srgb(0.5) == pytest.approx(0.7353569830524495)
+    assert linear_to_srgb(0.002) == pytest.approx(12.92 * 0.002)
+    assert linear_to_srgb(1.0) == pytest.approx(1.0) and linear_to_srgb(-1) == 0
+
+
+def test_png_round_trip_unpremultiplies_alpha():
+    img = np.zeros((3, 5, 4), np.float32)
+    img[1, 2] = (0.25, 0.1, 0.0, 0.5)       # premultiplied: straight colour (0.5, 0.2, 0)
+    out = _decode_png(encode_png(to_srgb8(img)))
+    assert out.shape == (3, 5, 4)
+    np.testing.assert_array_equal(out[1, 2], np.round([linear_to_srgb(0.5) * 255, linear_to_srgb(0.2) * 255, 0, 127.5]))
+    assert out[0, 0, 3] == 0
+
+
+def test_cli_renders_an_npz_and_prints_times(tmp_path, capsys):
+    src = tmp_path / "tuft.npz"
+    curls(6, 6).save_npz(src)
+    out = tmp_path / "tuft.png"
+    assert main(["render", str(src), "--out", str(out), "--size", "32x24", "--spp", "4", "--no-shadows"]) == 0
+    img = _decode_png(out.read_bytes())
+    assert img.shape == (24, 32, 4) and img[..., 3].max() > 0
+    text = capsys.readouterr().out
+    assert "upload" in text and "grid build" in text and "render" in text
+
+
+@pytest.mark.parametrize("case", ["missing", "garbage", "nan", "size", "spp", "camera"])
+def test_cli_errors_exit_2_and_write_nothing(tmp_path, capsys, case):
+    src = tmp_path / "in.npz"
+    curls(3, 4).save_npz(src)
+    args = ["render", str(src), "--out", str(tmp_path / "out.png")]
+    if case == "missing":
+        args[1] = str(tmp_path / "nope.npz")
+    elif case == "garbage":
+        src.write_bytes(b"not a zip at all")
+    elif case == "nan":
+        np.savez(src, points=np.array([[0, 0, 0], [np.nan, 0, 1.0]]), counts=np.array([2]))
+    elif case == "size":
+        args += ["--size", "big"]
+    elif case == "spp":
+        args += ["--spp", "3"]
+    elif case == "camera":
+        args += ["--camera", "1,2:3"]
+    assert main(args) == 2
+    assert "error" in capsys.readouterr().err
+    assert not (tmp_path / "out.png").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.npz"] or case == "missing"
+
+
+def _root():
+    return os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def test_worker_renders_keeps_the_scene_and_restarts_after_a_crash():
+    s = curls(6, 6)
+    cam = Camera.look_at((0, -2.5, 0.5), (0, 0, 0.5), size=(24, 24))
+    with WorkerClient(python=sys.executable, extra_sys_path=(_root(),), timeout=60) as client:
+        client.set_strands(s)
+        first = client.render(cam, RenderSettings())
+        assert first.shape == (24, 24, 4) and first[..., 3].max() > 0
+        sent = client.stats["bytes_uploaded"]
+        client.render(cam.moved(position=(0.3, -2.5, 0.6)), RenderSettings())
+        assert client.stats["bytes_uploaded"] == sent          # the scene stayed uploaded
+        with pytest.raises(InputError):
+            client.render(cam, RenderSettings(spp=2))           # bad input comes back as InputError
+        os.kill(client.pid, signal.SIGKILL)
+        time.sleep(0.2)
+        with pytest.raises(WorkerError):
+            client.render(cam, RenderSettings())
+        np.testing.assert_array_equal(client.render(cam, RenderSettings()), first)   # fresh worker, same scene
+
+
+def test_worker_that_hangs_times_out_with_a_clear_error(tmp_path):
+    fake = tmp_path / "fake-python"
+    fake.write_text("#!/bin/sh\nexec sleep 30\n")
+    fake.chmod(0o755)
+    client = WorkerClient(python=str(fake), timeout=1.0)
+    t0 = time.perf_counter()
+    with pytest.raises(WorkerError, match="no answer"):
+        client.set_strands(Strands.empty())
+    assert time.perf_counter() - t0 < 10
+    client.close()
+
+
+def test_worker_that_cannot_start_raises(tmp_path):
+    fake = tmp_path / "broken-python"
+    fake.write_text("#!/bin/sh\necho 'no such module' >&2\nexit 1\n")
+    fake.chmod(0o755)
+    client = WorkerClient(python=str(fake), timeout=10.0)
+    with pytest.raises(WorkerError, match="died"):
+        client.set_strands(Strands.empty())
+    client.close()
+
+
+def test_write_png_is_atomic(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        write_png(tmp_path / "missing-folder" / "x.png", np.zeros((2, 2, 4)))
