@@ -9,7 +9,7 @@ import time
 
 import bpy
 
-from . import blender_curves, scene_data
+from . import blender_curves, preview, scene_data
 from .properties import groom_params
 
 
@@ -48,6 +48,7 @@ def write_hair(scalp, strands):
                                             parent=scalp, obj=hair)
     if new:
         blender_curves.ensure_hair_material(hair)
+    preview.bump(hair.data)
     hair.keystrand_hair.role = 'HAIR'
     hair.keystrand_hair.scalp = scalp
     if scalp.keystrand_hair.hair_object != hair:

@@ -4,16 +4,19 @@
 A depsgraph handler notes which scalps had a key strand change; a timer does the work
 outside the handler (writing the hair from inside a depsgraph update would re-enter it).
 While edits keep arriving, a lighter generator at the scalp's viewport count is used;
-once edits have stopped for SETTLE_S, the full-count generator catches up, again only
-for the keys that changed (groom.Generator.update_keys). The timer's next interval grows
-with the time the last update took, so the viewport stays responsive on 100,000 strands.
+once edits have stopped for SETTLE_S, the full-count generator catches up on a worker
+thread, again only for the keys that changed (groom.Generator.update_keys), and the
+result is written when it is done. The timer's next interval grows with the time the last
+update took, so the viewport stays responsive on 100,000 strands.
 """
+import threading
 import time
 
 import bpy
 from bpy.app.handlers import persistent
 
 from . import scene_data
+from .properties import groom_params
 
 SETTLE_S = 0.4
 MIN_INTERVAL_S = 0.05
@@ -31,6 +34,7 @@ class ScalpState:
         self.view_sig = None
         self.dragging = False
         self.last_edit = 0.0
+        self.catchup = None                    # (thread, result box, key signature) while running
 
 
 _states = {}
@@ -47,6 +51,9 @@ def remember(scalp, scalp_data, keys, generator, result):
 
 
 def forget(scalp=None):
+    for state in (_states.values() if scalp is None else [_states.get(scalp.session_uid)]):
+        if state is not None and state.catchup is not None:
+            state.catchup[0].join()  # the thread holds the generator; let it finish first
     if scalp is None:
         _states.clear()
         _pending.clear()
@@ -68,13 +75,14 @@ def _changed(sig, old):
     return [i for i, (a, b) in enumerate(zip(sig, old)) if a.shape != b.shape or not (a == b).all()]
 
 
-def _update(gen, sig, old_sig, keys, scalp_data, settings, count):
-    """(generator, GroomResult or None when nothing changed)."""
-    from . import hair
+def _update(gen, sig, old_sig, keys, scalp_data, params):
+    """(generator, GroomResult or None when nothing changed). Pure groom work: no bpy, so
+    it may run on a worker thread."""
+    from groom import Generator
     changed = _changed(sig, old_sig)
     if changed is None or gen is None:
-        gen, result = hair.build_generator(scalp_data, keys, settings, count)
-        return gen, result
+        gen = Generator(scalp_data, keys, params)
+        return gen, gen.generate()
     if not changed:
         return gen, None
     return gen, gen.update_keys({i: keys[i] for i in changed})
@@ -104,14 +112,17 @@ def process(now=None, settle=False):
         view_count = min(settings.viewport_count, settings.count)
         try:
             if view_count >= settings.count:
+                if state.catchup is not None:
+                    _pending.add(uid)  # the full generator is busy: come back next tick
+                    continue
                 state.full, result = _update(state.full, sig, state.full_sig, keys, state.scalp_data,
-                                             settings, settings.count)
+                                             groom_params(settings))
                 state.full_sig = sig
                 if result is not None:
                     state.full_result = result
             else:
                 state.view, result = _update(state.view, sig, state.view_sig, keys, state.scalp_data,
-                                             settings, view_count)
+                                             groom_params(settings, view_count))
                 state.view_sig = sig
                 if result is not None:
                     state.dragging = True
@@ -123,32 +134,64 @@ def process(now=None, settle=False):
             state.last_edit = now
             written += 1
     for uid, state in list(_states.items()):
-        if state.dragging and (settle or now - state.last_edit >= SETTLE_S):
-            written += _catch_up(uid, state)
+        if state.catchup is not None:
+            written += _finish_catch_up(uid, state, wait=settle)
+        if state.dragging and state.catchup is None and (settle or now - state.last_edit >= SETTLE_S):
+            _start_catch_up(uid, state)
+            if settle:
+                written += _finish_catch_up(uid, state, wait=True)
     return written
 
 
-def _catch_up(uid, state):
-    """Bring the full-count hair up to date with the keys after an edit."""
+def _start_catch_up(uid, state):
+    """Bring the full-count hair up to date with the keys after an edit, on a worker thread
+    (groom is numpy and mostly releases the GIL), so the UI keeps running meanwhile. The scene
+    is read here, on the main thread; the thread touches only the generator."""
     from . import hair
     state.dragging = False
     scalp = _scalp_by_uid(uid)
     if scalp is None or hair.existing_hair(scalp) is None:
-        return 0
+        return
     try:
         keys = scene_data.read_keys(scalp)
-        sig = scene_data.keys_signature(keys)
-        state.full, result = _update(state.full, sig, state.full_sig, keys, state.scalp_data,
-                                     scalp.keystrand_hair, scalp.keystrand_hair.count)
-        state.full_sig = sig
-        if result is None:
-            # Keys are back where they were: the view generator changed the hair object,
-            # so put the last full-count hair back.
-            result = state.full_result
-        state.full_result = result
+        params = groom_params(scalp.keystrand_hair)
     except Exception as e:
         print(f"Key-strand hair: live update skipped ({e})")
+        return
+    sig = scene_data.keys_signature(keys)
+    box = {}
+
+    def work():
+        try:
+            box["gen"], box["result"] = _update(state.full, sig, state.full_sig, keys, state.scalp_data, params)
+        except Exception as e:  # reported on the main thread
+            box["error"] = e
+
+    thread = threading.Thread(target=work, name="keystrand-hair-catch-up", daemon=True)
+    state.catchup = (thread, box, sig)
+    thread.start()
+
+
+def _finish_catch_up(uid, state, wait=False):
+    """Write the catch-up's result once its thread is done; returns 1 when hair was written."""
+    from . import hair
+    thread, box, sig = state.catchup
+    if wait:
+        thread.join()
+    if thread.is_alive():
         return 0
+    state.catchup = None
+    if "error" in box:
+        print(f"Key-strand hair: live update skipped ({box['error']})")
+        return 0
+    state.full, state.full_sig = box["gen"], sig
+    # None: keys are back where they were; the view generator changed the hair object,
+    # so the last full-count hair goes back.
+    result = box["result"] if box["result"] is not None else state.full_result
+    state.full_result = result
+    scalp = _scalp_by_uid(uid)
+    if state.dragging or scalp is None or hair.existing_hair(scalp) is None:
+        return 0  # a newer drag is on screen; its own catch-up follows
     hair.write_hair(scalp, result.strands)
     return 1
 
@@ -158,7 +201,7 @@ def _tick():
     start = time.monotonic()
     process(start)
     _last_cost = time.monotonic() - start
-    if _pending or any(s.dragging for s in _states.values()):
+    if _pending or any(s.dragging or s.catchup is not None for s in _states.values()):
         # Leave the UI at least as much time as the update took.
         return max(MIN_INTERVAL_S, 1.5 * _last_cost)
     _timer_on = False
@@ -166,10 +209,14 @@ def _tick():
 
 
 def _key_scalps(depsgraph):
+    """Scalps whose key strands changed; also notes edited hair for the preview."""
+    from . import preview
     uids = set()
     for update in depsgraph.updates:
         ident = update.id.original if update.id is not None else None
-        if isinstance(ident, bpy.types.Object):
+        if isinstance(ident, bpy.types.Curves):
+            preview.bump(ident)  # sculpted or edited hair: the next preview re-uploads
+        elif isinstance(ident, bpy.types.Object):
             s = ident.keystrand_hair
             if s.role == 'KEY' and s.scalp is not None:
                 uids.add(s.scalp.session_uid)
@@ -183,8 +230,6 @@ def _key_scalps(depsgraph):
 @persistent
 def on_depsgraph_update(scene, depsgraph):
     global _timer_on
-    if not _states:
-        return
     uids = {u for u in _key_scalps(depsgraph) if u in _states}
     if not uids:
         return

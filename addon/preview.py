@@ -4,11 +4,11 @@
 The renderer is kept alive between renders (one per Blender session): by default a
 tracer.worker.WorkerClient, whose GPU work runs in a separate process so a driver fault
 cannot take Blender down; in-process (tracer.Renderer) when the scalp's settings or the
-KEYSTRAND_PREVIEW_IN_PROCESS environment variable ask for it. Strands are uploaded only
-when they changed (a fingerprint of the arrays and the object's matrix), so moving the
-camera re-renders without re-uploading.
+KEYSTRAND_PREVIEW_IN_PROCESS environment variable ask for it. Strands are read and
+uploaded only when they changed: every write of the hair and every depsgraph update of a
+hair Curves datablock bumps its revision (see `bump`), so moving the camera re-renders
+without reading or re-uploading anything.
 """
-import hashlib
 import os
 import time
 
@@ -27,6 +27,17 @@ class RendererDied(Exception):
 _renderer = None
 _renderer_in_process = None
 _uploaded = None
+_revisions = {}
+
+
+def bump(curves):
+    """Note that a Curves datablock's strands changed (the next preview re-uploads)."""
+    _revisions[curves.session_uid] = _revisions.get(curves.session_uid, 0) + 1
+
+
+def _upload_key(hair_obj):
+    m = np.array(hair_obj.matrix_world, np.float64)
+    return (hair_obj.data.session_uid, _revisions.get(hair_obj.data.session_uid, 0), m.tobytes())
 
 
 def in_process_requested(settings):
@@ -128,13 +139,6 @@ def world_strands(hair_obj):
     return Strands.from_arrays(points, s.counts, s.radius * scale, s.color, s.alpha, s.wisp)
 
 
-def _fingerprint(strands):
-    h = hashlib.blake2b(digest_size=16)
-    for name in ("points", "counts", "radius", "color", "alpha"):
-        h.update(np.ascontiguousarray(getattr(strands, name)).data)
-    return h.hexdigest()
-
-
 def render(scene, hair_obj, camera_obj, settings):
     """Render the preview; returns ((H, W, 4) float32 linear RGBA, row 0 = top; timings).
     Raises hairio.InputError for bad settings and RendererDied when the renderer failed
@@ -142,7 +146,6 @@ def render(scene, hair_obj, camera_obj, settings):
     global _uploaded
     from hairio import InputError
     t0 = time.perf_counter()
-    strands = world_strands(hair_obj)
     size = preview_size(scene, settings)
     camera = camera_for(scene, camera_obj, size)
     rs = render_settings(scene, settings)
@@ -150,10 +153,10 @@ def render(scene, hair_obj, camera_obj, settings):
     t1 = time.perf_counter()
     try:
         renderer = get_renderer(in_process_requested(settings))
-        key = _fingerprint(strands)
+        key = _upload_key(hair_obj)
         uploaded = False
         if key != _uploaded:
-            renderer.set_strands(strands)
+            renderer.set_strands(world_strands(hair_obj))
             _uploaded = key
             uploaded = True
         t2 = time.perf_counter()

@@ -97,7 +97,7 @@ class HairSettings(PropertyGroup):
         description="How many points each hair gets")
     points_per_strand: IntProperty(name="Points", default=32, min=2, soft_max=128,
                                    description="Points per hair (Fixed), or the most a hair may get (Adaptive)")
-    tolerance: FloatProperty(name="Tolerance", default=1e-4, min=1e-9, soft_max=0.01, precision=5,
+    tolerance: FloatProperty(name="Tolerance", default=3e-4, min=1e-9, soft_max=0.01, precision=5,
                              description="How far a hair may stray from its exact curve; "
                                          "smaller = smoother but heavier hair")
     tolerance_units: EnumProperty(

@@ -334,7 +334,7 @@ def test_save_preset_round_trips_keys_and_settings(clean, tmp_path):
     assert other.keystrand_hair.count == 777
 
 
-def test_render_preview_out_of_process_matches_and_survives_a_killed_worker(clean, monkeypatch):
+def test_render_preview_out_of_process_matches_and_reports_a_killed_worker(clean, monkeypatch):
     import os
     import signal
     preview = ext_module(clean, "preview")
@@ -361,13 +361,19 @@ def test_render_preview_out_of_process_matches_and_survives_a_killed_worker(clea
         assert type(worker).__name__ == "WorkerClient" and worker.pid not in (None, os.getpid())
         np.testing.assert_allclose(out_of_process, in_process, atol=1e-6)
         assert in_process.reshape(-1, 4)[:, 3].max() > 0.5
-        # The worker dies between renders (and is gone): the next Render Preview starts a
-        # fresh one. A death in the middle of a render is the error case in test_blender_errors.
+        # The worker dies between renders: the next Render Preview is a readable error that
+        # changes nothing, and the one after starts a fresh worker.
+        from blender_scene import scene_snapshot
         old_pid = worker.pid
         os.kill(old_pid, signal.SIGKILL)
         worker._proc.wait(timeout=10)
+        before = scene_snapshot()
+        activate(scalp)
+        with pytest.raises(RuntimeError, match="renderer stopped"):
+            bpy.ops.hair.render_preview()
+        assert scene_snapshot() == before
         again = render()
-        assert preview.current_renderer().pid != old_pid
+        assert preview.current_renderer().pid not in (None, old_pid)
         np.testing.assert_allclose(again, in_process, atol=1e-6)
     finally:
         preview.close()
