@@ -2,8 +2,8 @@
 """Strands as continual cylinders (SPEC §6): how many, how thick, what colour, how opaque.
 
 A strand of n+1 points is n cylinders. The thesis uses a fixed count (typically 25) and notes
-straight hair needs only 3–4; `error_bound_cylinders` gives each strand the fewest
-cylinders whose polyline provably stays within a tolerance of the exact curve, and
+straight hair needs only 3–4; `adaptive_sigma` gives each strand few cylinders, placed where
+it bends, whose polyline provably stays within a tolerance of the exact curve, and
 `geometric_error` measures the result the way SPEC §6 defines it.
 """
 import numpy as np
@@ -11,17 +11,96 @@ import numpy as np
 from . import rng
 
 
-def error_bound_cylinders(frac, guides, weights, accel, tolerance, max_cylinders):
-    """Fewest cylinders c (uniform in σ) with the polyline provably within `tolerance`:
-    for a curve with |C''| <= A over a parameter step h, the chord is within A·h²/8, and
-    |C_j''| <= Σ w_x |D_x''| (B_j is a rotation), so c = ceil(f·sqrt(A/(8·tol)))."""
-    samples = accel.shape[1]
-    last = np.minimum(np.ceil(frac * (samples - 1)).astype(np.int64), samples - 1)
-    a = (weights[:, 0] * accel[guides[:, 0], last] + weights[:, 1] * accel[guides[:, 1], last]
-         + weights[:, 2] * accel[guides[:, 2], last])
-    c = np.ceil(frac * np.sqrt(a / (8.0 * tolerance)))
-    return np.clip(c, 1, max_cylinders).astype(np.int64)
+_WINDOW = 16
 
+
+def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=32768):
+    """Per-strand adaptive resolution: curve parameters σ of the fewest points whose polyline
+    provably stays within `tolerance` (S,) of the exact strand, for the curvature bound below.
+
+    The bound: over a parameter step h, a curve with |C''| <= A stays within A·h²/8 of its
+    chord, and |C_j''(σ)| <= Σ_g w_g |D_g''(σ)| (B_j is a rotation), bounded per bin of σ by
+    `bins` (K, NB) from interpolate.key_table. Points are placed greedily from the root:
+    each segment is the longest whose h² times the largest bound over the bins it touches
+    stays <= 8·tol. Greedy covering is optimal for such a monotone constraint, so straight
+    stretches get one long cylinder and bends get short ones. (To bound the work a segment
+    that is not the strand's last scans at most _WINDOW bins: a few extra cylinders on long
+    gentle bends.) Strands needing more than `max_cylinders` fall back to max_cylinders
+    equal steps (tolerance not met there).
+
+    Returns (sigma (P,) float64 flat, counts (S,) int64). Each strand's numbers depend only on
+    its own inputs (incremental regeneration relies on it)."""
+    nb = bins.shape[1]
+    sig_parts, count_parts = [], []
+    for lo in range(0, len(frac), chunk):  # chunks of strands bound the (strands x bins) tables
+        sl = slice(lo, lo + chunk)
+        f, g, w = frac[sl], guides[sl], weights[sl]
+        budget = 8.0 * tolerance[sl]
+        s = len(f)
+        a = w[:, 0, None] * bins[g[:, 0]] + w[:, 1, None] * bins[g[:, 1]] + w[:, 2, None] * bins[g[:, 2]]
+        last_bin = np.clip(np.ceil(f * nb).astype(np.int64) - 1, 0, nb - 1)
+        a[np.arange(nb)[None, :] > last_bin[:, None]] = 0.0  # bins past the tip do not count
+        # Lower bound on the count: a segment that fits has ∫ sqrt(A / 8tol) <= 1 over it, so a
+        # strand with more than max_cylinders of that integral cannot fit: cap it right away.
+        covered = np.clip(f[:, None] * nb - np.arange(nb)[None, :], 0.0, 1.0) / nb
+        need = (np.sqrt(a / budget[:, None]) * covered).sum(axis=1)
+        suffix = np.maximum.accumulate(a[:, ::-1], axis=1)[:, ::-1].ravel()  # max(a[b:])
+        a_flat = a.ravel()
+        rows = [np.zeros(s)]
+        cur = np.zeros(s)
+        active = (f > 0) & (need <= max_cylinders)
+        hopeless = (f > 0) & ~active
+        for _ in range(max_cylinders):  # one greedy segment for all strands at once
+            idx = np.flatnonzero(active)
+            if not idx.size:
+                break
+            c, fe, bud, lb = cur[idx], f[idx], budget[idx], last_bin[idx]
+            b0 = np.minimum(np.floor(c * nb).astype(np.int64), lb)
+            base = idx * nb
+            end = fe.copy()
+            # Does the whole rest of the strand fit in one segment?
+            rest = suffix[base + b0] * (fe - c) ** 2 <= bud
+            # Otherwise extend bin by bin while the segment to the bin's far edge fits.
+            todo = np.flatnonzero(~rest)
+            e = b0[todo] - 1
+            amax = np.zeros(len(todo))
+            live = np.arange(len(todo))
+            stop = np.minimum(lb[todo] - 1, b0[todo] + _WINDOW - 1)
+            while live.size:
+                t = todo[live]
+                cand = e[live] + 1
+                m = np.maximum(amax[live], a_flat[base[t] + cand])
+                ok = m * ((cand + 1) / nb - c[t]) ** 2 <= bud[t]
+                e[live[ok]] = cand[ok]
+                amax[live[ok]] = m[ok]
+                live = live[ok & (cand < stop[live])]
+            t = todo
+            nxt = np.minimum(e + 1, lb[t])
+            m = np.maximum(amax, a_flat[base[t] + nxt])
+            with np.errstate(divide="ignore"):
+                reach = c[t] + np.sqrt(bud[t] / m)
+            low = np.where(e >= b0[t], (e + 1) / nb, c[t])
+            end[t] = np.minimum(np.minimum(np.maximum(reach, low), (nxt + 1) / nb), fe[t])
+            step = np.full(s, np.nan)
+            step[idx] = end
+            rows.append(step)
+            cur[idx] = end
+            active[idx] = end < fe
+        grid = np.stack(rows, axis=1)
+        capped = active | hopeless
+        if capped.any():
+            k = np.arange(max_cylinders + 1)
+            if grid.shape[1] < max_cylinders + 1:
+                grid = np.concatenate([grid, np.full((s, max_cylinders + 1 - grid.shape[1]), np.nan)], axis=1)
+            grid[capped] = np.nan
+            grid[capped, :max_cylinders + 1] = f[capped, None] * (k / max_cylinders)
+        zero = f <= 0
+        if zero.any():  # a strand of no length: one cylinder of no length
+            grid[zero, 1] = 0.0
+        valid = ~np.isnan(grid)
+        sig_parts.append(grid[valid])
+        count_parts.append(valid.sum(axis=1).astype(np.int64))
+    return np.concatenate(sig_parts), np.concatenate(count_parts)
 
 
 def strand_attributes(seed, ids, counts, base_radius, base_color, params):

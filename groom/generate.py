@@ -12,10 +12,10 @@ import numpy as np
 
 from hairio import InputError, Strands
 
-from .cylinders import error_bound_cylinders, strand_attributes
+from .cylinders import adaptive_sigma, strand_attributes
 from .frames import root_frames
 from .interpolate import (KEY_SAMPLES, evaluate_strands, key_table, length_fractions,
-                          strand_transforms, tidiness_angles)
+                          strand_transforms, tidiness_angles, uniform_sigma)
 from .keys import KeyStrand
 from .params import GroomParams
 from .sampling import sample_roots
@@ -83,10 +83,10 @@ class Generator:
         tri, bary, _ = self.scalp.closest_points(key.root[None])
         normal = self.scalp.normals_at(tri, bary, self.params.normal_mode)
         frame = root_frames(normal, self.params.up, self.params.front)[0]
-        table, accel = key_table(key, frame, self.params.intelligence, KEY_SAMPLES)
+        table, bound = key_table(key, frame, self.params.intelligence, KEY_SAMPLES)
         radius = self.params.radius if key.root_radius is None else key.root_radius
         color = np.asarray(self.params.color if key.color is None else key.color, dtype=np.float64)
-        return {"table": table, "accel": accel, "root": key.root.copy(), "group": key.group,
+        return {"table": table, "bound": bound, "root": key.root.copy(), "group": key.group,
                 "radius": radius, "color": color}
 
     def _assign(self):
@@ -97,14 +97,16 @@ class Generator:
                              self.params.n_influence, self.root_groups, key_groups)
 
     def evaluate(self, sel, cylinders):
-        """Points of strands `sel` at the given cylinder counts (S,) (measurement: e.g. 64x
+        """Points of strands `sel` at the given numbers of equal steps in σ (S,) (measurement:
         dense samples of the exact curve). Returns (points (P,3) float64, counts (S,))."""
         if self._result is None:
             self.generate()
         sel = np.asarray(sel, np.int64)
         tables = np.stack([d["table"] for d in self._key_data])
-        return evaluate_strands(self.samples.points[sel], self.transforms[sel], self._guides[sel],
-                                self._weights[sel], self.frac[sel], np.asarray(cylinders, np.int64), tables)
+        sigma, counts = uniform_sigma(self.frac[sel], np.asarray(cylinders, np.int64))
+        pts = evaluate_strands(self.samples.points[sel], self.transforms[sel], self._guides[sel],
+                               self._weights[sel], counts, sigma, tables)
+        return pts, counts
 
     def _strands(self, sel, guides, weights):
         """Points and attributes of the strands `sel` (indices into the roots), in that order."""
@@ -119,14 +121,13 @@ class Generator:
                       + w[:, 2, None] * colors[g[:, 2]])
         max_cyl = p.points_per_strand - 1
         if p.resolution_mode == "fixed":
-            cyl = np.full(len(sel), max_cyl, np.int64)
+            sigma, counts = uniform_sigma(self.frac[sel], np.full(len(sel), max_cyl, np.int64))
         else:
-            tol = p.tolerance * (base_radius if p.tolerance_units == "radius" else 1.0)
+            tol = p.tolerance * (base_radius if p.tolerance_units == "radius" else np.ones(len(sel)))
             tol = np.maximum(tol, 1e-300)
-            accel = np.stack([d["accel"] for d in kd])
-            cyl = error_bound_cylinders(self.frac[sel], g, w, accel, tol, max_cyl)
-        pts, counts = evaluate_strands(self.samples.points[sel], self.transforms[sel], g, w,
-                                       self.frac[sel], cyl, tables)
+            bins = np.stack([d["bound"] for d in kd])
+            sigma, counts = adaptive_sigma(self.frac[sel], g, w, bins, tol, max_cyl)
+        pts = evaluate_strands(self.samples.points[sel], self.transforms[sel], g, w, counts, sigma, tables)
         radius, color, alpha = strand_attributes(p.seed, self.samples.ids[sel], counts, base_radius, base_color, p)
         return pts, counts, radius, color, alpha
 

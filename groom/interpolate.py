@@ -27,27 +27,35 @@ import numpy as np
 from . import rng
 from .frames import rotation_xyz
 
-# Arc-length samples per key table: the lerp between samples is off the exact curve by at
-# most |D''|·h²/8 with h = 1/1023, about 1e-7 of the length for a curl of 20 turns.
-KEY_SAMPLES = 1024
-# The second-difference estimate of |D''| misses peaks between samples; bound it generously.
+# Arc-length samples per key table (1024 steps): the lerp between samples is off the exact
+# curve by at most |D''|·h²/8 with h = 1/1024, about 1e-7 of the length for a curl of 20 turns.
+KEY_SAMPLES = 1025
+# Curvature bins per key for the adaptive resolution (SAMPLES - 1 must be a multiple).
+CURVATURE_BINS = 128
+# The second-difference estimate of |D''| can miss a peak between samples; bound it with margin.
 _CURVATURE_SAFETY = 1.05
 
 
-def key_table(key, frame, intelligence, samples=KEY_SAMPLES):
-    """(table (samples,3) float64, accel (samples,) float64): offsets of the key from its root at
-    equal arc-length steps (in the key's root frame when `intelligence`, else world axes),
-    and the running maximum over σ' <= σ of |d²D/dσ²| used to bound polyline error."""
+def key_table(key, frame, intelligence, samples=KEY_SAMPLES, bins=CURVATURE_BINS):
+    """(table (samples,3) float64, bound (bins,) float64): offsets of the key from its root
+    at equal arc-length steps (in the key's root frame when `intelligence`, else world axes),
+    and for each of `bins` equal ranges of σ an upper bound of |d²D/dσ²| there (the largest
+    second difference over the bin's samples and one beyond each end, times a margin)."""
     table, _ = key.arc_length_table(samples)
     if intelligence:
         table = table @ frame  # rows: F_x^T D
-    h = 1.0 / (samples - 1)
+    steps = samples - 1
+    h = 1.0 / steps
     second = np.zeros(samples)
     if samples >= 3:
         second[1:-1] = np.linalg.norm(table[2:] - 2 * table[1:-1] + table[:-2], axis=1) / (h * h)
         second[0], second[-1] = second[1], second[-2]
-    accel = np.maximum.accumulate(second) * _CURVATURE_SAFETY
-    return table, accel
+    per = steps // bins
+    padded = np.concatenate([[second[0]], second, [second[-1]]])
+    # bin b covers samples b·per .. (b+1)·per; padded index = sample + 1, widened by one each side
+    idx = np.arange(bins)[:, None] * per + np.arange(per + 3)[None, :]
+    bound = padded[idx].max(axis=1) * _CURVATURE_SAFETY
+    return table, bound
 
 
 def length_fractions(seed, ids, lo, hi):
@@ -81,12 +89,22 @@ def _matmul3(a, b):
     return out
 
 
-def evaluate_strands(roots, transforms, guides, weights, frac, cylinders, tables, chunk_points=1 << 16):
-    """Points of each strand at cylinders[j] + 1 values of σ equally spaced in [0, f_j].
+def uniform_sigma(frac, cylinders):
+    """Flat σ (P,) of strands with cylinders[j] equal steps over [0, f_j], and counts (S,)."""
+    counts = np.asarray(cylinders, np.int64) + 1
+    strand = np.repeat(np.arange(len(counts)), counts)
+    offsets = np.zeros(len(counts), np.int64)
+    np.cumsum(counts[:-1], out=offsets[1:])
+    k = np.arange(int(counts.sum())) - offsets[strand]
+    return frac[strand] * (k / (counts[strand] - 1)), counts
 
-    roots (S,3) f64, transforms (S,3,3), guides (S,3), weights (S,3), frac (S,),
-    cylinders (S,) int, tables (K, M, 3). Returns (points (P,3) float64, counts (S,) int64),
-    strands in input order. The blend runs in float32 (offsets from the root: relative
+
+def evaluate_strands(roots, transforms, guides, weights, counts, sigma, tables, chunk_points=1 << 16):
+    """Points of strands at flat curve parameters σ (P,) (counts (S,) points per strand, in
+    order): C_j(σ) = R_j + B_j Σ_g w_jg D_g(σ).
+
+    roots (S,3) f64, transforms (S,3,3), guides (S,3), weights (S,3), tables (K, M, 3).
+    Returns points (P,3) float64. The blend runs in float32 (offsets from the root: relative
     precision 6e-8 of the strand length wherever the head is) in chunks of about
     `chunk_points` points that stay in cache; the root is added in float64."""
     n_keys, samples, _ = tables.shape
@@ -94,36 +112,30 @@ def evaluate_strands(roots, transforms, guides, weights, frac, cylinders, tables
     step = np.concatenate([np.diff(tables, axis=1), np.zeros((n_keys, 1, 3))], axis=1)
     packed = np.concatenate([tables, step], axis=2).reshape(-1, 6).astype(np.float32)
     w32 = weights.astype(np.float32)
-    b32 = transforms.astype(np.float32)
-    counts = np.asarray(cylinders, np.int64) + 1
-    offsets = np.zeros(len(counts), np.int64)
-    np.cumsum(counts[:-1], out=offsets[1:])
-    out = np.empty((int(counts.sum()), 3))
-    for c in np.unique(cylinders):  # a handful of distinct resolutions, not strands
-        c = int(c)
-        all_sel = np.flatnonzero(cylinders == c)
-        per = max(1, chunk_points // (c + 1))
-        kc = (np.arange(c + 1, dtype=np.float64) / c)
-        for lo in range(0, len(all_sel), per):  # chunks of ~64k points, for the cache
-            sel = all_sel[lo:lo + per]
-            pos = (frac[sel, None] * kc) * (samples - 1)
-            i0 = np.minimum(pos.astype(np.int64), samples - 2)
-            fr = (pos - i0).astype(np.float32)[..., None]
-            acc = None
-            for g in range(3):  # the three guides
-                row = np.take(packed, guides[sel, g, None] * samples + i0, axis=0)
-                term = w32[sel, g, None, None] * (row[..., :3] + fr * row[..., 3:])
-                acc = term if acc is None else acc + term
-            b = b32[sel]
-            pts = np.empty(acc.shape, np.float64)
-            for a in range(3):
-                pts[..., a] = (b[:, None, a, 0] * acc[..., 0] + b[:, None, a, 1] * acc[..., 1]
-                               + b[:, None, a, 2] * acc[..., 2])
-            pts += roots[sel, None, :]
-            start = offsets[sel[0]]
-            if sel[-1] - sel[0] == len(sel) - 1:  # a contiguous run of strands: one slice
-                out[start:start + pts.shape[0] * (c + 1)] = pts.reshape(-1, 3)
-            else:
-                rows = offsets[sel, None] + np.arange(c + 1)
-                out[rows.ravel()] = pts.reshape(-1, 3)
-    return out, counts
+    b32 = transforms.astype(np.float32).reshape(-1, 9)
+    counts = np.asarray(counts, np.int64)
+    ends = np.cumsum(counts)
+    out = np.empty((int(ends[-1]) if len(ends) else 0, 3))
+    first = 0
+    while first < len(counts):  # chunks of whole strands, ~64k points each, for the cache
+        start = int(ends[first - 1]) if first else 0
+        last = int(np.searchsorted(ends, start + chunk_points, side="right"))
+        last = max(last, first + 1)
+        stop = int(ends[last - 1])
+        strand = np.repeat(np.arange(first, last), counts[first:last])
+        pos = sigma[start:stop] * (samples - 1)
+        i0 = np.minimum(pos.astype(np.int64), samples - 2)
+        fr = (pos - i0).astype(np.float32)[:, None]
+        g, w = guides[strand], w32[strand]
+        acc = None
+        for k in range(3):  # the three guides
+            row = np.take(packed, g[:, k] * samples + i0, axis=0)
+            term = w[:, k, None] * (row[:, :3] + fr * row[:, 3:])
+            acc = term if acc is None else acc + term
+        b = b32[strand]
+        pts = out[start:stop]
+        for a in range(3):
+            pts[:, a] = b[:, 3 * a] * acc[:, 0] + b[:, 3 * a + 1] * acc[:, 1] + b[:, 3 * a + 2] * acc[:, 2]
+        pts += roots[strand]
+        first = last
+    return out

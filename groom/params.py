@@ -65,7 +65,7 @@ class GroomParams:
     intelligence: bool = True
     resolution_mode: str = "adaptive"
     points_per_strand: int = 32
-    tolerance: float = 1e-4
+    tolerance: float = 3e-4
     tolerance_units: str = "scene"
     radius: float = 5e-5
     radius_mode: str = "linear"
