@@ -103,42 +103,44 @@ def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=
     return np.concatenate(sig_parts), np.concatenate(count_parts)
 
 
-def strand_attributes(seed, ids, counts, base_radius, base_color, params):
-    """Per-point radius, colour and alpha (SPEC §6) for strands with `counts` points.
-
-    Position along a strand is s = k / (count - 1), so the profile is the same whatever the
-    resolution. Colour: base + U(-1,1)·variation per strand and per point, clamped to [0,1]."""
+def strand_attributes(seed, ids, counts, along, base_radius, base_color, params):
+    """Per-point radius, colour and alpha (SPEC §6), float32, for strands with `counts` points
+    at fractions `along` (P,) of their length (0 at the root, 1 at the tip), so a profile is
+    the same whatever the resolution. Radius: r(1 - s) ('linear', the thesis's r(1 - i/res)),
+    r ('constant'), or constant up to taper_start then linear to 0 ('taper_from'). Colour:
+    base + U(-1,1)·variation per strand and per point, clamped to [0, 1]. Alpha: 1 up to
+    alpha_start, then linear to alpha_tip at the tip."""
     n_pts = int(counts.sum())
     strand = np.repeat(np.arange(len(counts)), counts)
-    offsets = np.zeros(len(counts), np.int64)
-    np.cumsum(counts[:-1], out=offsets[1:])
-    k = np.arange(n_pts) - offsets[strand]
-    s = k / (counts[strand] - 1)
-    r = base_radius[strand]
+    s = along.astype(np.float32)
+    r = base_radius.astype(np.float32)[strand]
     if params.radius_mode == "linear":
-        radius = r * (1.0 - s)
+        radius = r * (np.float32(1.0) - s)
     elif params.radius_mode == "constant":
-        radius = r.copy()
+        radius = r
     else:
-        span = max(1.0 - params.taper_start, 1e-12)
-        radius = r * np.clip((1.0 - s) / span, 0.0, 1.0)
+        span = np.float32(max(1.0 - params.taper_start, 1e-12))
+        radius = r * np.clip((np.float32(1.0) - s) / span, 0.0, 1.0)
     var = np.asarray(params.color_variation)
     color = base_color.copy()
     if var.any():
         u = np.stack([rng.uniform(seed, ids, rng.CH_COLOR + c) for c in range(3)], 1)
         color = color + (2.0 * u - 1.0) * var
-    color = color[strand]
+    color = color.astype(np.float32)[strand]
     var_p = np.asarray(params.color_variation_point)
     if var_p.any():
+        offsets = np.zeros(len(counts), np.int64)
+        np.cumsum(counts[:-1], out=offsets[1:])
+        k = np.arange(n_pts) - offsets[strand]
         sid = ids[strand]
         u = np.stack([rng.uniform(seed, sid, rng.CH_COLOR_POINT + 3 * k + c) for c in range(3)], 1)
-        color = color + (2.0 * u - 1.0) * var_p
+        color += ((2.0 * u - 1.0) * var_p).astype(np.float32)
     np.clip(color, 0.0, 1.0, out=color)
     if params.alpha_start >= 1.0 or params.alpha_tip == 1.0:
-        alpha = np.ones(n_pts)
+        alpha = np.ones(n_pts, np.float32)
     else:
         t = np.clip((s - params.alpha_start) / (1.0 - params.alpha_start), 0.0, 1.0)
-        alpha = 1.0 + (params.alpha_tip - 1.0) * t
+        alpha = (1.0 + (params.alpha_tip - 1.0) * t).astype(np.float32)
     return radius, color, alpha
 
 

@@ -128,7 +128,9 @@ class Generator:
             bins = np.stack([d["bound"] for d in kd])
             sigma, counts = adaptive_sigma(self.frac[sel], g, w, bins, tol, max_cyl)
         pts = evaluate_strands(self.samples.points[sel], self.transforms[sel], g, w, counts, sigma, tables)
-        radius, color, alpha = strand_attributes(p.seed, self.samples.ids[sel], counts, base_radius, base_color, p)
+        along = sigma / np.repeat(self.frac[sel], counts)
+        radius, color, alpha = strand_attributes(p.seed, self.samples.ids[sel], counts, along, base_radius,
+                                                 base_color, p)
         return pts, counts, radius, color, alpha
 
     def _build(self, guides, weights, parts):
@@ -136,7 +138,9 @@ class Generator:
         s = self.samples
         strands = Strands.from_arrays(pts, counts.astype(np.int32), radius, color, alpha,
                                       guides[:, 0].astype(np.int32))
-        self._cache = {"pts": pts, "counts": counts, "radius": radius, "color": color, "alpha": alpha}
+        # float32, as Strands keeps them: splicing then copies half the bytes.
+        self._cache = {"pts": strands.points, "counts": counts, "radius": strands.radius,
+                       "color": strands.color, "alpha": strands.alpha}
         self._result = GroomResult(strands, s.points, self.root_uv, guides.astype(np.int32),
                                    weights.astype(np.float32), s.ids, s.tri, s.bary)
         self._guides, self._weights = guides, weights
@@ -188,26 +192,31 @@ class Generator:
         old_counts = c["counts"]
         new_counts = old_counts.copy()
         new_counts[sel] = parts[1]
+        new_arrays = dict(zip(("pts", "radius", "color", "alpha"), (parts[0], parts[2], parts[3], parts[4])))
         old_off = np.zeros(len(old_counts), np.int64)
         np.cumsum(old_counts[:-1], out=old_off[1:])
-        new_off = np.zeros(len(new_counts), np.int64)
-        np.cumsum(new_counts[:-1], out=new_off[1:])
-        total = int(new_counts.sum())
-        keep = np.ones(len(new_counts), bool)
-        keep[sel] = False
-        strand = np.repeat(np.arange(len(new_counts)), new_counts)
-        local = np.arange(total) - new_off[strand]
-        from_old = keep[strand]
-        src = old_off[strand[from_old]] + local[from_old]
-        # Rows of the recomputed strands, in the order `parts` lists them.
-        dst_new = np.flatnonzero(~from_old)
-        out = []
-        for name, new in zip(("pts", "radius", "color", "alpha"), (parts[0], parts[2], parts[3], parts[4])):
-            arr = np.empty((total,) + c[name].shape[1:], c[name].dtype)
-            arr[from_old] = c[name][src]
-            arr[dst_new] = new
-            out.append(arr)
-        return out[0], new_counts, out[1], out[2], out[3]
+        part_off = np.zeros(len(sel), np.int64)
+        np.cumsum(parts[1][:-1], out=part_off[1:])
+        n_new = int(parts[1].sum())
+        out = {}
+        if np.array_equal(parts[1], old_counts[sel]):
+            # Same counts (always so at fixed resolution): overwrite the changed rows in place.
+            rows = np.repeat(old_off[sel] - part_off, parts[1]) + np.arange(n_new)
+            for name, new in new_arrays.items():
+                arr = c[name].copy()
+                arr[rows] = new
+                out[name] = arr
+        else:
+            # Counts changed: gather every new row from the old arrays or from the new part.
+            new_off = np.zeros(len(new_counts), np.int64)
+            np.cumsum(new_counts[:-1], out=new_off[1:])
+            total_old = int(old_counts.sum())
+            base = old_off.copy()
+            base[sel] = total_old + part_off
+            src = np.repeat(base - new_off, new_counts) + np.arange(int(new_counts.sum()))
+            for name, new in new_arrays.items():
+                out[name] = np.take(np.concatenate([c[name], new.astype(c[name].dtype)]), src, axis=0)
+        return out["pts"], new_counts, out["radius"], out["color"], out["alpha"]
 
 
 def generate(scalp, keys, params=None):

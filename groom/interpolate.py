@@ -122,20 +122,29 @@ def evaluate_strands(roots, transforms, guides, weights, counts, sigma, tables, 
         last = int(np.searchsorted(ends, start + chunk_points, side="right"))
         last = max(last, first + 1)
         stop = int(ends[last - 1])
-        strand = np.repeat(np.arange(first, last), counts[first:last])
-        pos = sigma[start:stop] * (samples - 1)
+        n_pts = counts[first:last]
+        if n_pts[0] == n_pts[-1] and (n_pts == n_pts[0]).all():
+            # Equal counts (fixed resolution): per-strand data broadcasts, nothing is gathered
+            # per point.
+            shape = (last - first, int(n_pts[0]))
+            sl = slice(first, last)
+            g, w, b = guides[sl, None, :], w32[sl, None, :], b32[sl, None, :]
+            root = roots[sl, None, :]
+        else:
+            shape = (stop - start,)
+            strand = np.repeat(np.arange(first, last), n_pts)
+            g, w, b, root = guides[strand], w32[strand], b32[strand], roots[strand]
+        pos = sigma[start:stop].reshape(shape) * (samples - 1)
         i0 = np.minimum(pos.astype(np.int64), samples - 2)
-        fr = (pos - i0).astype(np.float32)[:, None]
-        g, w = guides[strand], w32[strand]
+        fr = (pos - i0).astype(np.float32)[..., None]
         acc = None
         for k in range(3):  # the three guides
-            row = np.take(packed, g[:, k] * samples + i0, axis=0)
-            term = w[:, k, None] * (row[:, :3] + fr * row[:, 3:])
+            row = np.take(packed, g[..., k] * samples + i0, axis=0)
+            term = w[..., k, None] * (row[..., :3] + fr * row[..., 3:])
             acc = term if acc is None else acc + term
-        b = b32[strand]
-        pts = out[start:stop]
+        pts = out[start:stop].reshape(shape + (3,))
         for a in range(3):
-            pts[:, a] = b[:, 3 * a] * acc[:, 0] + b[:, 3 * a + 1] * acc[:, 1] + b[:, 3 * a + 2] * acc[:, 2]
-        pts += roots[strand]
+            pts[..., a] = b[..., 3 * a] * acc[..., 0] + b[..., 3 * a + 1] * acc[..., 1] + b[..., 3 * a + 2] * acc[..., 2]
+        pts += root
         first = last
     return out
