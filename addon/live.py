@@ -80,6 +80,8 @@ def _update(gen, sig, old_sig, keys, scalp_data, params):
     it may run on a worker thread."""
     from groom import Generator
     changed = _changed(sig, old_sig)
+    if gen is not None and gen.params.to_dict() != params.to_dict():
+        gen = None  # settings changed since the generator was built: start over with them
     if changed is None or gen is None:
         gen = Generator(scalp_data, keys, params)
         return gen, gen.generate()
