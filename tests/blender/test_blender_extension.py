@@ -67,19 +67,35 @@ def test_installer_unpacked_the_wheels_into_the_extensions_site_packages(extensi
     assert pathlib.Path(extension.__file__).is_relative_to(pathlib.Path(os.environ["BLENDER_USER_RESOURCES"]))
 
 
-def test_enabling_imports_nothing_heavy(extension_zip):
-    """Enable the built extension in a fresh process: groom, tracer and moderngl stay unloaded."""
+def test_enabling_imports_nothing_heavy_and_the_wheels_do_the_work(extension_zip, tmp_path):
+    """In a fresh process that cannot see this checkout: enabling loads none of groom, tracer
+    or moderngl; Generate then runs on the copies Blender unpacked from the wheels."""
     code = f"""
-import os, sys, bpy
+import os, sys, bpy, bmesh
 bpy.context.preferences.extensions.repos.new(name="t", module="t", custom_directory=os.path.join(os.environ["BLENDER_USER_RESOURCES"], "r"), source='USER')
 assert bpy.ops.extensions.package_install_files(filepath={str(extension_zip[0])!r}, repo="t", enable_on_install=True) == {{'FINISHED'}}
 assert hasattr(bpy.types.Object, "keystrand_hair")
 print("HEAVY", sorted(m for m in ("groom", "tracer", "moderngl", "tracer.renderer") if m in sys.modules))
+mesh = bpy.data.meshes.new("S"); bm = bmesh.new(); bmesh.ops.create_uvsphere(bm, u_segments=16, v_segments=8, radius=0.1)
+bm.to_mesh(mesh); bm.free()
+obj = bpy.data.objects.new("S", mesh); bpy.context.scene.collection.objects.link(obj)
+bpy.context.view_layer.objects.active = obj
+assert bpy.ops.hair.load_preset(preset="wavy") == {{'FINISHED'}}
+obj.keystrand_hair.count = 100
+assert bpy.ops.hair.generate() == {{'FINISHED'}}
+import groom
+print("CURVES", len(obj.keystrand_hair.hair_object.data.curves))
+print("GROOM", groom.__file__)
 """
-    env = dict(os.environ, BLENDER_USER_RESOURCES=str(pathlib.Path(os.environ["BLENDER_USER_RESOURCES"]) / "fresh"))
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
-    assert proc.returncode == 0, proc.stderr
+    user = tmp_path / "user"
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(user), PYTHONPATH="")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120,
+                          cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-3000:]
     assert "HEAVY []" in proc.stdout, proc.stdout
+    assert "CURVES 100" in proc.stdout
+    groom_file = proc.stdout.split("GROOM ")[1].strip()
+    assert pathlib.Path(groom_file).is_relative_to(user / "extensions" / ".local"), groom_file
 
 
 def test_disabling_leaves_no_class_handler_property_or_menu_entry(extension, ext_enable):

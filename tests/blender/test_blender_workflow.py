@@ -377,3 +377,31 @@ def test_render_preview_out_of_process_matches_and_reports_a_killed_worker(clean
         np.testing.assert_allclose(again, in_process, atol=1e-6)
     finally:
         preview.close()
+
+
+def test_live_catch_up_runs_off_the_main_thread_and_uses_current_settings(clean):
+    import threading
+    from groom import generate
+    live = ext_module(clean, "live")
+    scalp = make_scalp()
+    keys = add_keys(scalp)
+    s = scalp.keystrand_hair
+    s.count, s.viewport_count = 900, 300
+    bpy.ops.hair.generate()
+    s.tidiness = 0.5  # changed after Generate: the live update must pick it up
+    tip = keys[2].data.splines[0].bezier_points[-1]
+    tip.co.z -= 0.03
+    keys[2].data.update_tag()
+    bpy.context.view_layer.update()
+    assert live.process(settle=False) == 1
+    # Past the settle time, the catch-up starts on a thread and the call returns at once.
+    live.process(now=1e12)
+    names = [t.name for t in threading.enumerate()]
+    state = next(iter(live._states.values()))
+    assert state.catchup is None or "keystrand-hair-catch-up" in names
+    live.process(settle=True)
+    assert state.catchup is None
+    expected = generate(read_scalp_arrays(scalp), [read_key(k) for k in keys], params_of(scalp)).strands
+    got = curves_arrays(s.hair_object)
+    np.testing.assert_array_equal(got["counts"], expected.counts)
+    np.testing.assert_array_equal(got["position"], expected.points)
