@@ -137,3 +137,56 @@ def test_the_same_tests_pass_inside_blender_background():
     proc = subprocess.run([os.environ["BLENDER"], "--background", "--factory-startup", "--python", str(runner),
                            "--", "-q", "-p", "no:cacheprovider"], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
+
+
+class _Layout:
+    """Records what a panel draws; rejects a property or operator that does not exist."""
+
+    def __init__(self, seen):
+        self.seen = seen
+        self.use_property_split = False
+        self.active = True
+
+    def prop(self, data, name, **kwargs):
+        assert name in data.bl_rna.properties, f"panel draws unknown setting {name!r}"
+        self.seen.append(name)
+
+    def operator(self, idname, **kwargs):
+        module, name = idname.split(".")
+        getattr(getattr(bpy.ops, module), name).get_rna_type()  # KeyError when missing
+        self.seen.append(idname)
+        return type("Props", (), {})()
+
+    def label(self, **kwargs):
+        pass
+
+    def separator(self, **kwargs):
+        pass
+
+    def row(self, **kwargs):
+        return self
+
+    def column(self, **kwargs):
+        return self
+
+
+def test_panels_draw_every_setting_and_button(clean):
+    from blender_scene import make_scalp
+    scalp = make_scalp()
+    seen = []
+    context = bpy.context
+    panels = [getattr(bpy.types, name) for name in dir(bpy.types)
+              if name.startswith(("VIEW3D_PT_keystrand", "IMAGE_PT_keystrand"))]
+    assert len(panels) >= 5
+    for panel in panels:
+        if panel.poll(context):
+            fake = type("P", (), {"layout": _Layout(seen)})()
+            panel.draw(fake, context)
+    settings = scalp.keystrand_hair.bl_rna.properties.keys()
+    shown = set(seen)
+    hidden = {"rna_type", "name", "role", "scalp", "hair_object", "use_key_color", "key_color", "key_radius",
+              "key_group"}  # the key's own settings show only with a key active
+    assert set(settings) - hidden - shown == set()
+    for op in ("hair.generate", "hair.add_key_strand", "hair.render_preview", "hair.load_preset",
+               "hair.save_preset", "hair.export"):
+        assert op in shown
