@@ -13,7 +13,7 @@ import time
 import bpy
 from bpy.props import EnumProperty, FloatVectorProperty, BoolProperty, StringProperty
 from bpy.types import Operator
-from bpy_extras.io_utils import ExportHelper, ImportHelper
+from bpy_extras.io_utils import ExportHelper
 
 from . import scene_data
 from .scene_data import SceneError, find_scalp

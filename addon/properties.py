@@ -8,7 +8,7 @@ back to their scalp. Tooltips are written for artists.
 """
 import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty,
-                       IntProperty, PointerProperty, StringProperty)
+                       IntProperty, PointerProperty)
 from bpy.types import PropertyGroup
 
 ROLES = (

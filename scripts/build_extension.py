@@ -112,7 +112,7 @@ def run_checked(cmd, what):
 def fetch_platform_wheels(manifest, offline):
     """Download every listed third-party wheel that is not yet in build/wheels/."""
     wanted = [pathlib.Path(w).name for w in manifest.get("wheels", [])]
-    project = project_wheel_name(manifest)
+    project = project_wheel_name()
     missing = [w for w in wanted if w != project and not (WHEEL_CACHE / w).is_file()]
     if not missing:
         return
@@ -136,7 +136,7 @@ def fetch_platform_wheels(manifest, offline):
             raise BuildError(f"pip download did not produce {name}; the manifest's wheel name is out of date")
 
 
-def project_wheel_name(manifest):
+def project_wheel_name():
     with open(ROOT / "pyproject.toml", "rb") as f:
         project = tomllib.load(f)["project"]
     return f"{project['name'].replace('-', '_')}-{project['version']}-py3-none-any.whl"
@@ -157,7 +157,7 @@ def build_project_wheel(dest):
     packages = pyproject["tool"]["setuptools"]["packages"]
     dist = project["name"].replace("-", "_")
     info = f"{dist}-{project['version']}.dist-info"
-    path = pathlib.Path(dest) / project_wheel_name(None)
+    path = pathlib.Path(dest) / project_wheel_name()
     files = {}
     for package in packages:
         for file in sorted((ROOT / package).rglob("*")):
@@ -200,7 +200,7 @@ def stage(manifest, stage_dir):
     wheels_dir = stage_dir / "wheels"
     wheels_dir.mkdir()
     built = build_project_wheel(wheels_dir)
-    expected = project_wheel_name(manifest)
+    expected = project_wheel_name()
     if built.name != expected:
         raise BuildError(f"wheels: built {built.name} but the manifest expects {expected}; "
                          "update blender_manifest.toml to the pyproject version")
@@ -221,9 +221,9 @@ def zip_ourselves(stage_dir, out_zip, manifest):
 def build(out_dir, offline=False, use_blender=True):
     """Build and validate the zip; returns its path."""
     manifest = read_manifest(ROOT / "blender_manifest.toml")
-    check_manifest_names = [pathlib.Path(w).name for w in manifest.get("wheels", [])]
-    if project_wheel_name(manifest) not in check_manifest_names:
-        raise BuildError(f"wheels: the manifest must list ./wheels/{project_wheel_name(manifest)}")
+    listed = [pathlib.Path(w).name for w in manifest.get("wheels", [])]
+    if project_wheel_name() not in listed:
+        raise BuildError(f"wheels: the manifest must list ./wheels/{project_wheel_name()}")
     fetch_platform_wheels(manifest, offline)
     out_dir = pathlib.Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

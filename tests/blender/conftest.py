@@ -11,7 +11,6 @@ import importlib.util
 import os
 import pathlib
 import shutil
-import sys
 import tempfile
 
 import pytest
