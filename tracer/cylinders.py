@@ -74,61 +74,66 @@ class Cylinders:
 _FIELDS = ("top", "tip", "n2", "radius", "color", "alpha", "strand", "flags", "extension")
 
 
-def _distinct_points(strands):
+def _distinct_points(strands, strand_of_point):
     """Mask of points kept: drops points that repeat their predecessor within a strand."""
-    pts = strands.points.astype(np.float64)
+    pts = strands.points
     keep = np.ones(len(pts), bool)
     if len(pts) < 2:
         return keep
     lo, hi = pts.min(axis=0), pts.max(axis=0)
-    scale = max(float(np.max(hi - lo)), float(np.max(np.abs(pts))) * 1e-3, 1e-30)
-    step = np.linalg.norm(pts[1:] - pts[:-1], axis=1)
-    keep[1:] = step > MERGE_EPS * scale
-    keep[strands.offsets] = True          # a root never repeats anything
+    scale = max(float(np.max(hi - lo)), float(np.max(np.abs(np.concatenate([lo, hi])))) * 1e-3, 1e-30)
+    step = pts[1:] - pts[:-1]
+    keep[1:] = np.einsum("ij,ij->i", step, step) > (MERGE_EPS * scale) ** 2
+    keep[1:] |= strand_of_point[1:] != strand_of_point[:-1]    # a root never repeats anything
     return keep
 
 
 def strands_to_cylinders(strands):
-    """hairio.Strands -> Cylinders (float32 arrays for the GPU; the reference promotes them)."""
+    """hairio.Strands -> Cylinders (float32 arrays for the GPU; the reference promotes them).
+    Whole-array float32 work: the GPU consumes float32, and the reference promotes exactly
+    these values, so both trace the same cylinders."""
     counts = strands.counts.astype(np.int64)
-    strand_of_point = np.repeat(np.arange(len(counts)), counts)
-    keep = _distinct_points(strands)
-    pts = strands.points[keep].astype(np.float64)
-    sid = strand_of_point[keep]
-    radius, color, alpha = strands.radius[keep], strands.color[keep], strands.alpha[keep]
-    n = len(pts)
-    if n < 2:
+    strand_of_point = np.repeat(np.arange(len(counts), dtype=np.int32), counts)
+    keep = _distinct_points(strands, strand_of_point)
+    if keep.all():      # the usual case: no copies
+        pts, sid = strands.points, strand_of_point
+        radius, color, alpha = strands.radius, strands.color, strands.alpha
+    else:
+        pts, sid = strands.points[keep], strand_of_point[keep]
+        radius, color, alpha = strands.radius[keep], strands.color[keep], strands.alpha[keep]
+    if len(pts) < 2:
         return _empty()
-    # Point j starts a cylinder when j+1 belongs to the same strand.
-    starts = np.flatnonzero(sid[:-1] == sid[1:])
-    if not len(starts):
+    # Point j starts a cylinder when point j+1 belongs to the same strand.
+    starts = sid[:-1] == sid[1:]
+    if not starts.any():
         return _empty()
-    top, tip = pts[starts], pts[starts + 1]
+    top = pts[:-1][starts]
+    tip = pts[1:][starts]
+    strand = sid[:-1][starts]
     axis = tip - top
-    u1 = axis / np.linalg.norm(axis, axis=1)[:, None]
-    has_next = np.zeros(len(starts), bool)
-    nxt_ok = starts + 2 < n
-    has_next[nxt_ok] = sid[starts[nxt_ok] + 2] == sid[starts[nxt_ok]]
+    length = np.sqrt(np.einsum("ij,ij->i", axis, axis))
+    u1 = axis / length[:, None]
+    # Cylinders of a strand are consecutive, so the next axis is the next row's own axis.
+    has_next = np.zeros(len(top), bool)
+    has_next[:-1] = strand[1:] == strand[:-1]
     u2 = u1.copy()
-    nxt = starts[has_next] + 2
-    d2 = pts[nxt] - pts[nxt - 1]
-    u2[has_next] = d2 / np.linalg.norm(d2, axis=1)[:, None]
+    u2[:-1][has_next[:-1]] = u1[1:][has_next[:-1]]
     cosang = np.einsum("ij,ij->i", u1, u2)
     sharp = has_next & (cosang < _COS_SHARP)
     u2[sharp] = u1[sharp]
-    cosang = np.where(sharp, 1.0, cosang)
+    cosang[sharp] = 1.0
     # Plane 1 of cylinder k is plane 2 of cylinder k-1 unless k is a strand's first or the
     # joint is sharp; both of those make it a cap.
-    first = np.ones(len(starts), bool)
+    first = np.ones(len(top), bool)
     first[1:] = ~has_next[:-1] | sharp[:-1]
     flags = first.astype(np.uint8) | ((~has_next | sharp).astype(np.uint8) << 1)
-    r = radius[starts].astype(np.float64)
-    ext = r * np.sqrt(np.maximum(0.0, 1.0 - cosang ** 2)) / np.maximum(cosang, _COS_SHARP)
+    r = radius[:-1][starts]
+    cosang = np.clip(cosang, _COS_SHARP, 1.0)
+    ext = r * np.sqrt(1.0 - cosang * cosang) / cosang
     return Cylinders(
-        top=top.astype(np.float32), tip=tip.astype(np.float32), n2=u2.astype(np.float32),
-        radius=r.astype(np.float32), color=np.ascontiguousarray(color[starts], np.float32),
-        alpha=alpha[starts].astype(np.float32), strand=sid[starts].astype(np.int32),
-        flags=flags, extension=ext.astype(np.float32))
+        top=top, tip=tip, n2=u2.astype(np.float32), radius=r,
+        color=np.ascontiguousarray(color[:-1][starts]), alpha=alpha[:-1][starts],
+        strand=strand, flags=flags, extension=ext.astype(np.float32))
 
 
 def _empty():

@@ -1,19 +1,19 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Uniform grid over cylinders with a compact (CSR) cell list, built in whole-array numpy.
 
-Every cylinder is listed in every cell its padded bounding box (the capsule's box, radius
-times `pad_factor`) touches, with no cap per cell. The resolution comes from the cylinder
-count and the extent: the cell size is tuned so that cells that hold anything hold about
-`TARGET_PER_CELL` cylinders; cells need not be cubes.
+Every cylinder is listed in every cell its padded capsule (radius times `pad_factor`) may
+touch, cut slab by slab along its dominant axis (tighter than its whole bounding box), with
+no cap per cell. The resolution comes from the cylinder count and the extent: the cell size
+is the smallest that lists a cylinder in about `MAX_REFS_PER_CYLINDER` cells on average
+(see choose_resolution); cells need not be cubes.
 """
 from dataclasses import dataclass
 
 import numpy as np
 
-TARGET_PER_CELL = 3.0
 MAX_DIM = 1024          # 3D textures of GL 3.3 guarantee 256; every driver we target has >= 2048
 MAX_CELLS = 1 << 23
-MAX_REFS_PER_CYLINDER = 8.0
+MAX_REFS_PER_CYLINDER = 6.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,39 +55,26 @@ def expected_refs(box_size, h):
     return float(np.mean((1.0 + e[:, 0]) * (1.0 + e[:, 1] / m) * (1.0 + e[:, 2] / m)))
 
 
-def choose_resolution(box_lo, box_hi, scene_lo, extent, target=TARGET_PER_CELL,
-                      max_refs=MAX_REFS_PER_CYLINDER):
-    """Cell counts per axis. The cell size h starts where non-empty cells hold about `target`
-    cylinders (counted at box centres; hair fills a shell, so occupancy grows about like h²,
-    hence the square-root step), then grows if needed so that a cylinder is listed in at most
-    `max_refs` cells on average: the build costs time per reference, and dense hair would
-    otherwise want cells much shorter than its segments."""
+def choose_resolution(box_lo, box_hi, scene_lo, extent, max_refs=MAX_REFS_PER_CYLINDER):
+    """Cell counts per axis: the smallest cell size h at which a cylinder is listed in about
+    `max_refs` cells on average (found by bisection on a sample of boxes).
+
+    Smaller cells mean fewer cylinder tests per ray but more references to build and more
+    cell steps; on dense hair no size gets near a few cylinders per occupied cell without
+    listing each segment in dozens of cells. Measured on 1.5 M wavy cylinders (see the
+    tracer's benchmark notes): first render (build + trace) is fastest near 4-5 references
+    per cylinder. A floor keeps the cell count within MAX_CELLS and MAX_DIM per axis."""
     n = len(box_lo)
     size = box_hi - box_lo
     sample = size if n <= 20_000 else size[:: n // 20_000 + 1]
     floor_h = max(float(extent.max()) / MAX_DIM, float(np.prod(extent) / MAX_CELLS) ** (1 / 3))
-    h = max(2.0 * float(np.median(size.max(axis=1))), floor_h)
-    mid = 0.5 * (box_lo + box_hi)
-    for _ in range(3):
-        dims = _dims_for(extent, h)
-        cs = extent / dims
-        c = np.minimum(((mid - scene_lo) / cs).astype(np.int64), dims - 1)
-        cid = c[:, 0] + dims[0] * (c[:, 1] + dims[1] * c[:, 2])
-        occupied = np.count_nonzero(np.bincount(cid, minlength=int(np.prod(dims))))
-        ratio = target / max(n / max(1, occupied), 1e-9)
-        if 0.8 < ratio < 1.25:
-            break
-        h_new = max(h * ratio ** 0.5, floor_h)
-        if abs(h_new - h) <= 1e-3 * h:
-            break
-        h = h_new
-    if expected_refs(sample, h) > max_refs:
-        lo_h, hi_h = h, max(h, float(extent.max()))
-        for _ in range(20):       # bisection: expected_refs falls as h grows
-            m = 0.5 * (lo_h + hi_h)
-            lo_h, hi_h = (m, hi_h) if expected_refs(sample, m) > max_refs else (lo_h, m)
-        h = hi_h
-    return _dims_for(extent, h)
+    lo_h, hi_h = floor_h, max(floor_h, float(extent.max()))
+    if expected_refs(sample, lo_h) <= max_refs:
+        return _dims_for(extent, lo_h)
+    for _ in range(24):       # bisection: expected_refs falls as h grows
+        m = 0.5 * (lo_h + hi_h)
+        lo_h, hi_h = (m, hi_h) if expected_refs(sample, m) > max_refs else (lo_h, m)
+    return _dims_for(extent, hi_h)
 
 
 def _cells_touched(cylinders, pad_factor, lo, cs, dims):
@@ -104,49 +91,59 @@ def _cells_touched(cylinders, pad_factor, lo, cs, dims):
     far = cylinders.tip + axis * (cylinders.extension / np.maximum(length, 1e-30))[:, None]
     g0 = (cylinders.top - lo) / cs
     dg = (far - lo) / cs - g0
-    padg = (cylinders.radius.astype(np.float64) * pad_factor)[:, None] / cs[None, :]
+    # A little extra pad (a thousandth of a cell) covers the float32 rounding below.
+    padg = (cylinders.radius.astype(np.float64) * pad_factor)[:, None] / cs[None, :] + 1e-3
     n = len(g0)
-    rows = np.arange(n)
+    # Reorder every per-cylinder triple as (dominant axis k, a, b) once, so the expanded
+    # stages below only repeat 1-D arrays (sequential copies, not gathers).
     k = np.argmax(np.abs(dg), axis=1)
-    a, b = (k + 1) % 3, (k + 2) % 3
-    g0k, dk, pk = g0[rows, k], dg[rows, k], padg[rows, k]
-    dimk = dims[k]
-    i0 = np.clip(np.floor(np.minimum(g0k, g0k + dk) - pk), 0, dimk - 1).astype(np.int64)
-    i1 = np.clip(np.floor(np.maximum(g0k, g0k + dk) + pk), 0, dimk - 1).astype(np.int64)
+    order = np.stack([k, (k + 1) % 3, (k + 2) % 3], axis=1)
+    G0 = np.take_along_axis(g0, order, 1).astype(np.float32)
+    DG = np.take_along_axis(dg, order, 1).astype(np.float32)
+    PAD = np.take_along_axis(padg, order, 1).astype(np.float32)
+    DIM = dims[order].astype(np.int32)
+    STRIDE = np.array([1, dims[0], dims[0] * dims[1]], np.int32)[order]
+    i0 = np.clip(np.floor(np.minimum(G0[:, 0], G0[:, 0] + DG[:, 0]) - PAD[:, 0]), 0, DIM[:, 0] - 1).astype(np.int32)
+    i1 = np.clip(np.floor(np.maximum(G0[:, 0], G0[:, 0] + DG[:, 0]) + PAD[:, 0]), 0, DIM[:, 0] - 1).astype(np.int32)
     nslab = i1 - i0 + 1
+    total = int(nslab.sum())
     first = np.cumsum(nslab) - nslab
-    c1 = np.repeat(rows, nslab)
-    slab = i0[c1] + (np.arange(len(c1)) - first[c1])
+    rep = lambda x: np.repeat(x, nslab)  # noqa: E731
+    c1 = rep(np.arange(n, dtype=np.int32))
+    slab = rep(i0 - first.astype(np.int32)) + np.arange(total, dtype=np.int32)
     # Part of the segment (parameter s in [0, 1]) whose dominant coordinate lies within pad of
     # the slab; a segment too short to have a dominant direction is taken whole.
-    dk1, g0k1, pk1 = dk[c1], g0k[c1], pk[c1]
+    dk1, g0k1, pk1 = rep(DG[:, 0]), rep(G0[:, 0]), rep(PAD[:, 0])
     flat = np.abs(dk1) < 1e-12
     with np.errstate(divide="ignore", invalid="ignore"):
-        sa = (slab - pk1 - g0k1) / dk1
-        sb = (slab + 1 + pk1 - g0k1) / dk1
-    s0 = np.where(flat, 0.0, np.clip(np.minimum(sa, sb), 0.0, 1.0))
-    s1 = np.where(flat, 1.0, np.clip(np.maximum(sa, sb), 0.0, 1.0))
+        inv = np.float32(1.0) / np.where(flat, np.float32(1.0), dk1)
+        sa = (slab - pk1 - g0k1) * inv
+        sb = (slab + 1 + pk1 - g0k1) * inv
+    s0 = np.where(flat, np.float32(0.0), np.clip(np.minimum(sa, sb), 0.0, 1.0))
+    s1 = np.where(flat, np.float32(1.0), np.clip(np.maximum(sa, sb), 0.0, 1.0))
+    del sa, sb, dk1, g0k1, pk1, flat
 
-    def span(axes):
-        ax = axes[c1]
-        g, d, p = g0[c1, ax], dg[c1, ax], padg[c1, ax]
+    def span(col):
+        g, d, p, top = rep(G0[:, col]), rep(DG[:, col]), rep(PAD[:, col]), rep(DIM[:, col] - 1)
         e0, e1 = g + s0 * d, g + s1 * d
-        top = dims[ax] - 1
-        j0 = np.clip(np.floor(np.minimum(e0, e1) - p), 0, top).astype(np.int64)
-        j1 = np.clip(np.floor(np.maximum(e0, e1) + p), 0, top).astype(np.int64)
-        return ax, j0, j1 - j0 + 1
+        j0 = np.clip(np.floor(np.minimum(e0, e1) - p), 0, top).astype(np.int32)
+        j1 = np.clip(np.floor(np.maximum(e0, e1) + p), 0, top).astype(np.int32)
+        return j0, j1 - j0 + 1
 
-    ax_a, ja, na = span(a)
-    ax_b, jb, nb = span(b)
-    stride = np.array([1, dims[0], dims[0] * dims[1]], np.int64)
-    base = slab * stride[k[c1]] + ja * stride[ax_a] + jb * stride[ax_b]
+    ja, na = span(1)
+    jb, nb = span(2)
+    stra, strb = rep(STRIDE[:, 1]), rep(STRIDE[:, 2])
+    base = slab * rep(STRIDE[:, 0]) + ja * stra + jb * strb
     per = na * nb
-    first2 = np.cumsum(per) - per
-    c2 = np.repeat(np.arange(len(c1)), per)
-    local = np.arange(len(c2)) - first2[c2]
-    na2 = na[c2]
-    cell = base[c2] + (local % na2) * stride[ax_a[c2]] + (local // na2) * stride[ax_b[c2]]
-    return c1[c2], cell
+    if np.all(per == 1):        # thin hair in cells longer than its radius: the usual case
+        return c1, base
+    total2 = int(per.sum())
+    first2 = (np.cumsum(per) - per).astype(np.int32)
+    rep2 = lambda x: np.repeat(x, per)  # noqa: E731
+    local = np.arange(total2, dtype=np.int32) - rep2(first2)
+    na2 = rep2(na)
+    cell = rep2(base) + (local % na2) * rep2(stra) + (local // na2) * rep2(strb)
+    return rep2(c1), cell
 
 
 def build_grid(cylinders, pad_factor=1.0, dims=None):
@@ -167,13 +164,12 @@ def build_grid(cylinders, pad_factor=1.0, dims=None):
     extent = extent * (1 + 2e-6)
     if dims is None:
         dims = choose_resolution(blo, bhi, lo, extent)
-    # choose_resolution counts whole boxes; the slab listing needs far fewer references.
     dims = np.asarray(dims, np.int64)
     cs = extent / dims
     cyl, cell = _cells_touched(cylinders, pad_factor, lo, cs, dims)
     # One int64 sort of (cell, cylinder) keys orders the list by cell and, inside a cell,
     # by cylinder id; it beats argsort by a factor of about two.
-    key = np.sort((cell << 31) | cyl.astype(np.int64))
+    key = np.sort((cell.astype(np.int64) << 31) | cyl)
     indices = (key & ((1 << 31) - 1)).astype(np.int32)
     ncell = int(np.prod(dims))
     count = np.bincount(key >> 31, minlength=ncell).astype(np.int32)
