@@ -11,9 +11,6 @@ import numpy as np
 from . import rng
 
 
-_WINDOW = 16
-
-
 def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=32768):
     """Per-strand adaptive resolution: curve parameters σ of the fewest points whose polyline
     provably stays within `tolerance` (S,) of the exact strand, for the curvature bound below.
@@ -23,10 +20,10 @@ def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=
     `bins` (K, NB) from interpolate.key_table. Points are placed greedily from the root:
     each segment is the longest whose h² times the largest bound over the bins it touches
     stays <= 8·tol. Greedy covering is optimal for such a monotone constraint, so straight
-    stretches get one long cylinder and bends get short ones. (To bound the work a segment
-    that is not the strand's last scans at most _WINDOW bins: a few extra cylinders on long
-    gentle bends.) Strands needing more than `max_cylinders` fall back to max_cylinders
-    equal steps (tolerance not met there).
+    stretches get one long cylinder and bends get short ones. Each segment scans the bins it
+    covers once, so the work is about (strands x bins) whatever the resolution. Strands
+    needing more than `max_cylinders` fall back to max_cylinders equal steps (tolerance not
+    met there).
 
     Returns (sigma (P,) float64 flat, counts (S,) int64). Each strand's numbers depend only on
     its own inputs (incremental regeneration relies on it)."""
@@ -65,7 +62,7 @@ def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=
             e = b0[todo] - 1
             amax = np.zeros(len(todo))
             live = np.arange(len(todo))
-            stop = np.minimum(lb[todo] - 1, b0[todo] + _WINDOW - 1)
+            stop = lb[todo] - 1
             while live.size:
                 t = todo[live]
                 cand = e[live] + 1

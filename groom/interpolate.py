@@ -13,14 +13,12 @@ B_j = F_j·Rloc_j·F_j^T (translate only, apart from tidiness), Rloc_j the tidin
 about the root's own axes. Length is set by TRIMMING: the strand stops at the fraction f_j
 of its keys' arc length, so curls keep their size.
 
-Default neighbour mode, by measurement (measure.seam_jump on the default scalp, 'wavy'
-preset keys, tidiness 1, equal lengths, 20,000 root pairs 0.5 mm apart): see
-params.GroomParams.neighbour_mode and the numbers recorded in measure.py.
-
-Each strand is evaluated at its own number of points; strands are grouped by that number
-and each group is whole-array numpy (a loop over a handful of resolutions, never strands).
-Every operation is element-wise per strand, so evaluating a subset of strands gives
-bit-identical results to evaluating them all (incremental regeneration relies on it).
+The weights w_x come from wisps.guide_weights; the default neighbour mode was chosen by
+measurement (measure.py holds the numbers). Each strand is evaluated at its own curve
+parameters σ (equal steps at fixed resolution, cylinders.adaptive_sigma otherwise), in
+whole-array chunks of strands, never a loop over strands. Every operation is element-wise
+per strand, so evaluating a subset of strands gives bit-identical results to evaluating
+them all (incremental regeneration relies on it).
 """
 import numpy as np
 
@@ -41,14 +39,21 @@ def key_table(key, frame, intelligence, samples=KEY_SAMPLES, bins=CURVATURE_BINS
     at equal arc-length steps (in the key's root frame when `intelligence`, else world axes),
     and for each of `bins` equal ranges of σ an upper bound of |d²D/dσ²| there (the largest
     second difference over the bin's samples and one beyond each end, times a margin)."""
-    table, _ = key.arc_length_table(samples)
+    table, length = key.arc_length_table(samples)
     if intelligence:
         table = table @ frame  # rows: F_x^T D
     steps = samples - 1
-    h = 1.0 / steps
+    # |D''(σ)| = κ·L² for a curve parametrised by arc-length fraction. κ from the circle through
+    # three neighbouring samples (Menger curvature), which is blind to the small uneven spacing
+    # of the samples that a plain second difference would read as bending.
     second = np.zeros(samples)
     if samples >= 3:
-        second[1:-1] = np.linalg.norm(table[2:] - 2 * table[1:-1] + table[:-2], axis=1) / (h * h)
+        u, v = table[1:-1] - table[:-2], table[2:] - table[1:-1]
+        lu, lv, lw = (np.linalg.norm(x, axis=1) for x in (u, v, u + v))
+        denom = lu * lv * lw
+        cross = np.linalg.norm(np.cross(u, v), axis=1)
+        kappa = np.where(denom > 0, 2.0 * cross / np.where(denom > 0, denom, 1.0), 0.0)
+        second[1:-1] = kappa * length * length
         second[0], second[-1] = second[1], second[-2]
     per = steps // bins
     padded = np.concatenate([[second[0]], second, [second[-1]]])

@@ -245,3 +245,39 @@ def test_bad_inputs_to_generate_are_clear_errors(scalp, curl_key):
         generate(scalp, [np.zeros((3, 3))], GroomParams(count=10))
     with pytest.raises(InputError, match="group"):
         generate(scalp, [curl_key([0, 0, 0.1], group=1)], GroomParams(count=10))
+
+
+def test_adaptive_resolution_gives_straight_strands_one_cylinder(scalp):
+    key = KeyStrand(np.array([[0, 0, 0.1], [0, 0.02, 0.15], [0, 0.04, 0.2]]))  # collinear: straight
+    s = generate(scalp, [key], GroomParams(count=300, tidiness=0.3)).strands
+    assert (s.counts == 2).all()
+
+
+def test_adaptive_points_gather_where_the_strand_bends(scalp):
+    # Straight for 10 cm (a cubic segment), then a tight hook (a second one).
+    key = KeyStrand(np.array([[0, 0, 0.1], [0, 0, 0.15], [0, 0, 0.2], [0, 0, 0.2],
+                              [0, 0, 0.2], [0.01, 0, 0.21], [0.02, 0, 0.2]]), kind="cubic")
+    gen = Generator(scalp, [key], GroomParams(count=50, tidiness=1.0, min_length=1, max_length=1,
+                                              tolerance=1e-5, points_per_strand=200))
+    s = gen.generate().strands
+    pts = s.strand_points(0).astype(np.float64) - gen.result.roots[0]
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    assert seg[0] > 0.04            # one long cylinder for the straight part
+    assert seg[-3:].max() < 0.005   # short ones in the hook
+
+
+def test_incremental_update_rejects_bad_changes(scalp, keys_around):
+    gen = Generator(scalp, keys_around(scalp, 3), GroomParams(count=100))
+    gen.generate()
+    with pytest.raises(InputError, match="out of range"):
+        gen.update_keys({7: keys_around(scalp, 1)[0]})
+    with pytest.raises(InputError, match="KeyStrand"):
+        gen.update_keys({0: np.zeros((3, 3))})
+
+
+def test_interpolate_mode_has_the_smallest_seam(scalp, keys_around):
+    from groom.measure import seam_jumps_by_mode
+    keys = keys_around(scalp, 6)
+    r = seam_jumps_by_mode(scalp, keys, GroomParams(points_per_strand=16), pairs=3000)
+    assert r["interpolate"]["pairs_across"] > 0
+    assert r["interpolate"]["across_max"] < 0.5 * min(r["root"]["across_max"], r["key"]["across_max"])
