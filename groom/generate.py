@@ -113,9 +113,8 @@ class Generator:
         p, kd = self.params, self._key_data
         tables = np.stack([d["table"] for d in kd])
         g, w = guides[sel], weights[sel]
-        base_radius = (w[:, 0] * np.array([d["radius"] for d in kd])[g[:, 0]]
-                       + w[:, 1] * np.array([d["radius"] for d in kd])[g[:, 1]]
-                       + w[:, 2] * np.array([d["radius"] for d in kd])[g[:, 2]])
+        radii = np.array([d["radius"] for d in kd], dtype=np.float64)
+        base_radius = w[:, 0] * radii[g[:, 0]] + w[:, 1] * radii[g[:, 1]] + w[:, 2] * radii[g[:, 2]]
         colors = np.stack([d["color"] for d in kd])
         base_color = (w[:, 0, None] * colors[g[:, 0]] + w[:, 1, None] * colors[g[:, 1]]
                       + w[:, 2, None] * colors[g[:, 2]])

@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from groom import GroomParams, KeyStrand, Scalp, generate, list_presets, load_preset, save_preset
+from groom import GroomParams, Scalp, generate, list_presets, load_preset, save_preset
 from hairio import InputError
 
 REQUIRED = {"short_intelligent", "long_straight", "wavy", "curly", "parted"}

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from groom import Scalp, default_scalp, load_obj
+from groom import Scalp, load_obj
 from hairio import InputError
 
 
