@@ -11,11 +11,12 @@ import numpy as np
 
 from hairio import InputError
 
+from .sampling import SAMPLING_MODES
+
 NEIGHBOUR_MODES = ("key", "root", "interpolate")
 RESOLUTION_MODES = ("adaptive", "fixed")
 TOLERANCE_UNITS = ("scene", "radius")
 RADIUS_MODES = ("linear", "constant", "taper_from")
-SAMPLING_MODES = ("uniform", "seed")
 NORMAL_MODES = ("interpolated", "face")
 
 

@@ -61,3 +61,11 @@ def test_python_dash_m_groom_runs_and_fails_cleanly(tmp_path):
                           "--out", str(tmp_path / "d.npz")], capture_output=True, text=True, env=env)
     assert bad.returncode == 2 and "--count" in bad.stderr
     assert not (tmp_path / "d.npz").exists()
+
+
+def test_export_subcommand_delegates_to_the_exporter(tmp_path):
+    npz = tmp_path / "h.npz"
+    assert main(["generate", "--preset", "short_intelligent", "--count", "20", "--out", str(npz)]) == 0
+    out = tmp_path / "h.hair"
+    assert main(["export", str(npz), "--out", str(out)]) == 0
+    assert out.stat().st_size > 0
