@@ -228,12 +228,16 @@ vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
     return result;
 }
 
-// Front-to-back compositing along one primary ray; returns premultiplied RGBA.
+// One primary ray: first find its LAYERS nearest hits without shading (a small sorted list;
+// cells come in ray order, so once the list is full, or its layers already let less than
+// t_eps through, no later cell can change it), then shade them front to back. Keeping the
+// shadow rays out of the traversal loop matters on SIMD hardware (llvmpipe included):
+// nested in it, one lane's shadow ray stalls all the lanes still traversing.
 vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
     vec3 inv = safe_inverse(d);
     float t0 = 0.0, t1 = BIG;
-    vec3 C = vec3(0.0);
-    float T = 1.0;
+    float ht[LAYERS]; float ha[LAYERS]; int hid[LAYERS]; int hs[LAYERS];
+    int n = 0;
     if (enter_grid(o, inv, t0, t1)) {
         vec3 pe = (o + t0 * d - grid_lo) / cell_size;
         ivec3 cell = clamp(ivec3(floor(pe)), ivec3(0), dims - 1);
@@ -241,46 +245,56 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
         vec3 tdelta = abs(cell_size * inv);
         vec3 tnext = (grid_lo + (vec3(cell) + step(0.0, d)) * cell_size - o) * inv;
         float tcur = t0;
-        float tlast = 0.0;
-        int layers = 0;
         int guard = dims.x + dims.y + dims.z + 3;
         for (int it = 0; it < guard; ++it) {
             float texit = min(min(tnext.x, tnext.y), min(tnext.z, t1));
+            bool last = texit >= t1;
             ivec2 sc = texelFetch(tex_cell, cell, 0).xy;
 #if COUNT
-            counter.z += 1.0;
+            counter.z += 1.0; counter.w += float(sc.y);
 #endif
-            // Take this cell's hits nearest first; a hit outside [tcur, texit] belongs to
-            // another cell the cylinder also lies in.
-            while (sc.y > 0) {
-                float best = texit;
-                int bid = -1, bsurf = 0; float basc = 1.0;
-                for (int k = 0; k < sc.y; ++k) {
-                    int id = texelFetch(tex_idx, texel(sc.x + k), 0).x;
-                    int surf; float asc;
-                    float t = hit_cylinder(id, o, d, widen_per_t, widen_const, surf, asc);
-                    if (t > tlast && t >= tcur && t <= best) { best = t; bid = id; bsurf = surf; basc = asc; }
+            bool added = false;
+            for (int k = 0; k < sc.y; ++k) {
+                int id = texelFetch(tex_idx, texel(sc.x + k), 0).x;
+                int surf; float asc;
+                float t = hit_cylinder(id, o, d, widen_per_t, widen_const, surf, asc);
+                // A hit outside this cell's [tcur, texit) belongs to another cell the
+                // cylinder is also listed in (half-open, so a hit on a face counts once).
+                if (t > 0.0 && t >= tcur && (t < texit || last) && (n < LAYERS || t < ht[LAYERS - 1])) {
+                    int j = n < LAYERS ? n : LAYERS - 1;
+                    if (n < LAYERS) ++n;
+                    for (; j > 0 && ht[j - 1] > t; --j) {
+                        ht[j] = ht[j - 1]; ha[j] = ha[j - 1]; hid[j] = hid[j - 1]; hs[j] = hs[j - 1];
+                    }
+                    ht[j] = t; hid[j] = id; hs[j] = surf;
+                    ha[j] = texelFetch(tex_tip, texel(id), 0).w * asc;
+                    added = true;
                 }
-#if COUNT
-                counter.w += float(sc.y);
-#endif
-                if (bid < 0) break;
-                float alpha = texelFetch(tex_tip, texel(bid), 0).w * basc;
-                C += T * alpha * shade(bid, bsurf, o, d, best);
-                T *= 1.0 - alpha;
-                tlast = best;
-                ++layers;
-#if COUNT
-                counter.y += 1.0;
-#endif
-                if (layers >= LAYERS || T < t_eps) { it = guard; break; }
             }
-            if (it >= guard || texit >= t1) break;
+            if (n == LAYERS) break;
+#if LAYERS > 1
+            if (added) {
+                float Tl = 1.0;
+                for (int i = 0; i < n; ++i) Tl *= 1.0 - ha[i];
+                if (Tl < t_eps) break;
+            }
+#endif
+            if (last) break;
             tcur = texit;
             if (tnext.x <= tnext.y && tnext.x <= tnext.z) { cell.x += stp.x; tnext.x += tdelta.x; if (cell.x < 0 || cell.x >= dims.x) break; }
             else if (tnext.y <= tnext.z) { cell.y += stp.y; tnext.y += tdelta.y; if (cell.y < 0 || cell.y >= dims.y) break; }
             else { cell.z += stp.z; tnext.z += tdelta.z; if (cell.z < 0 || cell.z >= dims.z) break; }
         }
+    }
+    vec3 C = vec3(0.0);
+    float T = 1.0;
+    for (int i = 0; i < n; ++i) {
+        if (i > 0 && T < t_eps) break;
+        C += T * ha[i] * shade(hid[i], hs[i], o, d, ht[i]);
+        T *= 1.0 - ha[i];
+#if COUNT
+        counter.y += 1.0;
+#endif
     }
     return vec4(C + T * background.rgb, 1.0 - T + T * background.a);
 }
