@@ -43,18 +43,28 @@ class Timing:
         return fmt_time(self.median)
 
 
-def measure(job, runs=MIN_RUNS, warmup=1, before=None):
+class TooSlow(Exception):
+    """The warm-up showed that the timed runs would not fit the time left."""
+
+
+def measure(job, runs=MIN_RUNS, warmup=1, before=None, budget=None):
     """Time `job()` `runs` times after `warmup` untimed calls; `before()` runs untimed each time.
 
     `before` exists for anchors whose caches must be invalidated (a depsgraph tag, a camera
-    move) without charging that to the job. Returns (Timing, result of the last call).
+    move) without charging that to the job. `budget` (seconds): raise TooSlow after the
+    warm-up when `runs` more calls like it would not fit. Returns (Timing, last result).
     """
     runs = max(int(runs), MIN_RUNS)
     result = None
     for _ in range(warmup):
         if before:
             before()
+        t0 = time.perf_counter()
         result = job()
+        one = time.perf_counter() - t0
+        if budget is not None and one * runs > budget:
+            raise TooSlow(f"one run takes {fmt_time(one)}, so {runs} runs would exceed the "
+                          f"{fmt_time(max(budget, 0))} left in this section's budget")
     times = []
     for _ in range(runs):
         if before:

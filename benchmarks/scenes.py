@@ -12,9 +12,10 @@ DATA = os.environ.get("HAIR_DATA", os.path.join(os.path.dirname(ROOT), "shared",
 
 LENS_MM = 50.0
 SENSOR_MM = 36.0
-# Blender's front is -Y: look at the head from the front-left and a little above.
-VIEW_DIRECTION = np.array([0.55, -1.0, 0.35])
-SUN_DIRECTION = np.array([-0.3, 0.4, -0.85])   # light travels this way (down, from the front)
+# The way the camera looks: from behind the head (+Y; Blender's front is -Y), a little to the
+# left and above, where the hair is.
+VIEW_DIRECTION = np.array([0.55, -1.0, -0.4])
+SUN_DIRECTION = np.array([0.35, -0.45, -0.8])   # light travels this way: down, from behind the camera
 
 
 def groom_api():
@@ -78,11 +79,12 @@ def n_keys(scalp, preset, n, seed=7, length_scale=1.0):
     return keys
 
 
-def groom_scene(preset_name="wavy", count=10000, n_key=None, points=32, resolution="fixed",
+def groom_scene(preset_name="wavy", count=10000, n_key=None, points=None, resolution="fixed",
                 seed=0, length_scale=1.0, **overrides):
     """(scalp, keys, params, result) for a preset at `count` strands.
 
-    n_key None keeps the preset's own keys; an integer plants that many keys (see n_keys)."""
+    n_key None keeps the preset's own keys; an integer plants that many keys (see n_keys).
+    points None keeps the preset's points_per_strand (the most an adaptive strand may use)."""
     groom = groom_api()
     scalp = groom.default_scalp()
     preset = load_preset(preset_name)
@@ -90,8 +92,9 @@ def groom_scene(preset_name="wavy", count=10000, n_key=None, points=32, resoluti
         keys = preset.keys_on(scalp)
     else:
         keys = n_keys(scalp, preset, n_key or len(preset.keys_on(scalp)), length_scale=length_scale)
-    params = preset.params.replace(count=int(count), seed=seed, resolution_mode=resolution,
-                                   points_per_strand=int(points), **overrides)
+    if points is not None:
+        overrides["points_per_strand"] = int(points)
+    params = preset.params.replace(count=int(count), seed=seed, resolution_mode=resolution, **overrides)
     return scalp, keys, params, groom.generate(scalp, keys, params)
 
 

@@ -4,7 +4,7 @@ import importlib
 import time
 import traceback
 
-from benchmarks.harness import NotMeasured, Section
+from benchmarks.harness import NotMeasured, Section, TooSlow
 
 SECTIONS = [
     ("generation", "Generation: groom against Blender's Interpolate Curves"),
@@ -30,7 +30,7 @@ def run_section(key, cfg, outdir, budget):
     try:
         module = importlib.import_module(f"benchmarks.sections.{key}")
         module.run(sec, cfg)
-    except NotMeasured as e:
+    except (NotMeasured, TooSlow) as e:
         sec.text(f"*not measured: {e}*")
         summary.append(f"not measured: {e}")
         status = "not measured"
@@ -49,6 +49,11 @@ def run_section(key, cfg, outdir, budget):
 def over_budget(sec, fraction=1.0):
     """True once the section has used `fraction` of its soft time budget."""
     return sec.elapsed() > fraction * sec.budget
+
+
+def left(sec, fraction=1.0):
+    """Seconds of the section's soft budget left (up to `fraction` of it)."""
+    return fraction * sec.budget - sec.elapsed()
 
 
 def require(module_name, what):

@@ -1,0 +1,145 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""5. Scaling: time against strand count, image size and hair length, and the thesis's cost
+model (cells per ray × cylinders per cell, SPEC §7 "Running time").
+
+The cost-model figures are the tracer's own work counters (`RenderSettings(count=True)`):
+grid cells visited and cylinders tested, summed over primary and shadow rays, divided by the
+primary rays traced (pixels inside the hair's screen box × samples). A least-squares fit of
+render time against cylinder tests over every configuration here says how much of the time
+the model explains.
+"""
+import numpy as np
+
+from benchmarks.harness import fmt_num, measure
+from benchmarks.scenes import groom_scene, settings, tracer_api, tracer_camera, view_matrix
+from benchmarks.sections import over_budget
+
+
+def _counters(renderer, camera, rs_kw):
+    renderer.render(camera, settings(**rs_kw, count=True))
+    st = renderer.stats
+    rays = max(1, int(st.get("traversed_pixels", 0)) * int(rs_kw.get("spp", 1)))
+    return {"rays": rays, "cells_per_ray": st.get("cells_visited", 0) / rays,
+            "tests_per_ray": st.get("cylinder_tests", 0) / rays,
+            "tests": st.get("cylinder_tests", 0), "cells": st.get("cells_visited", 0),
+            "per_full_cell": st.get("cylinders_per_full_cell", float("nan"))}
+
+
+def run(sec, cfg):
+    tracer = tracer_api()
+    size = (256, 256) if cfg.mode == "quick" else (512, 512)
+    rs_kw = dict(spp=1, shadows=True, layers=4)
+    sec.text(__doc__.split("\n", 2)[2].strip())
+    sec.settings(preset="wavy", image=f"{size[0]}x{size[1]}", spp=1, shadows=True, layers=4, runs=cfg.runs)
+    fits = []
+    renderer = tracer.Renderer()
+
+    # (a) strand count
+    rows = []
+    for count in cfg.sca_counts:
+        if over_budget(sec, 0.45) and rows:
+            rows.append([f"{count:,}", "not measured: time budget"] + [""] * 7)
+            continue
+        strands = groom_scene("wavy", count, resolution="adaptive")[3].strands
+        cam = tracer_camera(view_matrix(*strands.bounds(), size), size)
+        up, _ = measure(lambda: renderer.set_strands(strands), runs=cfg.runs)
+        t, _ = measure(lambda: renderer.render(cam, settings(**rs_kw)), runs=cfg.runs)
+        c = _counters(renderer, cam, rs_kw)
+        fits.append((t.median, c["tests"], c["cells"]))
+        rows.append([f"{count:,}", f"{strands.num_segments:,}", str(up), str(t), fmt_num(c["cells_per_ray"]),
+                     fmt_num(c["tests_per_ray"]), fmt_num(c["per_full_cell"]),
+                     fmt_num(t.median / c["rays"] * 1e6)])
+        sec.data.setdefault("count", []).append({"count": count, "upload": up.median, "render": t.median, **c})
+    sec.table(["strands", "cylinders", "set_strands (median)", "render (median)", "cells / ray", "cylinder tests / ray",
+               "cylinders / non-empty cell", "µs / primary ray"], rows, caption="(a) Strand count.")
+
+    # (b) image size
+    rows = []
+    strands = groom_scene("wavy", cfg.sca_fixed_count, resolution="adaptive")[3].strands
+    renderer.set_strands(strands)
+    lo, hi = strands.bounds()
+    for s in cfg.sca_sizes:
+        if over_budget(sec, 0.65) and rows:
+            rows.append([f"{s}²", "not measured: time budget", "", "", ""])
+            continue
+        cam = tracer_camera(view_matrix(lo, hi, (s, s)), (s, s))
+        t, img = measure(lambda: renderer.render(cam, settings(**rs_kw)), runs=cfg.runs)
+        c = _counters(renderer, cam, rs_kw)
+        fits.append((t.median, c["tests"], c["cells"]))
+        covered = int((img[..., 3] > 0).sum())
+        rows.append([f"{s}²", str(t), fmt_num(t.median / (s * s) * 1e6), fmt_num(t.median / max(1, covered) * 1e6),
+                     fmt_num(c["tests_per_ray"])])
+        sec.data.setdefault("size", []).append({"size": s, "render": t.median})
+    sec.table(["image", "render (median)", "µs / pixel", "µs / covered pixel", "cylinder tests / ray"], rows,
+              caption=f"(b) Image size at {strands.num_strands:,} strands.")
+
+    # (c) hair length at a fixed strand count and fixed points per strand
+    rows, base_t = [], None
+    variants = []
+    for scale in cfg.sca_lengths:
+        s_ = groom_scene("wavy", cfg.sca_fixed_count, n_key=12, resolution="fixed", points=32,
+                         length_scale=scale)[3].strands
+        variants.append((scale, s_))
+    # One camera for every length: it frames the longest hair, so only the hair changes.
+    lo = np.min([v[1].bounds()[0] for v in variants], axis=0)
+    hi = np.max([v[1].bounds()[1] for v in variants], axis=0)
+    cam = tracer_camera(view_matrix(lo, hi, size), size)
+    for scale, s_ in variants:
+        if over_budget(sec, 0.9) and rows:
+            rows.append([f"{scale:g}×", "not measured: time budget"] + [""] * 6)
+            continue
+        renderer.set_strands(s_)
+        t, img = measure(lambda: renderer.render(cam, settings(**rs_kw)), runs=cfg.runs)
+        c = _counters(renderer, cam, rs_kw)
+        fits.append((t.median, c["tests"], c["cells"]))
+        covered = int((img[..., 3] > 0).sum())
+        base_t = base_t or (t.median if scale == 1.0 else None)
+        lengths = np.linalg.norm(np.diff(s_.points.reshape(s_.num_strands, -1, 3), axis=1), axis=-1).sum(1)
+        rows.append([f"{scale:g}×", f"{np.median(lengths) * 100:.1f} cm", str(t), f"{covered:,}",
+                     fmt_num(c["cells_per_ray"]), fmt_num(c["tests_per_ray"]), fmt_num(c["per_full_cell"]),
+                     fmt_num(t.median / max(1, covered) * 1e6)])
+        sec.data.setdefault("length", []).append({"scale": scale, "render": t.median, "covered": covered, **c})
+    sec.table(["key length", "median strand length", "render (median)", "covered pixels", "cells / ray",
+               "cylinder tests / ray", "cylinders / non-empty cell", "µs / covered pixel"], rows,
+              caption=f"(c) Hair length at {cfg.sca_fixed_count:,} strands × 32 points (31 cylinders each, so the "
+                      f"cylinder count is the same for every length), one camera framing the longest.")
+    lens = sec.data.get("length", [])
+    if len(lens) >= 2:
+        t0, t1 = lens[0], lens[-1]
+        grow = t1["render"] / t0["render"]
+        per_px = (t1["render"] / max(1, t1["covered"])) / (t0["render"] / max(1, t0["covered"]))
+        verdict = ("confirmed: length barely changes the time" if grow < 1.5 else
+                   "refuted: time grows with length" if grow > 2 else "partly: time grows, but less than length")
+        sec.text(f"**Length claim: {t1['scale'] / t0['scale']:g}× longer hair takes {grow:.2f}× the time "
+                 f"({per_px:.2f}× per covered pixel) — {verdict}.** Longer hair covers more of the image, so "
+                 "the per-covered-pixel figure separates the two effects.")
+        sec.summary.append(f"length {t0['scale']:g}→{t1['scale']:g}×: time ×{grow:.2f}, per covered pixel ×{per_px:.2f}")
+
+    # cost model fit
+    if len(fits) >= 3:
+        t = np.array([f[0] for f in fits])
+        x = np.array([f[1] for f in fits], np.float64)
+        a = np.column_stack([np.ones_like(x), x])
+        coef, *_ = np.linalg.lstsq(a, t, rcond=None)
+        pred = a @ coef
+        r2 = 1 - np.sum((t - pred) ** 2) / max(np.sum((t - t.mean()) ** 2), 1e-30)
+        sec.text(f"Cost model: render time ≈ {fmt_num(coef[0])} s + {fmt_num(coef[1] * 1e9)} ns × cylinder tests, "
+                 f"R² = {r2:.3f} over {len(fits)} configurations (tests = cells per ray × cylinders per cell × rays).")
+        sec.summary.append(f"cost model R² {r2:.3f}")
+        _plot(sec, fits, coef)
+
+
+def _plot(sec, fits, coef):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(5.5, 3.6))
+    x = np.array([f[1] for f in fits])
+    ax.scatter(x, [f[0] * 1e3 for f in fits], label="measured")
+    xs = np.linspace(0, x.max() * 1.05, 50)
+    ax.plot(xs, (coef[0] + coef[1] * xs) * 1e3, "k--", lw=0.8, label="linear fit")
+    ax.set_xlabel("cylinder tests per image (primary + shadow rays)")
+    ax.set_ylabel("render time (ms, median)")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    sec.figure(fig, "scaling_cost_model.png", "Cost model: render time against cylinder tests.")
