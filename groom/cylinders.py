@@ -108,9 +108,8 @@ def strand_attributes(seed, ids, counts, along, base_radius, base_color, params)
     base + U(-1,1)·variation per strand and per point, clamped to [0, 1]. Alpha: 1 up to
     alpha_start, then linear to alpha_tip at the tip."""
     n_pts = int(counts.sum())
-    strand = np.repeat(np.arange(len(counts)), counts)
     s = along.astype(np.float32)
-    r = base_radius.astype(np.float32)[strand]
+    r = np.repeat(base_radius.astype(np.float32), counts)
     if params.radius_mode == "linear":
         radius = r * (np.float32(1.0) - s)
     elif params.radius_mode == "constant":
@@ -123,9 +122,10 @@ def strand_attributes(seed, ids, counts, along, base_radius, base_color, params)
     if var.any():
         u = np.stack([rng.uniform(seed, ids, rng.CH_COLOR + c) for c in range(3)], 1)
         color = color + (2.0 * u - 1.0) * var
-    color = color.astype(np.float32)[strand]
+    color = np.repeat(color.astype(np.float32), counts, axis=0)
     var_p = np.asarray(params.color_variation_point)
     if var_p.any():
+        strand = np.repeat(np.arange(len(counts)), counts)
         offsets = np.zeros(len(counts), np.int64)
         np.cumsum(counts[:-1], out=offsets[1:])
         k = np.arange(n_pts) - offsets[strand]

@@ -26,7 +26,8 @@ def nearest_keys(roots, key_roots, k, root_groups=None, key_groups=None):
     chunk = max(1, (1 << 22) // max(n_keys, 1))
     for lo in range(0, len(roots), chunk):  # chunks of ~4M distances, not strands
         r = roots[lo:lo + chunk]
-        d = np.sqrt(((r[:, None, :] - key_roots[None, :, :]) ** 2).sum(axis=2))
+        # Squared distances order the keys as well; only the chosen few get a square root.
+        d = ((r[:, None, :] - key_roots[None, :, :]) ** 2).sum(axis=2)
         if root_groups is not None:
             d = np.where(root_groups[lo:lo + chunk, None] == key_groups[None, :], d, np.inf)
         if k_eff < n_keys:
@@ -38,7 +39,7 @@ def nearest_keys(roots, key_roots, k, root_groups=None, key_groups=None):
             sel = np.take_along_axis(part, order, axis=1)
         else:
             sel = np.argsort(d, axis=1, kind="stable")
-        sd = np.take_along_axis(d, sel, axis=1)
+        sd = np.sqrt(np.take_along_axis(d, sel, axis=1))
         sel = np.where(np.isfinite(sd), sel, -1)
         idx[lo:lo + chunk, :k_eff] = sel
         dist[lo:lo + chunk, :k_eff] = sd
