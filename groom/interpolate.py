@@ -81,6 +81,8 @@ def tidiness_angles(seed, ids, tidiness, theta_max):
 
 def strand_transforms(frames, angles, intelligence):
     """B_j (S,3,3) applied to the blended table offsets (see module docstring)."""
+    if not np.any(angles):  # tidiness 1: no rotation at all
+        return frames.copy() if intelligence else np.broadcast_to(np.eye(3), frames.shape).copy()
     rot = rotation_xyz(angles)
     b = _matmul3(frames, rot)
     if not intelligence:

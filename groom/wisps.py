@@ -27,19 +27,33 @@ def nearest_keys(roots, key_roots, k, root_groups=None, key_groups=None):
     for lo in range(0, len(roots), chunk):  # chunks of ~4M distances, not strands
         r = roots[lo:lo + chunk]
         # Squared distances order the keys as well; only the chosen few get a square root.
-        d = ((r[:, None, :] - key_roots[None, :, :]) ** 2).sum(axis=2)
+        # One coordinate at a time keeps the temporaries (roots x keys), not (roots x keys x 3).
+        d = (r[:, 0, None] - key_roots[None, :, 0]) ** 2
+        d += (r[:, 1, None] - key_roots[None, :, 1]) ** 2
+        d += (r[:, 2, None] - key_roots[None, :, 2]) ** 2
         if root_groups is not None:
-            d = np.where(root_groups[lo:lo + chunk, None] == key_groups[None, :], d, np.inf)
-        if k_eff < n_keys:
-            part = np.argpartition(d, k_eff - 1, axis=1)[:, :k_eff]
-            # argpartition is not stable; re-sort the chosen few by (distance, index).
-            part.sort(axis=1)
-            pd = np.take_along_axis(d, part, axis=1)
-            order = np.argsort(pd, axis=1, kind="stable")
-            sel = np.take_along_axis(part, order, axis=1)
+            d[root_groups[lo:lo + chunk, None] != key_groups[None, :]] = np.inf
+        if n_keys <= 32:
+            # Few keys: k passes of argmin (first minimum = lower index on ties) beat sorting.
+            rows = np.arange(len(d))
+            sel = np.empty((len(d), k_eff), np.int64)
+            sq = np.empty((len(d), k_eff))
+            for j in range(k_eff):
+                sel[:, j] = np.argmin(d, axis=1)
+                sq[:, j] = d[rows, sel[:, j]]
+                d[rows, sel[:, j]] = np.inf
+            sd = np.sqrt(sq)
         else:
-            sel = np.argsort(d, axis=1, kind="stable")
-        sd = np.sqrt(np.take_along_axis(d, sel, axis=1))
+            if k_eff < n_keys:
+                part = np.argpartition(d, k_eff - 1, axis=1)[:, :k_eff]
+                # argpartition is not stable; re-sort the chosen few by (distance, index).
+                part.sort(axis=1)
+                pd = np.take_along_axis(d, part, axis=1)
+                order = np.argsort(pd, axis=1, kind="stable")
+                sel = np.take_along_axis(part, order, axis=1)
+            else:
+                sel = np.argsort(d, axis=1, kind="stable")
+            sd = np.sqrt(np.take_along_axis(d, sel, axis=1))
         sel = np.where(np.isfinite(sd), sel, -1)
         idx[lo:lo + chunk, :k_eff] = sel
         dist[lo:lo + chunk, :k_eff] = sd
