@@ -33,7 +33,7 @@ from .frames import rotation_xyz
 KEY_SAMPLES = 1025
 # Curvature bins per key for the adaptive resolution (SAMPLES - 1 must be a multiple).
 CURVATURE_BINS = 128
-# The second-difference estimate of |D''| can miss a peak between samples; bound it with margin.
+# The sampled curvature can miss a peak between samples; bound it with a margin.
 _CURVATURE_SAFETY = 1.05
 
 
@@ -41,7 +41,7 @@ def key_table(key, frame, intelligence, samples=KEY_SAMPLES, bins=CURVATURE_BINS
     """(table (samples,3) float64, bound (bins,) float64): offsets of the key from its root
     at equal arc-length steps (in the key's root frame when `intelligence`, else world axes),
     and for each of `bins` equal ranges of σ an upper bound of |d²D/dσ²| there (the largest
-    second difference over the bin's samples and one beyond each end, times a margin)."""
+    sampled curvature·length² over the bin's samples and one beyond each end, times a margin)."""
     table, length = key.arc_length_table(samples)
     if intelligence:
         table = table @ frame  # rows: F_x^T D
@@ -120,8 +120,9 @@ def evaluate_strands(roots, transforms, guides, weights, counts, sigma, tables, 
     order): C_j(σ) = R_j + B_j Σ_g w_jg D_g(σ).
 
     roots (S,3) f64, transforms (S,3,3), guides (S,3), weights (S,3), tables (K, M, 3).
-    Returns points (P,3) float32 (the precision Strands keeps). The blend runs in float32 (offsets from the root: relative
-    precision 6e-8 of the strand length wherever the head is) in chunks of whole strands of
+    Returns points (P,3) float32 (the precision Strands keeps). The blend runs in float32
+    (offsets from the root: relative precision 6e-8 of the strand length wherever the head
+    is) in chunks of whole strands of
     about `chunk_points` points that stay in cache; the root is added in float64. Chunks
     write disjoint rows and numpy releases the GIL in its loops, so they run on `threads`
     threads (default: one per CPU); a chunk's numbers do not depend on the thread."""
