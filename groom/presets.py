@@ -85,20 +85,25 @@ def _check_spec(name, i, spec):
     if not isinstance(anchor, dict) or len(anchor) != 1 or next(iter(anchor)) not in ("point", "direction"):
         raise InputError(f"{where}: anchor must be {{'point': [x, y, z]}} or {{'direction': [x, y, z]}}")
     kind, value = next(iter(anchor.items()))
-    value = np.asarray(value, dtype=np.float64)
+    try:
+        value = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        value = np.full(1, np.nan)
     if value.shape != (3,) or not np.isfinite(value).all() or (kind == "direction" and not value.any()):
-        raise InputError(f"{where}: anchor {kind} must be 3 finite numbers" + (", not zero" if kind == "direction" else ""))
+        rule = ", not all zero" if kind == "direction" else ""
+        raise InputError(f"{where}: anchor {kind} must be 3 finite numbers{rule}")
     frame = spec.get("frame", "root")
     if frame not in ("root", "world"):
         raise InputError(f"{where}: frame must be 'root' or 'world', got {frame!r}")
     out = {"anchor": {kind: value.tolist()}, "frame": frame,
-           "profile": spec.get("profile"), "angles": list(spec.get("angles", [0.0, 0.0, 0.0])),
+           "profile": spec.get("profile"), "angles": spec.get("angles", [0.0, 0.0, 0.0]),
            "kind": spec.get("kind", "bezier"), "color": spec.get("color"),
            "root_radius": spec.get("root_radius"), "group": spec.get("group", 0)}
     try:
         angles = np.asarray(out["angles"], dtype=np.float64)
         if angles.shape != (3,) or not np.isfinite(angles).all():
             raise ValueError
+        out["angles"] = angles.tolist()
     except (TypeError, ValueError):
         raise InputError(f"{where}: angles must be 3 finite numbers (radians)") from None
     # Validate the profile as a key strand (shape, NaN, kind rules) at the origin.
