@@ -22,8 +22,9 @@ break somewhere (a hairy-ball argument). With the vector blend above it breaks a
 the whorl, on the back half (the side opposite `front`) of the meridian plane through up and
 front, at the polar angle where (1 - s)·|proj_N(-up)| = s·|proj_N(front)| (about 31° behind
 the crown for the defaults; `whorl_direction` computes it). Everywhere else the frame is
-continuous; close to the whorl it turns quickly, as real hair does at a crown whorl. At the whorl itself (and wherever the
-blended vector is shorter than 1e-9) the main tangent falls back to proj_N(up × front), then
+continuous; close to the whorl it turns quickly, as real hair does at a crown whorl. At the
+whorl itself (and wherever the blended vector is shorter than 1e-9) the main tangent falls
+back to proj_N(up × front), then
 to any unit vector perpendicular to N, so a frame is never NaN. Below the equator the
 downhill field has a second zero at N = -up (the chin side of a full sphere); scalps do not
 grow hair there, and the same fallback applies.
