@@ -24,10 +24,9 @@ front, at the polar angle where (1 - s)·|proj_N(-up)| = s·|proj_N(front)| (abo
 the crown for the defaults; `whorl_direction` computes it). Everywhere else the frame is
 continuous; close to the whorl it turns quickly, as real hair does at a crown whorl. At the
 whorl itself (and wherever the blended vector is shorter than 1e-9) the main tangent falls
-back to proj_N(up × front), then
-to any unit vector perpendicular to N, so a frame is never NaN. Below the equator the
-downhill field has a second zero at N = -up (the chin side of a full sphere); scalps do not
-grow hair there, and the same fallback applies.
+back to proj_N(up × front), then to any unit vector perpendicular to N, so a frame is never
+NaN. Below the equator the downhill field has a second zero at N = -up (the chin side of a
+full sphere); scalps do not grow hair there, and the same fallback applies.
 """
 import numpy as np
 
