@@ -55,7 +55,7 @@ def expected_refs(box_size, h):
     return float(np.mean((1.0 + e[:, 0]) * (1.0 + e[:, 1] / m) * (1.0 + e[:, 2] / m)))
 
 
-def choose_resolution(box_lo, box_hi, scene_lo, extent, max_refs=MAX_REFS_PER_CYLINDER):
+def choose_resolution(box_lo, box_hi, scene_lo, extent, max_refs=None):
     """Cell counts per axis: the smallest cell size h at which a cylinder is listed in about
     `max_refs` cells on average (found by bisection on a sample of boxes).
 
@@ -64,6 +64,7 @@ def choose_resolution(box_lo, box_hi, scene_lo, extent, max_refs=MAX_REFS_PER_CY
     listing each segment in dozens of cells. Measured on 1.5 M wavy cylinders (see the
     tracer's benchmark notes): first render (build + trace) is fastest near 4-5 references
     per cylinder. A floor keeps the cell count within MAX_CELLS and MAX_DIM per axis."""
+    max_refs = MAX_REFS_PER_CYLINDER if max_refs is None else max_refs
     n = len(box_lo)
     size = box_hi - box_lo
     sample = size if n <= 20_000 else size[:: n // 20_000 + 1]

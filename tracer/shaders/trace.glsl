@@ -164,7 +164,7 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin) {
 #if SHADOWS == 1
             if (t > tmin && t < tmax) return 0.0;
 #else
-            if (t > tmin && t >= tcur && t <= texit && t < tmax) {
+            if (t > tmin && t >= tcur && (t < texit || texit >= t1) && t < tmax) {
                 trans *= 1.0 - texelFetch(tex_tip, texel(id), 0).w;
                 if (trans < t_eps) return 0.0;
             }
