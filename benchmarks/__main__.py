@@ -23,7 +23,8 @@ from benchmarks import config as config_mod  # noqa: E402
 from benchmarks.harness import machine_info, write_text_atomic, fmt_time  # noqa: E402
 from benchmarks.sections import SECTIONS, run_section  # noqa: E402
 
-BUDGET = {"quick": 290.0, "full": 1800.0, "gpu": 600.0}
+BUDGET = {"quick": 280.0, "full": 1800.0, "gpu": 600.0}
+SOFT = 0.75   # a section aims to finish in this fraction of its limit (it is killed at the limit + 30 s)
 
 
 def _child(key, mode, outdir, budget, timeout):
@@ -75,8 +76,12 @@ def _header(mode, machine, started, finished=None):
         "| | |",
         "|---|---|",
     ]
-    lines += [f"| {k} | {v} |" for k, v in machine.items()]
-    lines += ["", f"Started {started}" + (f", finished {finished}." if finished else ", still running."), ""]
+    lines += [f"| {k} | {str(v).replace('|', '·')} |" for k, v in machine.items()]
+    lines += ["", f"Started {started}" + (f", finished {finished}." if finished else ", still running.")
+              + f" The machine may be shared: its 1-minute load average was {machine['load_average']} at the "
+              f"start, {os.getloadavg()[0]:.1f} at the last write of this report (more than "
+              f"{machine['cores']} means other work competed for the cores; times are then noisier, ratios "
+              "less so, since both sides of a ratio ran in the same minutes).", ""]
     return "\n".join(lines)
 
 
@@ -106,12 +111,12 @@ def orchestrate(mode, outdir, only=None):
 
     for idx, k in enumerate(keys):
         left = budget_total - (time.perf_counter() - t_start)
-        later = sum(cfg.limits.get(x, 60) for x in keys[idx + 1:])
+        later = sum(SOFT * cfg.limits.get(x, 60) for x in keys[idx + 1:])
         limit = cfg.limits.get(k, 60)
         # Never let one section eat the time the ones after it were promised.
-        limit = max(10.0, min(limit, left - 0.5 * later)) if left < limit + later else limit
-        print(f"[bench] {k}: limit {limit:.0f} s ...", flush=True)
-        r, log = _child(k, mode, outdir, budget=0.75 * limit, timeout=limit + 30)
+        limit = max(10.0, min(limit, (left - later) / SOFT))
+        print(f"[bench] {k}: limit {limit:.0f} s (load average {os.getloadavg()[0]:.1f}) ...", flush=True)
+        r, log = _child(k, mode, outdir, budget=SOFT * limit, timeout=limit + 30)
         results[k] = r
         for line in (r.get("summary") or []):
             print(f"[bench]   {line}", flush=True)

@@ -78,18 +78,18 @@ QUICK = Config(
     sca_fixed_count=5000,
     sca_cost_rays=500,
     skip_strands=3000,
-    skip_size=96,
+    skip_size=160,
     stress_examples=30,
-    int_strands=10000,
+    int_strands=5000,
     tfx_vertices=(4, 16, 64),
-    limits={"generation": 35, "geometry": 35, "rendering": 40, "anchors": 60, "scaling": 30,
-            "skips": 25, "stress": 30, "gpu": 10, "integration": 30},
+    limits={"generation": 30, "geometry": 35, "rendering": 45, "anchors": 70, "scaling": 45,
+            "skips": 30, "stress": 25, "gpu": 10, "integration": 30},
 )
 
 FULL = Config(
     mode="full",
-    limits={"generation": 300, "geometry": 300, "rendering": 300, "anchors": 600, "scaling": 300,
-            "skips": 150, "stress": 200, "gpu": 30, "integration": 200},
+    limits={"generation": 240, "geometry": 240, "rendering": 240, "anchors": 480, "scaling": 240,
+            "skips": 120, "stress": 120, "gpu": 20, "integration": 150},
 )
 
 GPU = Config(

@@ -183,6 +183,7 @@ def machine_info():
         "matplotlib": package_version("matplotlib"),
         "hypothesis": package_version("hypothesis"),
         "commit": git_commit(),
+        "load_average": f"{os.getloadavg()[0]:.1f}",
         "date_utc": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
     }
 

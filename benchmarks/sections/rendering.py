@@ -81,7 +81,9 @@ def _gpu_vs_reference(sec, cfg, tracer, renderer, strands, camera, win, xy, base
                "GPU window vs GPU full-image crop (max abs)"], rows,
               caption="The float32 GPU tracer against the float64 reference tracer of the same model "
                       "(same rays, same settings). Last column: the window camera reproduces the "
-                      "full image's pixels.")
+                      "full image's pixels (exactly at 1 spp; above 1 spp each image jitters its samples "
+                      "by a hash of the pixel's own row and column, so a window draws other samples — "
+                      "the reference does the same, so its comparison stays exact).")
 
 
 def _antialiasing(sec, cfg, tracer, renderer, strands, camera, base):
