@@ -1,6 +1,20 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """GPU ray tracer of continual cylinders (SPEC §6–7), headless through EGL, with a float64
-reference tracer of the same model. numpy + moderngl + hairio only."""
+reference tracer of the same model. numpy + moderngl + hairio only.
+
+    from tracer import Camera, Light, RenderSettings, Renderer, reference_render
+    r = Renderer()                          # one EGL context per process, reused
+    r.set_strands(strands)                  # hairio.Strands -> cylinders, textures, grid
+    cam = Camera.frame_bounds(*strands.bounds(), size=(512, 512))
+    img = r.render(cam, RenderSettings(spp=4, shadows=True))   # (H, W, 4) float32
+    ref = reference_render(strands, cam, RenderSettings(spp=4, shadows=True))  # float64
+
+Images are linear, premultiplied RGBA with row 0 at the top. Modules: cylinders (strands
+to cut cylinders), grid (uniform grid, CSR lists), camera (Blender-exact projection),
+settings (lights, render settings), renderer + shaders/trace.glsl (the GPU side),
+reference (float64 CPU tracer), png, worker (out-of-process renderer), scenes (synthetic
+strands for tests and benchmarks), __main__ (python -m tracer render).
+"""
 from .camera import Camera
 from .settings import Light, RenderSettings
 from .cylinders import Cylinders, strands_to_cylinders

@@ -57,6 +57,15 @@ def _pad_rows(a, rows):
 
 
 class Renderer:
+    """GPU tracer of one scene at a time.
+
+    `stats` (a dict) after each call: cylinders_s, upload_s, grid_s (last set/update),
+    render_s, renders, bytes_uploaded and uploads (cumulative: unchanged by renders),
+    num_cylinders, grid_dims, grid_refs, cylinders_per_full_cell, full_cell_fraction,
+    layers_max (layers the shader was compiled for), screen_box and traversed_pixels (the
+    projected bounds that were traced), and with RenderSettings(count=True) also
+    shadow_rays, layers_traced, cells_visited, cylinder_tests (summed over samples)."""
+
     def __init__(self):
         self.ctx = shared_context()
         self._programs = {}
@@ -131,6 +140,10 @@ class Renderer:
         self.stats["upload_s"] = t2 - t1 + self.stats.pop("_grid_upload_s")
 
     def _texture(self, name, size, components, dtype, data):
+        limit = self.ctx.info["GL_MAX_3D_TEXTURE_SIZE" if len(size) == 3 else "GL_MAX_TEXTURE_SIZE"]
+        if max(size) > limit:
+            raise InputError(f"scene too large for this GPU: {name} needs {size} texels but the driver "
+                             f"allows {limit} per side; render fewer strands or fewer points per strand")
         old = self._tex.get(name)
         if old is not None:
             old.release()
