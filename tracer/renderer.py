@@ -154,7 +154,7 @@ class Renderer:
         import moderngl
         tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self._tex[name] = tex
-        self.stats["bytes_uploaded"] += len(data)
+        self.stats["bytes_uploaded"] += data.nbytes
         return tex
 
     def _cylinder_blocks(self, a, b):
@@ -175,12 +175,12 @@ class Renderer:
         for name, block in self._cylinder_blocks(a, b).items():
             block = np.ascontiguousarray(block, np.float32)
             if full:
-                self._texture(name, (TEX_W, rows), 4, "f4", _pad_rows(block, rows).tobytes())
+                self._texture(name, (TEX_W, rows), 4, "f4", _pad_rows(block, rows))
             else:
                 r0, r1 = a // TEX_W, _rows(b)
-                data = _pad_rows(block, r1 - r0).tobytes()
+                data = _pad_rows(block, r1 - r0)
                 self._tex[name].write(data, viewport=(0, r0, TEX_W, r1 - r0))
-                self.stats["bytes_uploaded"] += len(data)
+                self.stats["bytes_uploaded"] += data.nbytes
 
     def _build_and_upload_grid(self):
         t0 = time.perf_counter()
@@ -189,9 +189,9 @@ class Renderer:
         g = self.grid
         idx = np.zeros(_rows(len(g.indices)) * TEX_W, np.int32)
         idx[:len(g.indices)] = g.indices
-        self._texture("tex_idx", (TEX_W, _rows(len(g.indices))), 1, "i4", idx.tobytes())
+        self._texture("tex_idx", (TEX_W, _rows(len(g.indices))), 1, "i4", idx)
         cells = np.column_stack([g.cell_start, g.cell_count]).astype(np.int32)
-        self._texture("tex_cell", tuple(int(x) for x in g.dims), 2, "i4", cells.tobytes())
+        self._texture("tex_cell", tuple(int(x) for x in g.dims), 2, "i4", cells)
         self.stats["grid_s"] = t1 - t0
         self.stats["_grid_upload_s"] = time.perf_counter() - t1
         self.stats["grid_dims"] = tuple(int(x) for x in g.dims)
