@@ -40,7 +40,7 @@ class Config:
     sca_cost_rays: int = 4000
     # 6. skips
     skip_strands: int = 20000
-    skip_size: int = 256
+    skip_size: int = 512
     # 7. stress
     stress_examples: int = 200
     # 8. GPU
@@ -55,7 +55,7 @@ class Config:
 
 QUICK = Config(
     mode="quick",
-    gen_counts=(1000, 10000),
+    gen_counts=(1000, 10000, 100000),
     geo_presets=("straight", "wavy", "curly"),
     geo_fixed=(3, 8, 25),
     geo_tolerances=(3e-4,),
@@ -70,9 +70,9 @@ QUICK = Config(
     ren_aa_ref_spp=64,
     anc_counts=(10000,),
     anc_size=128,
-    anc_spp=(1,),
+    anc_spp=(1, 16),
     anc_real=True,
-    sca_counts=(1000, 5000, 20000),
+    sca_counts=(1000, 4000, 16000),
     sca_sizes=(64, 128, 256),
     sca_lengths=(0.5, 1.0, 2.0),
     sca_fixed_count=5000,
@@ -82,14 +82,14 @@ QUICK = Config(
     stress_examples=30,
     int_strands=5000,
     tfx_vertices=(4, 16, 64),
-    limits={"generation": 30, "geometry": 35, "rendering": 45, "anchors": 70, "scaling": 45,
-            "skips": 30, "stress": 25, "gpu": 10, "integration": 30},
+    limits={"generation": 45, "geometry": 35, "rendering": 45, "anchors": 90, "scaling": 45,
+            "skips": 30, "stress": 25, "gpu": 10, "integration": 40},
 )
 
 FULL = Config(
     mode="full",
-    limits={"generation": 240, "geometry": 240, "rendering": 240, "anchors": 480, "scaling": 240,
-            "skips": 120, "stress": 120, "gpu": 20, "integration": 150},
+    limits={"generation": 200, "geometry": 240, "rendering": 240, "anchors": 600, "scaling": 300,
+            "skips": 120, "stress": 100, "gpu": 20, "integration": 150},
 )
 
 GPU = Config(

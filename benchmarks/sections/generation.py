@@ -9,9 +9,9 @@ comparison leans towards Blender.
 """
 import numpy as np
 
-from benchmarks.harness import fmt_num, fmt_time, measure, ratio, run_child
+from benchmarks.harness import TooSlow, fmt_num, fmt_time, measure, ratio, run_child
 from benchmarks.scenes import groom_api, load_preset, n_keys
-from benchmarks.sections import over_budget
+from benchmarks.sections import left, over_budget
 
 MEMORY_LIMIT_MB = 1536.0
 
@@ -89,9 +89,14 @@ def run(sec, cfg):
             continue
         params = preset.params.replace(count=int(count), resolution_mode="fixed",
                                        points_per_strand=cfg.gen_points)
-        ours, result = measure(lambda: groom.generate(scalp, keys, params), runs=cfg.runs)
-        anchor = InterpolateAnchor(*blender_inputs(scalp, keys, params, result))
-        theirs, _ = measure(anchor.evaluate, runs=cfg.runs, before=anchor.invalidate)
+        try:
+            ours, result = measure(lambda: groom.generate(scalp, keys, params), runs=cfg.runs,
+                                   budget=left(sec, 0.5))
+            anchor = InterpolateAnchor(*blender_inputs(scalp, keys, params, result))
+            theirs, _ = measure(anchor.evaluate, runs=cfg.runs, before=anchor.invalidate, budget=left(sec, 0.6))
+        except TooSlow as e:
+            sec.not_measured(f"{count:,} strands", str(e))
+            continue
         blender_pos = anchor.positions()
         ours_pos = result.strands.points.reshape(len(result.roots), -1, 3)
         root_err = float(np.abs(blender_pos[:, 0] - result.roots).max())
@@ -143,7 +148,7 @@ def _plot(sec, data):
 
 
 def _memory(sec, cfg, preset_name):
-    count = max(cfg.gen_counts)
+    count = max(d["count"] for d in sec.data.get("timings", [])) if sec.data.get("timings") else min(cfg.gen_counts)
     if over_budget(sec, 0.8):
         sec.not_measured("peak memory", "skipped to stay inside the section's time budget")
         return
@@ -176,7 +181,8 @@ def _incremental(sec, cfg, scalp, keys, preset):
     if over_budget(sec, 0.9):
         sec.not_measured("incremental regeneration", "skipped to stay inside the section's time budget")
         return
-    count = max(c for c in cfg.gen_counts if c <= 100000)
+    done = [d["count"] for d in sec.data.get("timings", [])] or [min(cfg.gen_counts)]
+    count = max(c for c in done if c <= 100000)
     params = preset.params.replace(count=int(count), resolution_mode="fixed", points_per_strand=cfg.gen_points)
     gen = groom.Generator(scalp, keys, params)
     gen.generate()
