@@ -15,6 +15,7 @@ from .cylinders import strands_to_cylinders
 from .grid import build_grid
 from .settings import GRID_WIDEN_CAP, RenderSettings
 
+BLOCK = 4          # cells per side of the empty-space-skipping blocks (the shader's BLOCK)
 TEX_W = 4096       # texels per row of every per-cylinder texture; the shader's texel() agrees
 SHADER_DIR = pathlib.Path(__file__).resolve().parent / "shaders"
 
@@ -192,6 +193,8 @@ class Renderer:
         self._texture("tex_idx", (TEX_W, _rows(len(g.indices))), 1, "i4", idx)
         cells = np.column_stack([g.cell_start, g.cell_count]).astype(np.int32)
         self._texture("tex_cell", tuple(int(x) for x in g.dims), 2, "i4", cells)
+        occupied = block_occupancy(g)
+        self._texture("tex_block", occupied.shape[::-1], 1, "u1", np.ascontiguousarray(occupied))
         self.stats["grid_s"] = t1 - t0
         self.stats["_grid_upload_s"] = time.perf_counter() - t1
         self.stats["grid_dims"] = tuple(int(x) for x in g.dims)
@@ -214,6 +217,7 @@ class Renderer:
                 "MIN_PX": int(settings.min_pixel_width),
                 "ORTHO": int(camera.type == "ORTHO"),
                 "COUNT": int(settings.count),
+                "BLOCK": BLOCK,
             }
             head = "#version 330 core\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items())
             prog = self.ctx.program(vertex_shader=_VERTEX, fragment_shader=head + load_shader("trace.glsl"))
@@ -311,7 +315,7 @@ class Renderer:
 
     def _set_uniforms(self, prog, camera, settings):
         g = self.grid
-        for i, name in enumerate(("tex_top", "tex_tip", "tex_n2", "tex_col", "tex_idx", "tex_cell", "tex_sph")):
+        for i, name in enumerate(("tex_top", "tex_tip", "tex_n2", "tex_col", "tex_idx", "tex_cell", "tex_sph", "tex_block")):
             self._tex[name].use(location=i)
             _set(prog, name, i)
         _set(prog, "grid_lo", tuple(float(x) for x in g.lo))
@@ -331,6 +335,15 @@ class Renderer:
         _set(prog, "material", (settings.ambient, settings.diffuse, settings.specular, settings.shininess))
         _set(prog, "mpw_cap", float(settings.min_pixel_width_cap))
         _set(prog, "t_eps", float(settings.transmittance_eps))
+
+
+def block_occupancy(grid):
+    """(Bz, By, Bx) uint8: 1 where a block of BLOCK³ cells holds any cylinder."""
+    nx, ny, nz = (int(x) for x in grid.dims)
+    bx, by, bz = (-(-d // BLOCK) for d in (nx, ny, nz))
+    full = np.zeros((bz * BLOCK, by * BLOCK, bx * BLOCK), bool)
+    full[:nz, :ny, :nx] = (grid.cell_count > 0).reshape(nz, ny, nx)
+    return full.reshape(bz, BLOCK, by, BLOCK, bx, BLOCK).any(axis=(1, 3, 5)).astype(np.uint8)
 
 
 def bounding_spheres(c, a, b):

@@ -95,3 +95,17 @@ def test_curls_perspective_with_two_lights(renderer):
     settings = RenderSettings(shadows=True, layers=4, spp=4,
                               lights=(Light("directional", (0.2, 0.5, -1)), Light("point", (-1, -1, 2), intensity=0.5)))
     assert_matches_reference(renderer, s, cam, settings)
+
+
+def test_empty_blocks_between_tufts_are_skipped_without_losing_hits(renderer):
+    # Two tufts far apart: the grid between them is empty blocks the DDA jumps over.
+    a, b = curls(12, 8, seed=1, radius=0.01), curls(12, 8, seed=2, radius=0.01)
+    from hairio import Strands
+    pts = np.concatenate([a.points, b.points + [2.0, 1.5, 0.7]])
+    s = Strands.from_arrays(pts, np.concatenate([a.counts, b.counts]), radius=np.full(len(pts), 0.01))
+    renderer.set_strands(s)
+    from tracer.renderer import block_occupancy
+    assert block_occupancy(renderer.grid).mean() < 0.5
+    cam = Camera.look_at((-1.5, -2.0, -0.2), (1.0, 0.75, 0.85), fov_deg=60, size=(48, 48))
+    settings = RenderSettings(shadows=True, lights=(Light("directional", (1.0, 0.8, 0.2)),))
+    assert_matches_reference(renderer, s, cam, settings)

@@ -17,6 +17,7 @@ uniform sampler2D tex_col;    // rgb colour
 uniform sampler2D tex_sph;    // xyz middle, w bounding-sphere radius (widening included)
 uniform isampler2D tex_idx;   // cell lists (CSR), cylinder ids
 uniform isampler3D tex_cell;  // per cell: x = first slot, y = count
+uniform usampler3D tex_block; // per block of BLOCK^3 cells: 1 if any cell holds a cylinder
 
 uniform vec3 grid_lo;
 uniform vec3 cell_size;
@@ -115,6 +116,33 @@ float hit_cylinder(int id, vec3 o, vec3 d, float widen_per_t, float widen_const,
     return tc + tin;
 }
 
+// Most cells a ray crosses are empty (hair is a thin shell with air inside and around).
+// When the whole block of BLOCK^3 cells around `cell` is empty, move the DDA state to
+// where the ray leaves that block in one go instead of stepping cell by cell. Every cell
+// skipped lies in the empty block, so nothing can be missed; at exact ties of two faces
+// the cell we land in may differ from the step-by-step walk by one index, but then the
+// ray is on that shared edge and the next steps put it right. False when the ray ends or
+// leaves the grid inside the block.
+bool skip_empty_block(inout ivec3 cell, inout vec3 tnext, inout float tcur, vec3 tdelta,
+                      ivec3 stp, float t1) {
+    ivec3 b0 = (cell / BLOCK) * BLOCK;
+    ivec3 lastc = b0 + ivec3(greaterThan(stp, ivec3(0))) * (BLOCK - 1);
+    ivec3 nsteps = abs(lastc - cell);
+    vec3 tleave = tnext + vec3(nsteps) * tdelta;
+    float tb = min(min(tleave.x, tleave.y), tleave.z);
+    if (tb >= t1) return false;
+    int exit_axis = tleave.x <= tleave.y && tleave.x <= tleave.z ? 0 : (tleave.y <= tleave.z ? 1 : 2);
+    for (int i = 0; i < 3; ++i) {
+        int k;
+        if (i == exit_axis) k = nsteps[i] + 1;
+        else k = tnext[i] < tb ? min(int(floor((tb - tnext[i]) / tdelta[i])) + 1, nsteps[i]) : 0;
+        cell[i] += stp[i] * k;
+        tnext[i] += float(k) * tdelta[i];
+    }
+    tcur = tb;
+    return all(greaterThanEqual(cell, ivec3(0))) && all(lessThan(cell, dims));
+}
+
 // Slab test against the grid box; false when the ray misses it within [tmin, tmax].
 bool enter_grid(vec3 o, vec3 inv, inout float t0, inout float t1) {
     vec3 hi = grid_lo + cell_size * vec3(dims);
@@ -151,6 +179,10 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin) {
     float trans = 1.0;
     int guard = dims.x + dims.y + dims.z + 3;
     for (int it = 0; it < guard; ++it) {
+        if (texelFetch(tex_block, cell / BLOCK, 0).x == 0u) {
+            if (!skip_empty_block(cell, tnext, tcur, tdelta, stp, t1)) break;
+            continue;
+        }
         float texit = min(min(tnext.x, tnext.y), min(tnext.z, t1));
         ivec2 sc = texelFetch(tex_cell, cell, 0).xy;
 #if COUNT
@@ -247,6 +279,13 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
         float tcur = t0;
         int guard = dims.x + dims.y + dims.z + 3;
         for (int it = 0; it < guard; ++it) {
+            if (texelFetch(tex_block, cell / BLOCK, 0).x == 0u) {
+#if COUNT
+                counter.z += 1.0;
+#endif
+                if (!skip_empty_block(cell, tnext, tcur, tdelta, stp, t1)) break;
+                continue;
+            }
             float texit = min(min(tnext.x, tnext.y), min(tnext.z, t1));
             bool last = texit >= t1;
             ivec2 sc = texelFetch(tex_cell, cell, 0).xy;
