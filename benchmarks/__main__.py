@@ -95,7 +95,9 @@ def orchestrate(mode, outdir, only=None):
     results = {}
     t_start = time.perf_counter()
     budget_total = BUDGET[mode]
-    report_path = os.path.join(outdir, "REPORT.md")
+    # A partial run (--only, or --gpu-only on a GPU machine) must not replace the full report.
+    name = "REPORT_GPU.md" if mode == "gpu" else "REPORT_PARTIAL.md" if only else "REPORT.md"
+    report_path = os.path.join(outdir, name)
 
     def write(finished=None):
         body = [_header(mode, machine, started, finished)]

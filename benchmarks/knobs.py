@@ -14,7 +14,7 @@ import numpy as np
 def grid_scale(scale):
     """Build every grid with `scale` times the tracer's own cells per axis."""
     from tracer import renderer as rmod
-    from tracer.grid import build_grid, choose_resolution  # noqa: F401  (choose_resolution: documents intent)
+    from tracer.grid import build_grid
     original = rmod.build_grid
 
     def scaled(cylinders, pad_factor=1.0, dims=None):

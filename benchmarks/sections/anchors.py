@@ -21,121 +21,137 @@ from benchmarks.scenes import (SUN_DIRECTION, crop_camera, groom_scene, orbit, p
 from benchmarks.sections import left
 
 REF_PAIRS = 6e7      # rays × cylinders the float64 window may cost
+LAYERS = 4
 
 
-def _scenes(cfg):
+def _scene_makers(cfg):
     for count in cfg.anc_counts:
         yield f"groom wavy {count // 1000}k", lambda count=count: groom_scene("wavy", count, resolution="adaptive")[3].strands
     if cfg.anc_real:
         yield "straight.hair (real)", lambda: real_strands("straight.hair")
 
 
+class _Scene:
+    def __init__(self, tracer, name, strands, size):
+        self.name, self.strands = name, strands
+        lo, hi = strands.bounds()
+        self.matrix = view_matrix(lo, hi, size)
+        self.cam = tracer_camera(self.matrix, size)
+        self.moved = tracer_camera(orbit(self.matrix, np.radians(12), 0.5 * (lo + hi)), size)
+        self.renderer = tracer.Renderer()
+        self.cold, _ = once(lambda: (self.renderer.set_strands(strands),
+                                     self.renderer.render(self.cam, settings(spp=1, layers=LAYERS))))
+        self.ours, self.cycles, self.images, self.error = {}, {}, {}, None
+
+
 def run(sec, cfg):
     tracer = tracer_api()
     size = (cfg.anc_size, cfg.anc_size)
-    layers = 4
     sec.text(__doc__.split("\n", 2)[2].strip())
     sec.text("Cycles set-up: " + CyclesAnchor.MATERIAL + f"; CPU device, {os.cpu_count()} threads, "
              "no denoiser, no adaptive sampling. Tracer: Kajiya-Kay, one directional light (the same "
-             f"direction), hard shadows, {layers} alpha layers.")
-    sec.settings(image=f"{size[0]}x{size[1]}", spp=list(cfg.anc_spp), runs=cfg.runs, layers=layers)
-    rows, pics, targets = [], [], []
-    scenes = list(_scenes(cfg))
-    for i, (name, make) in enumerate(scenes):
-        # Each scene gets an equal share of what is left; inside it the tracer may use 55 %,
-        # the float64 window 15 %, Cycles the rest.
-        share = left(sec) / (len(scenes) - i)
-        scene_start = sec.elapsed()
+             f"direction), hard shadows, {LAYERS} alpha layers.")
+    sec.settings(image=f"{size[0]}x{size[1]}", spp=list(cfg.anc_spp), runs=cfg.runs, layers=LAYERS)
+    scenes = [_Scene(tracer, name, make(), size) for name, make in _scene_makers(cfg)]
+    # Every scene at the lowest sample count first, so a tight budget drops the costly
+    # high-sample runs, not whole scenes. Each job gets a share of what is left in proportion
+    # to its expected cost (samples + 2 for upload and scene sync).
+    jobs = [(spp, sc) for spp in cfg.anc_spp for sc in scenes]
+    weights = [spp + 2 for spp, _ in jobs]
+    for n, (spp, sc) in enumerate(jobs):
+        share = left(sec) * weights[n] / sum(weights[n:])
+        start = sec.elapsed()
 
         def until(fraction):
-            return scene_start + fraction * share - sec.elapsed()
+            return start + fraction * share - sec.elapsed()
 
-        strands = make()
-        lo, hi = strands.bounds()
-        matrix = view_matrix(lo, hi, size)
-        cam = tracer_camera(matrix, size)
-        moved = tracer_camera(orbit(matrix, np.radians(12), 0.5 * (lo + hi)), size)
-        renderer = tracer.Renderer()
-        cold, _ = once(lambda: (renderer.set_strands(strands), renderer.render(cam, settings(spp=1, layers=layers))))
-        per_spp = {}
-        m = len(cfg.anc_spp)
-        for j, spp in enumerate(cfg.anc_spp):
-            rs = settings(spp=spp, layers=layers)
-            try:
-                first, img = measure(lambda: (renderer.set_strands(strands), renderer.render(cam, rs))[1],
-                                     runs=cfg.runs, budget=until(0.55 * (j + 0.6) / m))
-                state = {"flip": False}
+        _tracer_job(sec, cfg, tracer, sc, spp, until)
+        _cycles_job(sec, cfg, sc, spp, size, until)
+    _report(sec, cfg, scenes, size)
 
-                def rerender():
-                    state["flip"] = not state["flip"]
-                    return renderer.render(moved if state["flip"] else cam, rs)
 
-                uploaded = renderer.stats["bytes_uploaded"]
-                again, _ = measure(rerender, runs=cfg.runs, budget=until(0.55 * (j + 1) / m))
-                no_upload = renderer.stats["bytes_uploaded"] == uploaded
-                img = renderer.render(cam, rs)
-                per_spp[spp] = (first, again, no_upload, img)
-            except TooSlow as exc:
-                per_spp[spp] = str(exc)
-        if not isinstance(per_spp.get(cfg.anc_spp[0]), tuple):
-            sec.not_measured(name, f"the tracer at {cfg.anc_spp[0]} spp: {per_spp.get(cfg.anc_spp[0])}")
-            continue
-        # Error beside the time: float64 reference on a window of the 1-spp image.
-        e = None
-        ncyl = max(1, strands.num_segments)
-        side = int(np.clip(np.sqrt(REF_PAIRS / ncyl), 4, 24))
-        if until(0.7) > 0:
-            rs1 = settings(spp=1, layers=layers)
-            x0, y0 = pick_window(per_spp[cfg.anc_spp[0]][3], side, side)
-            win = crop_camera(cam, x0, y0, side, side)
-            e = image_error(renderer.render(win, rs1), tracer.reference_render(strands, win, rs1))
-        del renderer
-        cyc = CyclesAnchor(strands, matrix, size=size, sun_direction=SUN_DIRECTION, layers=layers)
-        cyc_t, cyc_img = {}, None
-        for j, spp in enumerate(cfg.anc_spp):
-            try:
-                cyc_t[spp], _ = measure(lambda: cyc.render(spp), runs=cfg.runs, budget=until(0.7 + 0.27 * (j + 1) / m))
-            except TooSlow as exc:
-                cyc_t[spp] = str(exc)
-        if not hasattr(cyc_t[cfg.anc_spp[0]], "median"):
-            sec.not_measured(f"{name}: Cycles", cyc_t[cfg.anc_spp[0]])
-            continue
-        shown = max(s_ for s_ in cfg.anc_spp if isinstance(per_spp[s_], tuple) and hasattr(cyc_t[s_], "median"))
-        cyc.render(shown)   # the image shown beside ours, at the same samples
-        with tempfile.TemporaryDirectory() as tmp:
-            path = os.path.join(tmp, "cycles.png")
-            cyc.save_last(path)
-            import matplotlib.image as mpimg
-            cyc_img = mpimg.imread(path)
-        del cyc
-        c1 = cyc_t[cfg.anc_spp[0]].median
+def _tracer_job(sec, cfg, tracer, sc, spp, until):
+    r = sc.renderer
+    rs = settings(spp=spp, layers=LAYERS)
+    try:
+        first, _ = measure(lambda: (r.set_strands(sc.strands), r.render(sc.cam, rs)), runs=cfg.runs,
+                           budget=until(0.35))
+        flip = {"on": False}
+
+        def rerender():
+            flip["on"] = not flip["on"]
+            return r.render(sc.moved if flip["on"] else sc.cam, rs)
+
+        uploaded = r.stats["bytes_uploaded"]
+        again, _ = measure(rerender, runs=cfg.runs, budget=until(0.6))
+        no_upload = r.stats["bytes_uploaded"] == uploaded
+        img = r.render(sc.cam, rs)
+        sc.ours[spp] = (first, again, no_upload)
+        sc.images[("ours", spp)] = img
+    except TooSlow as e:
+        sc.ours[spp] = f"tracer: {e}"
+        return
+    if sc.error is None and spp == min(cfg.anc_spp) and until(0.7) > 0:
+        # Error beside the time: the float64 reference on a window of the image.
+        side = int(np.clip(np.sqrt(REF_PAIRS / max(1, sc.strands.num_segments)), 4, 24))
+        x0, y0 = pick_window(img, side, side)
+        win = crop_camera(sc.cam, x0, y0, side, side)
+        sc.error = (side, image_error(r.render(win, rs), tracer.reference_render(sc.strands, win, rs)))
+
+
+def _cycles_job(sec, cfg, sc, spp, size, until):
+    cyc = CyclesAnchor(sc.strands, sc.matrix, size=size, sun_direction=SUN_DIRECTION, layers=LAYERS)
+    try:
+        sc.cycles[spp], _ = measure(lambda: cyc.render(spp), runs=cfg.runs, budget=until(1.0))
+    except TooSlow as e:
+        sc.cycles[spp] = f"Cycles: {e}"
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "cycles.png")
+        cyc.save_last(path)
+        import matplotlib.image as mpimg
+        sc.images[("cycles", spp)] = mpimg.imread(path)
+
+
+def _report(sec, cfg, scenes, size):
+    rows, pics = [], []
+    for sc in scenes:
+        c1 = sc.cycles.get(min(cfg.anc_spp))
+        c1 = c1.median if hasattr(c1, "median") else None
+        label = f"{sc.strands.num_strands:,} / {sc.strands.num_segments:,}"
         for spp in cfg.anc_spp:
-            if not isinstance(per_spp[spp], tuple) or not hasattr(cyc_t[spp], "median"):
-                why = per_spp[spp] if not isinstance(per_spp[spp], tuple) else cyc_t[spp]
-                rows.append([name, f"{strands.num_strands:,} / {strands.num_segments:,}", str(spp),
-                             f"not measured: {why}"] + [""] * 7)
+            ours, theirs = sc.ours.get(spp), sc.cycles.get(spp)
+            if not isinstance(ours, tuple) or not hasattr(theirs, "median"):
+                why = ours if isinstance(ours, str) else theirs if isinstance(theirs, str) else "time budget"
+                rows.append([sc.name, label, str(spp), f"not measured: {why}"] + [""] * 7)
                 continue
-            first, again, no_upload, _ = per_spp[spp]
-            err = f"{fmt_num(e['rmse'])} / {fmt_num(e['max_abs'])} / {100 * e['coverage_agree']:.1f} % ({side}² window)" \
-                if (e and spp == cfg.anc_spp[0]) else ("see 1-spp row" if e else "not measured: time budget")
-            rows.append([name, f"{strands.num_strands:,} / {strands.num_segments:,}", str(spp), str(cyc_t[spp]),
-                         str(first), f"{ratio(first.median, cyc_t[spp].median):.2f}",
-                         f"{ratio(first.median, c1):.2f}", str(again), f"{ratio(again.median, c1):.2f}",
-                         "yes" if no_upload else "NO", err])
-        f1, a1 = per_spp[cfg.anc_spp[0]][0].median, per_spp[cfg.anc_spp[0]][1].median
-        targets.append((name, ratio(f1, c1), ratio(a1, c1)))
-        sec.summary.append(f"{name}: first {fmt_time(f1)} = {ratio(f1, c1):.2f}× Cycles 1 spp ({fmt_time(c1)}); "
-                           f"re-render {fmt_time(a1)} = {ratio(a1, c1):.2f}×; cold first {fmt_time(cold)}")
-        pics.append((name, per_spp[shown][3], cyc_img, shown))
-        sec.data.setdefault("rows", []).append({"scene": name, "cycles_1spp": c1, "first": f1, "rerender": a1})
+            first, again, no_upload = ours
+            if sc.error and spp == min(cfg.anc_spp):
+                side, e = sc.error
+                err = f"{fmt_num(e['rmse'])} / {fmt_num(e['max_abs'])} / {100 * e['coverage_agree']:.1f} % ({side}² window)"
+            else:
+                err = "see the lowest-spp row" if sc.error else "not measured: time budget"
+            rows.append([sc.name, label, str(spp), str(theirs), str(first), f"{ratio(first.median, theirs.median):.2f}",
+                         f"{ratio(first.median, c1):.2f}" if c1 else "n/a", str(again),
+                         f"{ratio(again.median, c1):.2f}" if c1 else "n/a", "yes" if no_upload else "NO", err])
+            sec.data.setdefault("rows", []).append({"scene": sc.name, "spp": spp, "cycles": theirs.median,
+                                                    "first": first.median, "rerender": again.median})
+        lowest = sc.ours.get(min(cfg.anc_spp))
+        if isinstance(lowest, tuple) and c1:
+            f1, a1 = lowest[0].median, lowest[1].median
+            sec.text(f"**{sc.name}: first render {ratio(f1, c1):.2f}× Cycles {min(cfg.anc_spp)} spp (target ≤ 0.5: "
+                     f"{'met' if ratio(f1, c1) <= 0.5 else 'NOT met'}); re-render after a camera move "
+                     f"{ratio(a1, c1):.2f}× (target ≤ 0.25: {'met' if ratio(a1, c1) <= 0.25 else 'NOT met'}).** "
+                     f"Cold first render (shader compile included): {fmt_time(sc.cold)}.")
+            sec.summary.append(f"{sc.name}: first {fmt_time(f1)} = {ratio(f1, c1):.2f}× Cycles 1 spp ({fmt_time(c1)}); "
+                               f"re-render {fmt_time(a1)} = {ratio(a1, c1):.2f}×")
+        both = [s for s in cfg.anc_spp if ("ours", s) in sc.images and ("cycles", s) in sc.images]
+        if both:
+            pics.append((sc.name, sc.images[("ours", both[-1])], sc.images[("cycles", both[-1])], both[-1]))
     sec.table(["scene", "strands / cylinders", "spp", "Cycles (median)", "tracer first render (median)",
                "first / Cycles same spp", "first / Cycles 1 spp", "tracer re-render after camera move",
                "re-render / Cycles 1 spp", "re-render uploads nothing", "tracer error vs float64: RMSE / max / coverage"],
               rows, caption=f"The tracer against Cycles at {size[0]}×{size[1]} (medians, same run).")
-    for name, first_r, again_r in targets:
-        sec.text(f"**{name}: first render {first_r:.2f}× Cycles 1 spp (target ≤ 0.5: "
-                 f"{'met' if first_r <= 0.5 else 'NOT met'}); re-render {again_r:.2f}× (target ≤ 0.25: "
-                 f"{'met' if again_r <= 0.25 else 'NOT met'}).**")
     if pics:
         _side_by_side(sec, pics)
 
