@@ -9,6 +9,7 @@
 //   MIN_PX        1: widen radii to half a pixel (alpha scaled by r / r')
 //   ORTHO         1: orthographic camera
 //   COUNT         1: write per-pixel work counters to a second target
+//   BLOCK         cells per side of the blocks whose emptiness lets the DDA jump ahead
 
 uniform sampler2D tex_top;    // xyz top, w radius
 uniform sampler2D tex_tip;    // xyz tip, w alpha
