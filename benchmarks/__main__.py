@@ -101,6 +101,15 @@ def orchestrate(mode, outdir, only=None):
 
     def write(finished=None):
         body = [_header(mode, machine, started, finished)]
+        if finished:
+            body[0] += f"\nWhole run: {fmt_time(time.perf_counter() - t_start)}.\n"
+        lines = []
+        for i, k in enumerate(keys, 1):
+            r = results.get(k)
+            for line in (r or {}).get("summary") or ["not measured: the run ended before this section"]:
+                lines.append(f"- §{i} {line}")
+        body.append("## Summary\n\nThe key figures of each section (details, settings and plots below).\n\n"
+                    + "\n".join(lines))
         for i, k in enumerate(keys, 1):
             body.append(f"## {i}. {titles[k]}")
             r = results.get(k)

@@ -16,7 +16,7 @@ class Config:
     geo_presets: tuple = ("straight", "wavy", "curly")
     geo_fixed: tuple = (3, 4, 6, 8, 12, 16, 25, 32, 48, 64)
     geo_tolerances: tuple = (3e-4, 1e-4, 3e-5, 1e-5)
-    geo_error_strands: int = 200        # strands whose distance to the exact curve is measured
+    geo_error_strands: int = 100        # strands whose distance to the exact curve is measured
     geo_render_strands: int = 10000
     geo_render_size: int = 256
     # 3. rendering
@@ -88,7 +88,7 @@ QUICK = Config(
 
 FULL = Config(
     mode="full",
-    limits={"generation": 200, "geometry": 240, "rendering": 240, "anchors": 600, "scaling": 300,
+    limits={"generation": 200, "geometry": 300, "rendering": 240, "anchors": 600, "scaling": 300,
             "skips": 120, "stress": 100, "gpu": 20, "integration": 150},
 )
 
