@@ -165,7 +165,6 @@ class Renderer:
             "tex_tip": np.column_stack([c.tip[a:b], c.alpha[a:b]]),
             "tex_n2": np.column_stack([c.n2[a:b], c.flags[a:b].astype(np.float32)]),
             "tex_col": np.column_stack([c.color[a:b], np.zeros(b - a, np.float32)]),
-            "tex_sph": np.column_stack(bounding_spheres(c, a, b)),
         }
 
     def _upload_cylinders(self, a, b, full=False):
@@ -315,7 +314,7 @@ class Renderer:
 
     def _set_uniforms(self, prog, camera, settings):
         g = self.grid
-        for i, name in enumerate(("tex_top", "tex_tip", "tex_n2", "tex_col", "tex_idx", "tex_cell", "tex_sph", "tex_block")):
+        for i, name in enumerate(("tex_top", "tex_tip", "tex_n2", "tex_col", "tex_idx", "tex_cell", "tex_block")):
             self._tex[name].use(location=i)
             _set(prog, name, i)
         _set(prog, "grid_lo", tuple(float(x) for x in g.lo))
@@ -344,15 +343,6 @@ def block_occupancy(grid):
     full = np.zeros((bz * BLOCK, by * BLOCK, bx * BLOCK), bool)
     full[:nz, :ny, :nx] = (grid.cell_count > 0).reshape(nz, ny, nx)
     return full.reshape(bz, BLOCK, by, BLOCK, bx, BLOCK).any(axis=(1, 3, 5)).astype(np.uint8)
-
-
-def bounding_spheres(c, a, b):
-    """Middle (n,3) and radius (n,) of a sphere around cylinders a..b, radius widened as far as
-    the grid allows (minimum pixel width), plus a little for float32 rounding."""
-    top, tip = c.top[a:b].astype(np.float64), c.tip[a:b].astype(np.float64)
-    half = 0.5 * np.linalg.norm(tip - top, axis=1)
-    rb = (half + c.extension[a:b] + GRID_WIDEN_CAP * c.radius[a:b]) * (1 + 1e-5)
-    return (0.5 * (top + tip)).astype(np.float32), rb.astype(np.float32)
 
 
 def _set(prog, name, value):

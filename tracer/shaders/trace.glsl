@@ -15,7 +15,6 @@ uniform sampler2D tex_top;    // xyz top, w radius
 uniform sampler2D tex_tip;    // xyz tip, w alpha
 uniform sampler2D tex_n2;     // xyz unit normal of plane 2, w cap flags
 uniform sampler2D tex_col;    // rgb colour
-uniform sampler2D tex_sph;    // xyz middle, w bounding-sphere radius (widening included)
 uniform isampler2D tex_idx;   // cell lists (CSR), cylinder ids
 uniform isampler3D tex_cell;  // per cell: x = first slot, y = count
 uniform usampler3D tex_block; // per block of BLOCK^3 cells: 1 if any cell holds a cylinder
@@ -61,12 +60,10 @@ uint hash32(uint x) {
 // surface: the ray was inside the strand already.
 float hit_cylinder(int id, vec3 o, vec3 d, float widen_per_t, float widen_const,
                    out int surf, out float ascale) {
-    // Most listed cylinders are misses: one fetch and a cross product reject them. The cross
-    // product, unlike |v|² - (v·d)², loses nothing when the cylinder is far away.
-    vec4 S = texelFetch(tex_sph, texel(id), 0);
-    vec3 v = S.xyz - o;
-    vec3 x = cross(v, d);
-    if (dot(x, x) > S.w * S.w) return -1.0;
+    // No cheaper pre-test (bounding sphere, distance to the axis line) pays off: cells are
+    // shorter than the cylinders, so nearly every candidate passes such a test, and the
+    // extra fetch costs more than the quadratic below, which rejects misses at disc < 0
+    // (measured on llvmpipe: 25 % slower with a sphere test, 45 % with a line test).
     vec4 A4 = texelFetch(tex_top, texel(id), 0);
     vec4 B4 = texelFetch(tex_tip, texel(id), 0);
     vec4 N4 = texelFetch(tex_n2, texel(id), 0);
