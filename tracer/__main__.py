@@ -19,7 +19,12 @@ def read_any(path):
     except ImportError:
         read_strands = None
     if read_strands is not None:
-        return read_strands(path)
+        try:
+            return read_strands(path)
+        except InputError:
+            raise
+        except Exception as e:   # a reader tripping over a malformed file is still bad input
+            raise InputError(f"{path}: cannot read ({type(e).__name__}: {e})") from e
     if path.lower().endswith(".npz"):
         from hairio import Strands
         return Strands.load_npz(path)

@@ -64,7 +64,7 @@ def test_cli_renders_an_npz_and_prints_times(tmp_path, capsys):
     assert "upload" in text and "grid build" in text and "render" in text
 
 
-@pytest.mark.parametrize("case", ["missing", "garbage", "nan", "size", "spp", "camera"])
+@pytest.mark.parametrize("case", ["missing", "garbage", "nan", "size", "spp", "camera", "truncated-hair"])
 def test_cli_errors_exit_2_and_write_nothing(tmp_path, capsys, case):
     src = tmp_path / "in.npz"
     curls(3, 4).save_npz(src)
@@ -81,10 +81,15 @@ def test_cli_errors_exit_2_and_write_nothing(tmp_path, capsys, case):
         args += ["--spp", "3"]
     elif case == "camera":
         args += ["--camera", "1,2:3"]
+    elif case == "truncated-hair":
+        bad = tmp_path / "in.hair"
+        bad.write_bytes(b"HAIR\x01\x00")
+        src.unlink()
+        args[1] = str(bad)
     assert main(args) == 2
     assert "error" in capsys.readouterr().err
     assert not (tmp_path / "out.png").exists()
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.npz"] or case == "missing"
+    assert not any(p.suffix == ".png" or p.name.startswith(".tmp-") for p in tmp_path.iterdir())
 
 
 def _root():
