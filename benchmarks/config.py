@@ -20,11 +20,11 @@ class Config:
     geo_render_strands: int = 10000
     geo_render_size: int = 256
     # 3. rendering
-    ren_strands: int = 10000
+    ren_strands: int = 5000
     ren_size: int = 128                 # the float64 reference is numpy: keep images small
     ren_spp: tuple = (1, 4, 9, 16, 25)
     ren_layers: tuple = (1, 2, 4, 8)
-    ren_grid_scale: tuple = (0.25, 0.5, 1.0, 2.0, 4.0)
+    ren_grid_scale: tuple = (0.25, 0.5, 1.0, 2.0)
     ren_aa_ref_spp: int = 64
     # 4. anchors
     anc_counts: tuple = (10000, 100000)

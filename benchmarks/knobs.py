@@ -9,6 +9,8 @@ import contextlib
 
 import numpy as np
 
+MAX_GRID_CELLS = 1 << 25     # 32 M cells: 256 MiB of cell table
+
 
 @contextlib.contextmanager
 def grid_scale(scale):
@@ -19,8 +21,12 @@ def grid_scale(scale):
 
     def scaled(cylinders, pad_factor=1.0, dims=None):
         auto = build_grid(cylinders, pad_factor=pad_factor) if dims is None else None
-        d = np.asarray(auto.dims if dims is None else dims, np.float64)
-        d = np.clip(np.round(d * scale), 1, 1024).astype(np.int64)
+        d = np.asarray(auto.dims if dims is None else dims, np.float64) * scale
+        # Keep the cell table within what a run can afford (the tracer caps its own choice too).
+        over = np.prod(d) / MAX_GRID_CELLS
+        if over > 1:
+            d = d / over ** (1 / 3)
+        d = np.clip(np.round(d), 1, 1024).astype(np.int64)
         return build_grid(cylinders, pad_factor=pad_factor, dims=d)
 
     rmod.build_grid = scaled
