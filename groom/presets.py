@@ -30,8 +30,16 @@ from .frames import root_frames
 from .keys import KeyStrand, place_key
 from .params import GroomParams
 
-PRESET_DIR = pathlib.Path(os.environ.get("KEYSTRAND_PRESETS",
-                                         pathlib.Path(__file__).resolve().parents[1] / "presets"))
+def _preset_dir():
+    """$KEYSTRAND_PRESETS, else the repository's presets/, else the copy installed inside groom."""
+    if "KEYSTRAND_PRESETS" in os.environ:
+        return pathlib.Path(os.environ["KEYSTRAND_PRESETS"])
+    here = pathlib.Path(__file__).resolve().parent
+    in_repo = here.parent / "presets"
+    return in_repo if in_repo.is_dir() else here / "_presets"
+
+
+PRESET_DIR = _preset_dir()
 _KEY_FIELDS = {"anchor", "frame", "profile", "angles", "kind", "color", "root_radius", "group"}
 
 

@@ -154,16 +154,22 @@ def build_project_wheel(dest):
     with open(ROOT / "pyproject.toml", "rb") as f:
         pyproject = tomllib.load(f)
     project = pyproject["project"]
-    packages = pyproject["tool"]["setuptools"]["packages"]
+    setup = pyproject["tool"]["setuptools"]
+    packages = setup["packages"]
     dist = project["name"].replace("-", "_")
     info = f"{dist}-{project['version']}.dist-info"
     path = pathlib.Path(dest) / project_wheel_name()
     files = {}
+    # The same selection setuptools makes: each listed package's modules, read from its
+    # package-dir mapping if it has one, plus its package-data patterns.
     for package in packages:
-        for file in sorted((ROOT / package).rglob("*")):
-            rel = file.relative_to(ROOT)
-            if file.is_file() and "__pycache__" not in rel.parts and file.suffix != ".pyc":
-                files[rel.as_posix()] = file.read_bytes()
+        source = ROOT / setup.get("package-dir", {}).get(package, package.replace(".", "/"))
+        target = package.replace(".", "/")
+        patterns = ["*.py", *setup.get("package-data", {}).get(package, [])]
+        for pattern in patterns:
+            for file in sorted(source.glob(pattern)):
+                if file.is_file():
+                    files[f"{target}/{file.relative_to(source).as_posix()}"] = file.read_bytes()
     if not any(name.endswith("/__init__.py") for name in files):
         raise BuildError(f"project wheel: none of the packages {packages} has an __init__.py")
     requires = "".join(f"Requires-Dist: {d}\n" for d in project.get("dependencies", []))
@@ -172,7 +178,7 @@ def build_project_wheel(dest):
                                  f"License: GPL-3.0-or-later\n{requires}").encode()
     files[f"{info}/WHEEL"] = (b"Wheel-Version: 1.0\nGenerator: keystrand build_extension\n"
                               b"Root-Is-Purelib: true\nTag: py3-none-any\n")
-    files[f"{info}/top_level.txt"] = "".join(p + "\n" for p in packages).encode()
+    files[f"{info}/top_level.txt"] = "".join(sorted({p.split(".")[0] + "\n" for p in packages})).encode()
     record = []
     for name, data in files.items():
         digest = base64.urlsafe_b64encode(hashlib.sha256(data).digest()).rstrip(b"=").decode()
