@@ -29,6 +29,7 @@ MIN_RUNS = 5
 class Timing:
     """Wall-clock seconds of repeated runs of one job; `median` is the figure we report."""
     runs: list
+    warmups: list = field(default_factory=list)   # untimed-for-the-median first calls (cold costs)
 
     @property
     def median(self):
@@ -56,12 +57,14 @@ def measure(job, runs=MIN_RUNS, warmup=1, before=None, budget=None):
     """
     runs = max(int(runs), MIN_RUNS)
     result = None
+    warm = []
     for _ in range(warmup):
         if before:
             before()
         t0 = time.perf_counter()
         result = job()
         one = time.perf_counter() - t0
+        warm.append(one)
         if budget is not None and one * runs > budget:
             raise TooSlow(f"one run takes {fmt_time(one)}, so {runs} runs would exceed the "
                           f"{fmt_time(max(budget, 0))} left in this section's budget")
@@ -72,7 +75,7 @@ def measure(job, runs=MIN_RUNS, warmup=1, before=None, budget=None):
         t0 = time.perf_counter()
         result = job()
         times.append(time.perf_counter() - t0)
-    return Timing(times), result
+    return Timing(times, warm), result
 
 
 def once(job):
