@@ -39,7 +39,7 @@ class Config:
     sca_fixed_count: int = 20000
     sca_cost_rays: int = 4000
     # 6. skips
-    skip_strands: int = 20000
+    skip_strands: int = 10000
     skip_size: int = 512
     # 7. stress
     stress_examples: int = 200
@@ -72,7 +72,7 @@ QUICK = Config(
     anc_size=128,
     anc_spp=(1, 16),
     anc_real=True,
-    sca_counts=(1000, 4000, 16000),
+    sca_counts=(1000, 3000, 10000),
     sca_sizes=(64, 128, 256),
     sca_lengths=(0.5, 1.0, 2.0),
     sca_fixed_count=5000,
@@ -89,7 +89,7 @@ QUICK = Config(
 FULL = Config(
     mode="full",
     limits={"generation": 120, "geometry": 240, "rendering": 240, "anchors": 900, "scaling": 300,
-            "skips": 120, "stress": 100, "gpu": 20, "integration": 150},
+            "skips": 180, "stress": 100, "gpu": 20, "integration": 150},
 )
 
 GPU = Config(

@@ -94,7 +94,7 @@ def run(sec, cfg):
 
     # 6. incremental regeneration (groom) and partial re-upload (tracer). Fixed resolution, so
     # a moved key changes point positions but not counts and the tracer can patch in place.
-    if not over_budget(sec, 0.6):
+    if not over_budget(sec, 0.7):
         groom = groom_api()
         fparams = params.replace(resolution_mode="fixed", points_per_strand=32)
         base_strands = groom.generate(scalp, keys, fparams).strands
@@ -138,7 +138,7 @@ def run(sec, cfg):
             f"image equals a full upload's: max abs {fmt_num(float(np.abs(a - b).max()))}")
 
     # 7. adaptive resolution against fixed 25 cylinders, at the same maximum error
-    if not over_budget(sec, 0.8):
+    if not over_budget(sec, 0.85):
         groom = groom_api()
         sub = params.replace(count=min(40, params.count))
         exact = groom.generate(scalp, keys, sub.replace(resolution_mode="fixed", points_per_strand=2049)).strands
