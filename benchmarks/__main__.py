@@ -34,14 +34,22 @@ def _child(key, mode, outdir, budget, timeout):
     cmd = [sys.executable, "-m", "benchmarks", "--section", key, "--mode", mode,
            "--outdir", outdir, "--budget", f"{budget:.1f}", "--result", result_path]
     t0 = time.perf_counter()
-    try:
-        proc = subprocess.run(cmd, cwd=ROOT, timeout=timeout, stdout=subprocess.PIPE,
-                              stderr=subprocess.STDOUT, text=True)
-        log = proc.stdout
-        code = proc.returncode
-    except subprocess.TimeoutExpired as e:
-        log = (e.stdout or b"").decode(errors="replace") if isinstance(e.stdout, bytes) else (e.stdout or "")
-        code = "timeout"
+    with tempfile.TemporaryFile(mode="w+") as out:
+        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT, text=True)
+        try:
+            code = proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            # Ask first: the section keeps what it measured and writes it out.
+            proc.terminate()
+            try:
+                proc.wait(timeout=30)
+                code = "timeout"
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+                code = "killed"
+        out.seek(0)
+        log = out.read()
     elapsed = time.perf_counter() - t0
     result = None
     try:
@@ -54,7 +62,7 @@ def _child(key, mode, outdir, budget, timeout):
             os.unlink(result_path)
     if result is None:
         tail = "\n".join(line for line in log.strip().splitlines()[-8:])
-        reason = (f"section exceeded its {timeout:.0f} s limit" if code == "timeout"
+        reason = (f"section exceeded its {timeout:.0f} s limit" if code in ("timeout", "killed")
                   else f"section process exited with {code}")
         result = {"markdown": f"*not measured: {reason}.*\n\n```\n{tail}\n```", "status": "failed"}
     result["elapsed"] = elapsed

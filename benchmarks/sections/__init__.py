@@ -19,8 +19,21 @@ SECTIONS = [
 ]
 
 
+class Stopped(BaseException):
+    """The parent ran out of patience (SIGTERM at the section's limit)."""
+
+
+def _stop(signum, frame):
+    raise Stopped()
+
+
 def run_section(key, cfg, outdir, budget):
-    """Run one section in this process and return what the report needs (JSON-able)."""
+    """Run one section in this process and return what the report needs (JSON-able).
+
+    SIGTERM (the parent's time limit) stops the section where it is; what it measured so
+    far is kept and the rest is marked not measured."""
+    import signal
+    signal.signal(signal.SIGTERM, _stop)
     title = dict(SECTIONS)[key]
     sec = Section(key, title, cfg.mode, outdir)
     sec.budget = float(budget)
@@ -30,6 +43,10 @@ def run_section(key, cfg, outdir, budget):
     try:
         module = importlib.import_module(f"benchmarks.sections.{key}")
         module.run(sec, cfg)
+    except Stopped:
+        sec.text("*not measured beyond this point: the section reached its time limit and was stopped.*")
+        summary.append("stopped at the time limit (partial)")
+        status = "partial"
     except (NotMeasured, TooSlow) as e:
         sec.text(f"*not measured: {e}*")
         summary.append(f"not measured: {e}")
