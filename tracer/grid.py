@@ -16,6 +16,7 @@ import numpy as np
 MAX_DIM = 1024          # 3D textures of GL 3.3 guarantee 256; every driver we target has >= 2048
 MAX_CELLS = 1 << 23
 MAX_REFS_PER_CYLINDER = 8.0
+CHUNK = 1 << 16         # cylinders per build job (see build_grid)
 
 
 @dataclass(frozen=True, eq=False)
@@ -170,27 +171,49 @@ def build_grid(cylinders, pad_factor=1.0, dims=None):
         dims = choose_resolution(blo, bhi, lo, extent)
     dims = np.asarray(dims, np.int64)
     cs = extent / dims
-    # Chunks of cylinders on all cores (numpy drops the GIL in its loops), each giving sorted
-    # (cell, cylinder) keys; one stable sort then merges the sorted runs in linear time
-    # (timsort). Sorting keys orders the list by cell and, inside a cell, by cylinder id.
-    workers = min(os.cpu_count() or 1, max(1, n // 100_000))
-    bounds = np.linspace(0, n, workers + 1).astype(np.int64)
-    jobs = [(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
+    ncell = int(np.prod(dims))
+    # Small chunks of cylinders on all cores (numpy drops the GIL in its loops). Small, so the
+    # dozen temporaries per reference stay in cache instead of streaming ~40 MB arrays
+    # through memory: measured 2-3x faster than one chunk per core on 10 M references.
+    # Each chunk comes back as (cell, cylinder) keys sorted by cell.
+    step = max(1, min(CHUNK, -(-n // (os.cpu_count() or 1))))
+    jobs = [(a, min(n, a + step)) for a in range(0, n, step)]
 
-    def keys(job):
+    def run(job):
         a, b = job
         cyl, cell = _cells_touched(cylinders.select(slice(a, b)), pad_factor, lo, cs, dims)
         key = (cell.astype(np.int64) << 31) | (cyl.astype(np.int64) + a)
         key.sort()
-        return key
+        cell = (key >> 31).astype(np.int32)
+        # First entry of every cell's run inside this chunk, and the run lengths.
+        head = np.flatnonzero(np.concatenate([[True], cell[1:] != cell[:-1]]))
+        length = np.diff(np.append(head, len(cell)))
+        return cell[head], head, length, (key & ((1 << 31) - 1)).astype(np.int32)
 
+    workers = min(os.cpu_count() or 1, len(jobs))
     if workers == 1:
-        key = keys(jobs[0])
+        runs = [run(job) for job in jobs]
     else:
         with ThreadPoolExecutor(workers) as pool:
-            key = np.sort(np.concatenate(list(pool.map(keys, jobs))), kind="stable")
-    indices = (key & ((1 << 31) - 1)).astype(np.int32)
-    ncell = int(np.prod(dims))
-    count = np.bincount(key >> 31, minlength=ncell).astype(np.int32)
+            runs = list(pool.map(run, jobs))
+    count, indices = _merge_runs(runs, ncell)
     start = (np.cumsum(count, dtype=np.int64) - count).astype(np.int32)
     return Grid(lo, cs, dims, start, count, indices)
+
+
+def _merge_runs(runs, ncell):
+    """Counting-sort merge of per-chunk runs (cells of the chunk's runs, run heads, run
+    lengths, cylinder ids sorted by cell) into one CSR list in linear time: a cell's slots
+    are its chunks' entries in chunk order, so every cell's run stays sorted by cylinder id
+    (chunks hold increasing ids). Returns (count, indices)."""
+    count = np.zeros(ncell, np.int64)
+    for ucell, _, length, _ in runs:
+        count[ucell] += length          # cells are unique within a chunk: no lost updates
+    fill = np.cumsum(count) - count     # next free slot of every cell
+    indices = np.empty(int(count.sum()), np.int32)
+    for ucell, head, length, cyl in runs:
+        # Slot of entry j of a run = fill[cell] + (j - head); one repeat per chunk.
+        pos = np.repeat(fill[ucell] - head, length) + np.arange(len(cyl))
+        indices[pos] = cyl
+        fill[ucell] += length
+    return count.astype(np.int32), indices
