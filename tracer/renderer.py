@@ -16,7 +16,12 @@ from .grid import build_grid
 from .settings import GRID_WIDEN_CAP, RenderSettings
 
 BLOCK = 4          # cells per side of the empty-space-skipping blocks (the shader's BLOCK)
-TEX_W = 4096       # texels per row of every per-cylinder texture; the shader's texel() agrees
+TEX_W = 4096       # texels per row of every texture of lists; the shader's texel() agrees
+# Per cylinder, four consecutive RGBA32F texels of one texture (top+radius, tip+alpha,
+# n2+flags, colour): 64 bytes, one cache line, so a cylinder test on a CPU driver touches
+# one line where four textures took up to four. The shader's cyl_texel() agrees.
+TEXELS_PER_CYL = 4
+CYL_PER_ROW = TEX_W // TEXELS_PER_CYL
 SHADER_DIR = pathlib.Path(__file__).resolve().parent / "shaders"
 
 _VERTEX = """#version 330 core
@@ -48,13 +53,6 @@ def load_shader(name):
 
 def _rows(n):
     return max(1, -(-n // TEX_W))
-
-
-def _pad_rows(a, rows):
-    """Pad a (N, C) array to rows*TEX_W rows (zeros)."""
-    out = np.zeros((rows * TEX_W, a.shape[1]), np.float32)
-    out[:len(a)] = a
-    return out
 
 
 class Renderer:
@@ -130,11 +128,11 @@ class Renderer:
             getattr(old, f)[dest] = getattr(new, f)
         self.strands = strands
         t1 = time.perf_counter()
-        rows = np.unique(dest // TEX_W)
+        rows = np.unique(dest // CYL_PER_ROW)
         # Consecutive rows go up in one write.
         breaks = np.flatnonzero(np.diff(rows) > 1)
         for a, b in zip(np.concatenate([[0], breaks + 1]), np.concatenate([breaks, [len(rows) - 1]])):
-            self._upload_cylinders(int(rows[a]) * TEX_W, min(len(old), (int(rows[b]) + 1) * TEX_W))
+            self._upload_cylinders(int(rows[a]) * CYL_PER_ROW, min(len(old), (int(rows[b]) + 1) * CYL_PER_ROW))
         t2 = time.perf_counter()
         self._build_and_upload_grid()
         self.stats["cylinders_s"] = t1 - t0
@@ -158,29 +156,30 @@ class Renderer:
         self.stats["bytes_uploaded"] += data.nbytes
         return tex
 
-    def _cylinder_blocks(self, a, b):
+    def _cylinder_block(self, a, b, rows):
+        """Cylinders a..b as RGBA float32 texels, TEXELS_PER_CYL per cylinder one after the
+        other, zero-padded to `rows` texture rows."""
         c = self.cylinders
-        return {
-            "tex_top": np.column_stack([c.top[a:b], c.radius[a:b]]),
-            "tex_tip": np.column_stack([c.tip[a:b], c.alpha[a:b]]),
-            "tex_n2": np.column_stack([c.n2[a:b], c.flags[a:b].astype(np.float32)]),
-            "tex_col": np.column_stack([c.color[a:b], np.zeros(b - a, np.float32)]),
-        }
+        out = np.zeros((rows * CYL_PER_ROW, TEXELS_PER_CYL, 4), np.float32)
+        m = b - a
+        out[:m, 0, :3], out[:m, 0, 3] = c.top[a:b], c.radius[a:b]
+        out[:m, 1, :3], out[:m, 1, 3] = c.tip[a:b], c.alpha[a:b]
+        out[:m, 2, :3], out[:m, 2, 3] = c.n2[a:b], c.flags[a:b]
+        out[:m, 3, :3] = c.color[a:b]
+        return out.reshape(-1, 4)
 
     def _upload_cylinders(self, a, b, full=False):
         n = len(self.cylinders)
         self.stats["uploads"] += 1
         self.all_opaque = bool(n == 0 or self.cylinders.alpha.min() >= 1.0)
-        rows = _rows(n)
-        for name, block in self._cylinder_blocks(a, b).items():
-            block = np.ascontiguousarray(block, np.float32)
-            if full:
-                self._texture(name, (TEX_W, rows), 4, "f4", _pad_rows(block, rows))
-            else:
-                r0, r1 = a // TEX_W, _rows(b)
-                data = _pad_rows(block, r1 - r0)
-                self._tex[name].write(data, viewport=(0, r0, TEX_W, r1 - r0))
-                self.stats["bytes_uploaded"] += data.nbytes
+        if full:
+            rows = max(1, -(-n // CYL_PER_ROW))
+            self._texture("tex_cyl", (TEX_W, rows), 4, "f4", self._cylinder_block(0, n, rows))
+        else:
+            r0, r1 = a // CYL_PER_ROW, max(1, -(-b // CYL_PER_ROW))
+            data = self._cylinder_block(r0 * CYL_PER_ROW, min(n, r1 * CYL_PER_ROW), r1 - r0)
+            self._tex["tex_cyl"].write(data, viewport=(0, r0, TEX_W, r1 - r0))
+            self.stats["bytes_uploaded"] += data.nbytes
 
     def _build_and_upload_grid(self):
         t0 = time.perf_counter()
@@ -314,7 +313,7 @@ class Renderer:
 
     def _set_uniforms(self, prog, camera, settings):
         g = self.grid
-        for i, name in enumerate(("tex_top", "tex_tip", "tex_n2", "tex_col", "tex_idx", "tex_cell", "tex_block")):
+        for i, name in enumerate(("tex_cyl", "tex_idx", "tex_cell", "tex_block")):
             self._tex[name].use(location=i)
             _set(prog, name, i)
         _set(prog, "grid_lo", tuple(float(x) for x in g.lo))

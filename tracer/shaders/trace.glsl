@@ -11,10 +11,10 @@
 //   COUNT         1: write per-pixel work counters to a second target
 //   BLOCK         cells per side of the blocks whose emptiness lets the DDA jump ahead
 
-uniform sampler2D tex_top;    // xyz top, w radius
-uniform sampler2D tex_tip;    // xyz tip, w alpha
-uniform sampler2D tex_n2;     // xyz unit normal of plane 2, w cap flags
-uniform sampler2D tex_col;    // rgb colour
+// Per cylinder, 4 consecutive texels (one 64-byte cache line on a CPU driver):
+//   TOP: xyz top, w radius   TIP: xyz tip, w alpha   N2: xyz unit normal of plane 2, w cap
+//   flags   COL: rgb colour
+uniform sampler2D tex_cyl;
 uniform isampler2D tex_idx;   // cell lists (CSR), cylinder ids
 uniform isampler3D tex_cell;  // per cell: x = first slot, y = count
 uniform usampler3D tex_block; // per block of BLOCK^3 cells: 1 if any cell holds a cylinder
@@ -45,6 +45,9 @@ vec4 counter = vec4(0.0);
 const float BIG = 1e30;
 
 ivec2 texel(int i) { return ivec2(i & 4095, i >> 12); }
+const int TOP = 0, TIP = 1, N2 = 2, COL = 3;
+// Texel `j` of cylinder `id`: 1024 cylinders per row of 4096 texels.
+vec4 cyl(int id, int j) { return texelFetch(tex_cyl, ivec2(((id & 1023) << 2) | j, id >> 10), 0); }
 
 // Fixed per-sample hash (lowbias32); the reference tracer computes the same integers.
 uint hash32(uint x) {
@@ -64,8 +67,8 @@ float hit_cylinder(int id, vec3 o, vec3 d, float widen_per_t, float widen_const,
     // shorter than the cylinders, so nearly every candidate passes such a test, and the
     // extra fetch costs more than the quadratic below, which rejects misses at disc < 0
     // (measured on llvmpipe: 25 % slower with a sphere test, 45 % with a line test).
-    vec4 A4 = texelFetch(tex_top, texel(id), 0);
-    vec4 B4 = texelFetch(tex_tip, texel(id), 0);
+    vec4 A4 = cyl(id, TOP);
+    vec4 B4 = cyl(id, TIP);
     vec3 A = A4.xyz, ax = B4.xyz - A4.xyz;
     // Move the origin to the point of the ray nearest the cylinder's middle: the quadratic
     // then works with lengths of the cylinder's size, not the camera distance, so float32
@@ -99,7 +102,7 @@ float hit_cylinder(int id, vec3 o, vec3 d, float widen_per_t, float widen_const,
     }
     // Most candidates miss the infinite cylinder (disc < 0 above); only the rest pay for
     // the plane-2 texel.
-    vec4 N4 = texelFetch(tex_n2, texel(id), 0);
+    vec4 N4 = cyl(id, N2);
     // Plane 1 keeps (p - A)·ax >= 0, i.e. t·dn >= -wn.
     if (dn > 0.0) { float t1 = -wn / dn; if (t1 > tin) { tin = t1; surf = 1; } }
     else if (dn < 0.0) tout = min(tout, -wn / dn);
@@ -197,7 +200,7 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin) {
             if (t > tmin && t < tmax) return 0.0;
 #else
             if (t > tmin && t >= tcur && (t < texit || texit >= t1) && t < tmax) {
-                trans *= 1.0 - texelFetch(tex_tip, texel(id), 0).w;
+                trans *= 1.0 - cyl(id, TIP).w;
                 if (trans < t_eps) return 0.0;
             }
 #endif
@@ -213,9 +216,9 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin) {
 #endif
 
 vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
-    vec4 A4 = texelFetch(tex_top, texel(id), 0);
-    vec4 B4 = texelFetch(tex_tip, texel(id), 0);
-    vec3 col = texelFetch(tex_col, texel(id), 0).rgb;
+    vec4 A4 = cyl(id, TOP);
+    vec4 B4 = cyl(id, TIP);
+    vec3 col = cyl(id, COL).rgb;
     vec3 ax = B4.xyz - A4.xyz;
     vec3 T = normalize(ax);
     vec3 p = o + t * d;
@@ -229,7 +232,7 @@ vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
     } else if (surf == 1) {
         N = -T;
     } else {
-        N = texelFetch(tex_n2, texel(id), 0).xyz;
+        N = cyl(id, N2).xyz;
     }
     float nl = length(N);
     N = nl > 0.0 ? N / nl : -d;
@@ -306,7 +309,7 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
                         ht[j] = ht[j - 1]; ha[j] = ha[j - 1]; hid[j] = hid[j - 1]; hs[j] = hs[j - 1];
                     }
                     ht[j] = t; hid[j] = id; hs[j] = surf;
-                    ha[j] = texelFetch(tex_tip, texel(id), 0).w * asc;
+                    ha[j] = cyl(id, TIP).w * asc;
                     added = true;
                 }
             }
