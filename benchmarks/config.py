@@ -88,7 +88,7 @@ QUICK = Config(
 
 FULL = Config(
     mode="full",
-    limits={"generation": 120, "geometry": 240, "rendering": 240, "anchors": 900, "scaling": 300,
+    limits={"generation": 120, "geometry": 300, "rendering": 240, "anchors": 900, "scaling": 300,
             "skips": 180, "stress": 100, "gpu": 20, "integration": 240},
 )
 
