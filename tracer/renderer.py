@@ -190,9 +190,14 @@ class Renderer:
         idx[:len(g.indices)] = g.indices
         self._texture("tex_idx", (TEX_W, _rows(len(g.indices))), 1, "i4", idx)
         cells = np.column_stack([g.cell_start, g.cell_count]).astype(np.int32)
+        # An empty cell's start is unused; -1 there says its whole block of BLOCK³ cells is
+        # empty, so the DDA learns "skip the block" from the one texel it reads per cell.
+        nx, ny, nz = (int(x) for x in g.dims)
+        occupied = block_occupancy(g).astype(bool)
+        in_full_block = occupied[np.arange(nz)[:, None, None] // BLOCK, np.arange(ny)[None, :, None] // BLOCK,
+                                 np.arange(nx)[None, None, :] // BLOCK].ravel()
+        cells[~in_full_block, 0] = -1
         self._texture("tex_cell", tuple(int(x) for x in g.dims), 2, "i4", cells)
-        occupied = block_occupancy(g)
-        self._texture("tex_block", occupied.shape[::-1], 1, "u1", np.ascontiguousarray(occupied))
         self.stats["grid_s"] = t1 - t0
         self.stats["_grid_upload_s"] = time.perf_counter() - t1
         self.stats["grid_dims"] = tuple(int(x) for x in g.dims)
@@ -313,7 +318,7 @@ class Renderer:
 
     def _set_uniforms(self, prog, camera, settings):
         g = self.grid
-        for i, name in enumerate(("tex_cyl", "tex_idx", "tex_cell", "tex_block")):
+        for i, name in enumerate(("tex_cyl", "tex_idx", "tex_cell")):
             self._tex[name].use(location=i)
             _set(prog, name, i)
         _set(prog, "grid_lo", tuple(float(x) for x in g.lo))

@@ -16,8 +16,8 @@
 //   flags   COL: rgb colour
 uniform sampler2D tex_cyl;
 uniform isampler2D tex_idx;   // cell lists (CSR), cylinder ids
-uniform isampler3D tex_cell;  // per cell: x = first slot, y = count
-uniform usampler3D tex_block; // per block of BLOCK^3 cells: 1 if any cell holds a cylinder
+uniform isampler3D tex_cell;  // per cell: x = first slot (-1: the whole BLOCK^3 block of
+                              // this cell is empty), y = count
 
 uniform vec3 grid_lo;
 uniform vec3 cell_size;
@@ -182,12 +182,12 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin) {
     float trans = 1.0;
     int guard = dims.x + dims.y + dims.z + 3;
     for (int it = 0; it < guard; ++it) {
-        if (texelFetch(tex_block, cell / BLOCK, 0).x == 0u) {
+        ivec2 sc = texelFetch(tex_cell, cell, 0).xy;
+        if (sc.x < 0) {
             if (!skip_empty_block(cell, tnext, tcur, tdelta, stp, t1)) break;
             continue;
         }
         float texit = min(min(tnext.x, tnext.y), min(tnext.z, t1));
-        ivec2 sc = texelFetch(tex_cell, cell, 0).xy;
 #if COUNT
         counter.z += 1.0; counter.w += float(sc.y);
 #endif
@@ -282,7 +282,8 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
         float tcur = t0;
         int guard = dims.x + dims.y + dims.z + 3;
         for (int it = 0; it < guard; ++it) {
-            if (texelFetch(tex_block, cell / BLOCK, 0).x == 0u) {
+            ivec2 sc = texelFetch(tex_cell, cell, 0).xy;
+            if (sc.x < 0) {
 #if COUNT
                 counter.z += 1.0;
 #endif
@@ -291,7 +292,6 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
             }
             float texit = min(min(tnext.x, tnext.y), min(tnext.z, t1));
             bool last = texit >= t1;
-            ivec2 sc = texelFetch(tex_cell, cell, 0).xy;
 #if COUNT
             counter.z += 1.0; counter.w += float(sc.y);
 #endif
