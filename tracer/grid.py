@@ -113,8 +113,11 @@ def _cells_touched(cylinders, pad_factor, lo, cs, dims):
     nslab = i1 - i0 + 1
     total = int(nslab.sum())
     first = np.cumsum(nslab) - nslab
-    rep = lambda x: np.repeat(x, nslab)  # noqa: E731
-    c1 = rep(np.arange(n, dtype=np.int32))
+    # Expansion by one repeat of the owner index, then gathers: np.repeat with per-element
+    # counts copies element by element and cost a third of the whole build; a gather from
+    # a cache-sized chunk array is a few times cheaper.
+    c1 = np.repeat(np.arange(n, dtype=np.int32), nslab)
+    rep = lambda x: np.take(x, c1)  # noqa: E731
     slab = rep(i0 - first.astype(np.int32)) + np.arange(total, dtype=np.int32)
     # Part of the segment (parameter s in [0, 1]) whose dominant coordinate lies within pad of
     # the slab; a segment too short to have a dominant direction is taken whole.
@@ -144,7 +147,8 @@ def _cells_touched(cylinders, pad_factor, lo, cs, dims):
         return c1, base
     total2 = int(per.sum())
     first2 = (np.cumsum(per) - per).astype(np.int32)
-    rep2 = lambda x: np.repeat(x, per)  # noqa: E731
+    owner2 = np.repeat(np.arange(total, dtype=np.int32), per)
+    rep2 = lambda x: np.take(x, owner2)  # noqa: E731
     local = np.arange(total2, dtype=np.int32) - rep2(first2)
     na2 = rep2(na)
     cell = rep2(base) + (local % na2) * rep2(stra) + (local // na2) * rep2(strb)
