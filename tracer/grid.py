@@ -197,27 +197,40 @@ def build_grid(cylinders, pad_factor=1.0, dims=None):
     workers = min(os.cpu_count() or 1, len(jobs))
     if workers == 1:
         runs = [run(job) for job in jobs]
+        count, indices = _merge_runs(runs, ncell)
     else:
         with ThreadPoolExecutor(workers) as pool:
             runs = list(pool.map(run, jobs))
-    count, indices = _merge_runs(runs, ncell)
+            count, indices = _merge_runs(runs, ncell, pool)
     start = (np.cumsum(count, dtype=np.int64) - count).astype(np.int32)
     return Grid(lo, cs, dims, start, count, indices)
 
 
-def _merge_runs(runs, ncell):
+def _merge_runs(runs, ncell, pool=None):
     """Counting-sort merge of per-chunk runs (cells of the chunk's runs, run heads, run
     lengths, cylinder ids sorted by cell) into one CSR list in linear time: a cell's slots
     are its chunks' entries in chunk order, so every cell's run stays sorted by cylinder id
-    (chunks hold increasing ids). Returns (count, indices)."""
+    (chunks hold increasing ids). The slots of each chunk are fixed first (small arrays, in
+    chunk order); the scatters touch disjoint slots, so they run on `pool` when given.
+    Returns (count, indices)."""
     count = np.zeros(ncell, np.int64)
     for ucell, _, length, _ in runs:
         count[ucell] += length          # cells are unique within a chunk: no lost updates
     fill = np.cumsum(count) - count     # next free slot of every cell
-    indices = np.empty(int(count.sum()), np.int32)
-    for ucell, head, length, cyl in runs:
-        # Slot of entry j of a run = fill[cell] + (j - head); one repeat per chunk.
-        pos = np.repeat(fill[ucell] - head, length) + np.arange(len(cyl))
-        indices[pos] = cyl
+    offsets = []
+    for ucell, head, length, _ in runs:
+        offsets.append(fill[ucell] - head)   # slot of entry j of a run = this + j
         fill[ucell] += length
+    indices = np.empty(int(count.sum()), np.int32)
+
+    def scatter(job):
+        (_, _, length, cyl), off = job
+        indices[np.repeat(off, length) + np.arange(len(cyl))] = cyl
+
+    jobs = list(zip(runs, offsets))
+    if pool is None:
+        for job in jobs:
+            scatter(job)
+    else:
+        list(pool.map(scatter, jobs))
     return count.astype(np.int32), indices
