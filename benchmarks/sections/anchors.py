@@ -51,13 +51,23 @@ def run(sec, cfg):
              "no denoiser, no adaptive sampling. Tracer: Kajiya-Kay, one directional light (the same "
              f"direction), hard shadows, {LAYERS} alpha layers.")
     sec.settings(image=f"{size[0]}x{size[1]}", spp=list(cfg.anc_spp), runs=cfg.runs, layers=LAYERS)
-    scenes = [_Scene(tracer, name, make(), size) for name, make in _scene_makers(cfg)]
+    scenes = []
+    for name, make in _scene_makers(cfg):
+        try:
+            scenes.append(_Scene(tracer, name, make(), size))
+        except Exception as e:  # noqa: BLE001 — e.g. the real file is missing: say so, go on
+            sec.not_measured(name, f"{type(e).__name__}: {e}")
     # Every scene at the lowest sample count first (the targets), then the higher
     # counts, each taking what is left; a job whose runs cannot fit is reported, not half-run.
     for spp in sorted(cfg.anc_spp):
         for sc in sorted(scenes, key=lambda s: s.strands.num_segments):   # cheapest first
-            _tracer_job(sec, cfg, tracer, sc, spp)
-            _cycles_job(sec, cfg, sc, spp, size)
+            try:
+                _tracer_job(sec, cfg, tracer, sc, spp)
+                _cycles_job(sec, cfg, sc, spp, size)
+            except Exception as e:  # noqa: BLE001 — one scene failing must not lose the others
+                sc.ours.setdefault(spp, f"failed: {type(e).__name__}: {e}")
+                if isinstance(sc.ours.get(spp), tuple):
+                    sc.cycles[spp] = f"failed: {type(e).__name__}: {e}"
     _report(sec, cfg, scenes, size)
 
 

@@ -65,24 +65,27 @@ def run(sec, cfg):
             if over_budget(sec, budget_each * (p_i + 1)):
                 sec.not_measured(f"{name}: {kind} {n_cyl or tol}", "skipped to stay inside the time budget")
                 continue
-            n_points = n_cyl + 1 if kind == "fixed" else ADAPTIVE_CAP
-            small = groom.generate(scalp, keys, _params(preset, cfg.geo_error_strands, kind, n_points, tol)).strands
-            exact = exact_for(small)
-            worst, dists = curve_to_polyline_distance(exact.points, exact.counts, small.points, small.counts)
-            big = groom.generate(scalp, keys, _params(preset, cfg.geo_render_strands, kind, n_points, tol)).strands
-            if camera is None:
-                lo, hi = big.bounds()
-                camera = tracer_camera(view_matrix(lo, hi, size), size)
-            renderer.set_strands(big)
-            t, _ = measure(lambda: renderer.render(camera, rs), runs=cfg.runs)
-            label = f"fixed {n_cyl}" if kind == "fixed" else f"adaptive {tol:g} m"
-            row = {"label": label, "kind": kind, "cyl_per_strand": big.num_segments / big.num_strands,
-                   "max": float(worst.max()), "p99": float(np.percentile(dists, 99)), "time": t.median,
-                   "cylinders": int(big.num_segments), "n_cyl": n_cyl, "tol": tol}
-            results.append(row)
-            all_rows.append((name, kind, n_cyl or -tol, [name, label, f"{row['cyl_per_strand']:.1f}",
-                                                         fmt_num(row["max"]), fmt_num(row["p99"]), str(t),
-                                                         f"{row['cylinders']:,}"]))
+            try:
+                n_points = n_cyl + 1 if kind == "fixed" else ADAPTIVE_CAP
+                small = groom.generate(scalp, keys, _params(preset, cfg.geo_error_strands, kind, n_points, tol)).strands
+                exact = exact_for(small)
+                worst, dists = curve_to_polyline_distance(exact.points, exact.counts, small.points, small.counts)
+                big = groom.generate(scalp, keys, _params(preset, cfg.geo_render_strands, kind, n_points, tol)).strands
+                if camera is None:
+                    lo, hi = big.bounds()
+                    camera = tracer_camera(view_matrix(lo, hi, size), size)
+                renderer.set_strands(big)
+                t, _ = measure(lambda: renderer.render(camera, rs), runs=cfg.runs)
+                label = f"fixed {n_cyl}" if kind == "fixed" else f"adaptive {tol:g} m"
+                row = {"label": label, "kind": kind, "cyl_per_strand": big.num_segments / big.num_strands,
+                       "max": float(worst.max()), "p99": float(np.percentile(dists, 99)), "time": t.median,
+                       "cylinders": int(big.num_segments), "n_cyl": n_cyl, "tol": tol}
+                results.append(row)
+                all_rows.append((name, kind, n_cyl or -tol, [name, label, f"{row['cyl_per_strand']:.1f}",
+                                                             fmt_num(row["max"]), fmt_num(row["p99"]), str(t),
+                                                             f"{row['cylinders']:,}"]))
+            except Exception as e:  # noqa: BLE001 — one configuration failing must not lose the rest
+                sec.not_measured(f"{name}: {kind} {n_cyl or tol}", f"{type(e).__name__}: {e}")
         per_preset[name] = results
         if results:
             _plot(sec, name, results)

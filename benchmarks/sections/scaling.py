@@ -10,6 +10,8 @@ the model explains.
 """
 import numpy as np
 
+from hairio import InputError
+
 from benchmarks.harness import TooSlow, fmt_num, fmt_time, measure, once
 from benchmarks.scenes import groom_scene, settings, tracer_api, tracer_camera, view_matrix
 from benchmarks.sections import left, over_budget
@@ -44,7 +46,11 @@ def run(sec, cfg):
             continue
         strands = groom_scene("wavy", count, resolution="adaptive")[3].strands
         cam = tracer_camera(view_matrix(*strands.bounds(), size), size)
-        t_once, _ = once(lambda: renderer.set_strands(strands))
+        try:
+            t_once, _ = once(lambda: renderer.set_strands(strands))
+        except InputError as e:     # e.g. more cylinders than the driver's textures hold: a finding
+            rows.append((count, [f"{count:,}", f"{strands.num_segments:,}", f"refused: {e}"] + [""] * 5))
+            continue
         try:
             t, _ = measure(lambda: renderer.render(cam, settings(**rs_kw)), runs=cfg.runs, budget=left(sec, 0.4))
         except TooSlow as e:
