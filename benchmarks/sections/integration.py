@@ -109,6 +109,8 @@ def _export(sec, cfg):
                 rows.append([f".{ext}", f"not measured: {e}", ""])
             except Exception as e:  # noqa: BLE001
                 rows.append([f".{ext}", f"not measured: {type(e).__name__}: {e}", ""])
+        sec.summary.append(f"export {strands.num_strands:,} strands: " + ", ".join(
+            f"{r[0].split()[0]} {r[1]} / {r[2]}" for r in rows if not r[1].startswith("not measured")))
         sec.table(["format", "write time (median)", "file size"], rows,
                   caption=f"Export of {strands.num_strands:,} strands × 32 points (issue 5).")
         # .tfx resampling error: the writer's own figure, and ours from the file read back.
