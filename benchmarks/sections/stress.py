@@ -39,6 +39,17 @@ def run(sec, cfg):
     sec.summary.append(f"SPEC §9: {dict(tally)}")
     sec.data["spec"] = dict(tally)
 
+    rows = []
+    for name, fn in sc.limit_probes():
+        o = fn()
+        extra = ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}" for k, v in o.checks.items())
+        rows.append([name, o.kind, (o.detail[:160] + "; " if o.detail else "") + extra])
+        if not o.ok:
+            sec.summary.append(f"beyond the SPEC range, {name}: {o.kind} ({o.detail[:80]})")
+    sec.table(["beyond the SPEC range", "outcome", "detail"], rows,
+              caption="Where float32 runs out: heads far smaller than their distance from the origin "
+                      "(hairio.Strands and the GPU hold float32 coordinates). Reported, not promised.")
+
     from hypothesis import HealthCheck, given, settings
     results = []
 
