@@ -291,6 +291,9 @@ class Renderer:
         if box is not None:
             prog, vao = self._program(settings, camera, layers)
             self._set_uniforms(prog, camera, settings)
+            import moderngl
+            self.ctx.blend_func = moderngl.ONE, moderngl.ONE
+            self.ctx.blend_equation = moderngl.FUNC_ADD
             x0, y0, x1, y1 = box
             step = settings.tile
             for ty in range(y0, y1, step):
@@ -298,7 +301,14 @@ class Renderer:
                     tw, th = min(step, x1 - tx), min(step, y1 - ty)
                     # GL's window origin is the bottom-left corner.
                     self.ctx.scissor = (tx, h - ty - th, tw, th)
-                    vao.render(vertices=3)
+                    # One sample per draw (the shader's main says why): the first replaces the
+                    # cleared background, the others add to it (colour and counters alike).
+                    for s in range(settings.spp):
+                        _set(prog, "sample_index", s)
+                        if s == 1:
+                            self.ctx.enable(moderngl.BLEND)
+                        vao.render(vertices=3)
+                    self.ctx.disable(moderngl.BLEND)
                     if (x1 - x0) * (y1 - y0) > step * step:
                         self.ctx.finish()
             self.ctx.scissor = None

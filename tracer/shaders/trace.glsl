@@ -5,7 +5,8 @@
 //   SHADOWS       0: no shadow code at all; 1: hard (any hit); 2: transmittance
 //   SHADING_KK    1: Kajiya-Kay, 0: Phong
 //   NUM_LIGHTS    1..MAX
-//   SPP_N         samples per pixel = SPP_N * SPP_N (stratified, jittered by a fixed hash)
+//   SPP_N         samples per pixel = SPP_N * SPP_N (stratified, jittered by a fixed hash;
+//                 one sample per draw, see main)
 //   MIN_PX        1: widen radii to half a pixel (alpha scaled by r / r')
 //   ORTHO         1: orthographic camera
 //   COUNT         1: write per-pixel work counters to a second target
@@ -341,38 +342,42 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
     return vec4(C + T * background.rgb, 1.0 - T + T * background.a);
 }
 
+// One sample per draw: the host draws every pixel SPP_N² times, sample_index = 0, 1, ...,
+// and adds the passes with blending. Mesa's llvmpipe caps the loop iterations of one
+// shader invocation (65535 back-edges over all loops together, then every loop exits
+// early, silently); all samples in one invocation with several layers and shadow rays ran
+// past it and dropped hits, so the work of one invocation is kept to one sample.
+uniform int sample_index;
+
 void main() {
     int px = int(gl_FragCoord.x);
     int py = int(image_size.y) - 1 - int(gl_FragCoord.y);   // row 0 = top
-    vec4 acc = vec4(0.0);
-    for (int s = 0; s < SPP_N * SPP_N; ++s) {
-        vec2 jit = vec2(0.5);
+    int s = sample_index;
+    vec2 jit = vec2(0.5);
 #if SPP_N > 1
-        uint h = hash32(hash32(hash32(uint(s)) ^ uint(py)) ^ uint(px));
-        vec2 rnd = vec2(float(h >> 8u), float(hash32(h ^ 0x68bc21ebu) >> 8u)) * (1.0 / 16777216.0);
-        jit = (vec2(s % SPP_N, s / SPP_N) + rnd) / float(SPP_N);
+    uint h = hash32(hash32(hash32(uint(s)) ^ uint(py)) ^ uint(px));
+    vec2 rnd = vec2(float(h >> 8u), float(hash32(h ^ 0x68bc21ebu) >> 8u)) * (1.0 / 16777216.0);
+    jit = (vec2(s % SPP_N, s / SPP_N) + rnd) / float(SPP_N);
 #endif
-        float x = float(px) + jit.x, y = float(py) + jit.y;
-        float u = (x - 0.5 * image_size.x + shift_px.x) * pixel_size;
-        float v = (0.5 * image_size.y - y + shift_px.y) * pixel_size;
-        vec3 o, d;
-        float widen_per_t = 0.0, widen_const = 0.0;
+    float x = float(px) + jit.x, y = float(py) + jit.y;
+    float u = (x - 0.5 * image_size.x + shift_px.x) * pixel_size;
+    float v = (0.5 * image_size.y - y + shift_px.y) * pixel_size;
+    vec3 o, d;
+    float widen_per_t = 0.0, widen_const = 0.0;
 #if ORTHO
-        o = cam_pos + cam_rot * vec3(u, v, 0.0);
-        d = -cam_rot[2];
-        widen_const = 0.5 * pixel_size;
+    o = cam_pos + cam_rot * vec3(u, v, 0.0);
+    d = -cam_rot[2];
+    widen_const = 0.5 * pixel_size;
 #else
-        o = cam_pos;
-        vec3 dc = cam_rot * vec3(u, v, -1.0);
-        float len = length(dc);
-        d = dc / len;
-        // At distance t along this ray the depth is t / len and a pixel spans pixel_size times
-        // that; the minimum width is half of it.
-        widen_per_t = 0.5 * pixel_size / len;
+    o = cam_pos;
+    vec3 dc = cam_rot * vec3(u, v, -1.0);
+    float len = length(dc);
+    d = dc / len;
+    // At distance t along this ray the depth is t / len and a pixel spans pixel_size times
+    // that; the minimum width is half of it.
+    widen_per_t = 0.5 * pixel_size / len;
 #endif
-        acc += trace(o, d, widen_per_t, widen_const);
-    }
-    frag_color = acc / float(SPP_N * SPP_N);
+    frag_color = trace(o, d, widen_per_t, widen_const) / float(SPP_N * SPP_N);
 #if COUNT
     frag_count = counter;
 #endif
