@@ -5,11 +5,12 @@ The Curves datablock stores exactly the SPEC §0 layout (points + per-strand cou
 conversion is a handful of `foreach_set`/`foreach_get` calls over whole arrays and never a
 Python loop over strands or points. Attributes written:
 
-    position  POINT  FLOAT_VECTOR  strand points (the object's local space)
-    radius    POINT  FLOAT         Blender's built-in hair radius (Cycles, EEVEE read it)
-    color     POINT  FLOAT_COLOR   linear RGB, alpha in A
-    alpha     POINT  FLOAT         the strand opacity profile on its own, for shader nodes
-    wisp      CURVE  INT           index of the key strand whose wisp the strand belongs to
+    position     POINT  FLOAT_VECTOR  strand points (the object's local space)
+    radius       POINT  FLOAT         Blender's built-in hair radius (Cycles, EEVEE read it)
+    strand_rgba  POINT  FLOAT_COLOR   linear RGB, alpha in A (COLOR_ATTRIBUTE; not "color",
+                                      which Cycles renders black, see below)
+    alpha        POINT  FLOAT         the strand opacity profile on its own, for shader nodes
+    wisp         CURVE  INT           index of the key strand whose wisp the strand belongs to
 
 Curve type is POLY: the strands are polylines (the tracer's cylinders), so Blender's
 evaluated curve, its exporters and the tracer all see the same points.
@@ -19,7 +20,15 @@ import bpy
 
 from hairio import Strands
 
-ATTRIBUTES = ("position", "radius", "color", "alpha", "wisp")
+# The strand colour is not stored as "color": Cycles maps an Attribute node whose name is
+# one of its standard names to that standard attribute, and "color" is the standard volume
+# colour (like "density", "temperature", ...), which hair never has, so the node reads zero
+# and the hair renders black. EEVEE reads either name; this one reaches both engines.
+COLOR_ATTRIBUTE = "strand_rgba"
+# The name the colour had before; read when no COLOR_ATTRIBUTE is present, and dropped on refill.
+LEGACY_COLOR_ATTRIBUTE = "color"
+
+ATTRIBUTES = ("position", "radius", COLOR_ATTRIBUTE, "alpha", "wisp")
 
 
 def _attribute(curves, name, data_type, domain):
@@ -62,7 +71,11 @@ def fill_curves(curves, strands):
     rgba = np.empty((n_p, 4), np.float32)
     rgba[:, :3] = strands.color
     rgba[:, 3] = strands.alpha
-    _attribute(curves, "color", 'FLOAT_COLOR', 'POINT').data.foreach_set("color", rgba.ravel())
+    _attribute(curves, COLOR_ATTRIBUTE, 'FLOAT_COLOR', 'POINT').data.foreach_set("color", rgba.ravel())
+    legacy = curves.attributes.get(LEGACY_COLOR_ATTRIBUTE)
+    if legacy is not None and legacy.domain == 'POINT' and legacy.data_type == 'FLOAT_COLOR':
+        # Written by an earlier version of this module: stale now, so nothing may read it.
+        curves.attributes.remove(legacy)
     _attribute(curves, "alpha", 'FLOAT', 'POINT').data.foreach_set(
         "value", np.ascontiguousarray(strands.alpha, np.float32))
     _attribute(curves, "wisp", 'INT', 'CURVE').data.foreach_set(
@@ -102,13 +115,34 @@ def strands_to_curves(name, strands, collection=None, parent=None, obj=None):
     return obj
 
 
+def _retarget_legacy_nodes(mat):
+    """Point this module's material's Attribute nodes that read the old colour name (which
+    Cycles renders black) at COLOR_ATTRIBUTE."""
+    if mat.node_tree is None:
+        return
+    for node in mat.node_tree.nodes:
+        if node.type == 'ATTRIBUTE' and node.attribute_name == LEGACY_COLOR_ATTRIBUTE:
+            node.attribute_name = COLOR_ATTRIBUTE
+
+
+def _is_ours(mat, name):
+    return mat is not None and (mat.name == name or mat.name.startswith(name + "."))
+
+
 def ensure_hair_material(obj, name="Key-Strand Hair"):
-    """Give a hair Curves object without materials one that renders its `color` attribute
-    (Principled Hair BSDF, direct colouring), so Cycles and EEVEE show the groomed colours."""
+    """Give a hair Curves object without materials one that renders its COLOR_ATTRIBUTE
+    (Principled Hair BSDF, direct colouring), so Cycles and EEVEE show the groomed colours.
+    A material of this name made by an earlier version is repaired, an artist's own is
+    left alone."""
     if len(obj.data.materials):
-        return obj.data.materials[0]
+        mat = obj.data.materials[0]
+        if _is_ours(mat, name):
+            _retarget_legacy_nodes(mat)
+        return mat
     mat = bpy.data.materials.get(name)
-    if mat is None:
+    if mat is not None:
+        _retarget_legacy_nodes(mat)
+    else:
         mat = bpy.data.materials.new(name)
         if bpy.app.version < (5, 0, 0):  # node trees are always on from 5.0 (use_nodes deprecated)
             mat.use_nodes = True
@@ -118,7 +152,7 @@ def ensure_hair_material(obj, name="Key-Strand Hair"):
         bsdf = nodes.new("ShaderNodeBsdfHairPrincipled")
         bsdf.parametrization = 'COLOR'
         attr = nodes.new("ShaderNodeAttribute")
-        attr.attribute_name = "color"
+        attr.attribute_name = COLOR_ATTRIBUTE
         attr.location, bsdf.location, out.location = (-400, 0), (-150, 0), (150, 0)
         links.new(attr.outputs["Color"], bsdf.inputs["Color"])
         links.new(bsdf.outputs[0], out.inputs["Surface"])
@@ -130,8 +164,9 @@ def curves_to_strands(obj):
     """The strands of a hair Curves object (or its Curves datablock) as hairio.Strands.
 
     Reads the evaluated control points of the datablock as stored (local space). Missing
-    attributes get hairio's defaults; color comes from the `color` attribute's RGB, alpha
-    from `alpha` (else the color's A channel).
+    attributes get hairio's defaults; color comes from the COLOR_ATTRIBUTE's RGB (else, for
+    objects written by earlier versions, from `color`), alpha from `alpha` (else the colour's
+    A channel).
     """
     curves = obj.data if isinstance(obj, bpy.types.Object) else obj
     n_s, n_p = len(curves.curves), len(curves.points)
@@ -148,9 +183,15 @@ def curves_to_strands(obj):
         attrs["radius"].data.foreach_get("value", radius)
         kwargs["radius"] = radius
     rgba = None
-    if "color" in attrs and attrs["color"].domain == 'POINT' and attrs["color"].data_type == 'FLOAT_COLOR':
+    for name in (COLOR_ATTRIBUTE, LEGACY_COLOR_ATTRIBUTE):
+        color_attr = attrs.get(name)
+        if color_attr is not None and color_attr.domain == 'POINT' and color_attr.data_type == 'FLOAT_COLOR':
+            break
+    else:
+        color_attr = None
+    if color_attr is not None:
         rgba = np.empty(n_p * 4, np.float32)
-        attrs["color"].data.foreach_get("color", rgba)
+        color_attr.data.foreach_get("color", rgba)
         rgba = rgba.reshape(n_p, 4)
         kwargs["color"] = rgba[:, :3]
     if "alpha" in attrs and attrs["alpha"].domain == 'POINT' and attrs["alpha"].data_type == 'FLOAT':

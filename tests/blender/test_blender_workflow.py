@@ -73,7 +73,7 @@ def curves_arrays(obj):
     c.curve_offset_data.foreach_get("value", offsets)
     n = len(c.points)
     out = {"counts": np.diff(offsets)}
-    for name, width, key in (("position", 3, "vector"), ("radius", 1, "value"), ("color", 4, "color"),
+    for name, width, key in (("position", 3, "vector"), ("radius", 1, "value"), ("strand_rgba", 4, "color"),
                              ("alpha", 1, "value")):
         a = np.empty(n * width, np.float32)
         c.attributes[name].data.foreach_get(key, a)
@@ -113,7 +113,7 @@ def test_generate_writes_the_curves_groom_computes(clean):
     assert hair.keystrand_hair.role == 'HAIR'
     material = hair.data.materials[0]
     attribute_nodes = [n for n in material.node_tree.nodes if n.type == 'ATTRIBUTE']
-    assert [n.attribute_name for n in attribute_nodes] == ["color"], "the material does not show the hair colour"
+    assert [n.attribute_name for n in attribute_nodes] == ["strand_rgba"], "the material does not show the hair colour"
     expected = generate(read_scalp_arrays(scalp), [read_key(k) for k in keys],
                         params_of(scalp)).strands
     assert params_of(scalp).tidiness == pytest.approx(0.7) and params_of(scalp).count == 1500
@@ -122,7 +122,7 @@ def test_generate_writes_the_curves_groom_computes(clean):
     np.testing.assert_array_equal(got["counts"], expected.counts)
     np.testing.assert_array_equal(got["position"], expected.points)
     np.testing.assert_array_equal(got["radius"], expected.radius)
-    np.testing.assert_array_equal(got["color"][:, :3], expected.color)
+    np.testing.assert_array_equal(got["strand_rgba"][:, :3], expected.color)
     np.testing.assert_array_equal(got["alpha"], expected.alpha)
     np.testing.assert_array_equal(got["wisp"], expected.wisp)
 
