@@ -16,12 +16,12 @@ from .grid import build_grid
 from .settings import GRID_WIDEN_CAP, RenderSettings
 
 BLOCK = 4          # cells per side of the empty-space-skipping blocks (the shader's BLOCK)
-TEX_W = 4096       # texels per row of every texture of lists; the shader's texel() agrees
+TEX_W = 4096       # texels per row of the textures of lists unless more rows than the driver
+                   # allows would be needed; see texture_layout
 # Per cylinder, four consecutive RGBA32F texels of one texture (top+radius, tip+alpha,
 # n2+flags, colour): 64 bytes, one cache line, so a cylinder test on a CPU driver touches
-# one line where four textures took up to four. The shader's cyl_texel() agrees.
+# one line where four textures took up to four. The shader's cyl() agrees.
 TEXELS_PER_CYL = 4
-CYL_PER_ROW = TEX_W // TEXELS_PER_CYL
 SHADER_DIR = pathlib.Path(__file__).resolve().parent / "shaders"
 
 _VERTEX = """#version 330 core
@@ -51,8 +51,21 @@ def load_shader(name):
     return (SHADER_DIR / name).read_text()
 
 
-def _rows(n):
-    return max(1, -(-n // TEX_W))
+def texture_layout(name, n_texels, max_size, base_width=TEX_W):
+    """(log2 of the row width, rows) of a 2D texture holding `n_texels` in row-major order:
+    rows of `base_width` texels while the rows fit the driver's `max_size` per side, wider
+    power-of-two rows (up to `max_size`) when they do not. The shader finds texel i at
+    (i & (width - 1), i >> log2 width). InputError when even the widest rows do not fit."""
+    top = 1 << (int(max_size).bit_length() - 1)        # widest power of two the driver allows
+    width = max(TEXELS_PER_CYL, min(int(base_width), top))
+    while width < top and -(-n_texels // width) > max_size:
+        width *= 2
+    rows = max(1, -(-n_texels // width))
+    if rows > max_size:
+        raise InputError(f"scene too large for this GPU: {name} needs {n_texels} texels but the driver "
+                         f"allows {max_size} per side ({top * max_size} in all); render fewer strands "
+                         "or fewer points per strand")
+    return width.bit_length() - 1, rows
 
 
 class Renderer:
@@ -65,8 +78,13 @@ class Renderer:
     projected bounds that were traced), and with RenderSettings(count=True) also
     shadow_rays, layers_traced, cells_visited, cylinder_tests (summed over samples)."""
 
-    def __init__(self):
+    def __init__(self, max_texture_size=None, base_width=TEX_W):
+        """`max_texture_size` (default: the driver's GL_MAX_TEXTURE_SIZE) and `base_width`
+        shape the 2D textures (texture_layout); smaller values exercise big-scene layouts."""
         self.ctx = shared_context()
+        self.max_texture_size = int(max_texture_size or self.ctx.info["GL_MAX_TEXTURE_SIZE"])
+        self.base_width = int(base_width)
+        self._shift = {}     # log2 row width of tex_cyl and tex_idx
         self._programs = {}
         self._fbos = {}
         self._tex = {}
@@ -128,18 +146,19 @@ class Renderer:
             getattr(old, f)[dest] = getattr(new, f)
         self.strands = strands
         t1 = time.perf_counter()
-        rows = np.unique(dest // CYL_PER_ROW)
+        per = self._cyl_per_row
+        rows = np.unique(dest // per)
         # Consecutive rows go up in one write.
         breaks = np.flatnonzero(np.diff(rows) > 1)
         for a, b in zip(np.concatenate([[0], breaks + 1]), np.concatenate([breaks, [len(rows) - 1]])):
-            self._upload_cylinders(int(rows[a]) * CYL_PER_ROW, min(len(old), (int(rows[b]) + 1) * CYL_PER_ROW))
+            self._upload_cylinders(int(rows[a]) * per, min(len(old), (int(rows[b]) + 1) * per))
         t2 = time.perf_counter()
         self._build_and_upload_grid()
         self.stats["cylinders_s"] = t1 - t0
         self.stats["upload_s"] = t2 - t1 + self.stats.pop("_grid_upload_s")
 
     def _texture(self, name, size, components, dtype, data):
-        limit = self.ctx.info["GL_MAX_3D_TEXTURE_SIZE" if len(size) == 3 else "GL_MAX_TEXTURE_SIZE"]
+        limit = self.ctx.info["GL_MAX_3D_TEXTURE_SIZE"] if len(size) == 3 else self.max_texture_size
         if max(size) > limit:
             raise InputError(f"scene too large for this GPU: {name} needs {size} texels but the driver "
                              f"allows {limit} per side; render fewer strands or fewer points per strand")
@@ -160,7 +179,7 @@ class Renderer:
         """Cylinders a..b as RGBA float32 texels, TEXELS_PER_CYL per cylinder one after the
         other, zero-padded to `rows` texture rows."""
         c = self.cylinders
-        out = np.zeros((rows * CYL_PER_ROW, TEXELS_PER_CYL, 4), np.float32)
+        out = np.zeros((rows * self._cyl_per_row, TEXELS_PER_CYL, 4), np.float32)
         m = b - a
         out[:m, 0, :3], out[:m, 0, 3] = c.top[a:b], c.radius[a:b]
         out[:m, 1, :3], out[:m, 1, 3] = c.tip[a:b], c.alpha[a:b]
@@ -173,22 +192,30 @@ class Renderer:
         self.stats["uploads"] += 1
         self.all_opaque = bool(n == 0 or self.cylinders.alpha.min() >= 1.0)
         if full:
-            rows = max(1, -(-n // CYL_PER_ROW))
-            self._texture("tex_cyl", (TEX_W, rows), 4, "f4", self._cylinder_block(0, n, rows))
+            shift, rows = texture_layout("tex_cyl", n * TEXELS_PER_CYL, self.max_texture_size, self.base_width)
+            self._shift["tex_cyl"] = shift
+            self._texture("tex_cyl", (1 << shift, rows), 4, "f4", self._cylinder_block(0, n, rows))
         else:
-            r0, r1 = a // CYL_PER_ROW, max(1, -(-b // CYL_PER_ROW))
-            data = self._cylinder_block(r0 * CYL_PER_ROW, min(n, r1 * CYL_PER_ROW), r1 - r0)
-            self._tex["tex_cyl"].write(data, viewport=(0, r0, TEX_W, r1 - r0))
+            per = self._cyl_per_row
+            r0, r1 = a // per, max(1, -(-b // per))
+            data = self._cylinder_block(r0 * per, min(n, r1 * per), r1 - r0)
+            self._tex["tex_cyl"].write(data, viewport=(0, r0, 1 << self._shift["tex_cyl"], r1 - r0))
             self.stats["bytes_uploaded"] += data.nbytes
+
+    @property
+    def _cyl_per_row(self):
+        return (1 << self._shift["tex_cyl"]) // TEXELS_PER_CYL
 
     def _build_and_upload_grid(self):
         t0 = time.perf_counter()
         self.grid = build_grid(self.cylinders, pad_factor=self._grid_pad)
         t1 = time.perf_counter()
         g = self.grid
-        idx = np.zeros(_rows(len(g.indices)) * TEX_W, np.int32)
+        shift, rows = texture_layout("tex_idx", len(g.indices), self.max_texture_size, self.base_width)
+        self._shift["tex_idx"] = shift
+        idx = np.zeros(rows << shift, np.int32)
         idx[:len(g.indices)] = g.indices
-        self._texture("tex_idx", (TEX_W, _rows(len(g.indices))), 1, "i4", idx)
+        self._texture("tex_idx", (1 << shift, rows), 1, "i4", idx)
         cells = np.column_stack([g.cell_start, g.cell_count]).astype(np.int32)
         # An empty cell's start is unused; -1 there says its whole block of BLOCK³ cells is
         # empty, so the DDA learns "skip the block" from the one texel it reads per cell.
@@ -331,6 +358,8 @@ class Renderer:
         for i, name in enumerate(("tex_cyl", "tex_idx", "tex_cell")):
             self._tex[name].use(location=i)
             _set(prog, name, i)
+        _set(prog, "cyl_shift", self._shift["tex_cyl"] - 2)     # log2 cylinders per row
+        _set(prog, "idx_shift", self._shift["tex_idx"])
         _set(prog, "grid_lo", tuple(float(x) for x in g.lo))
         _set(prog, "cell_size", tuple(float(x) for x in g.cell_size))
         _set(prog, "dims", tuple(int(x) for x in g.dims))

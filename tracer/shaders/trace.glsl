@@ -45,10 +45,14 @@ vec4 counter = vec4(0.0);
 
 const float BIG = 1e30;
 
-ivec2 texel(int i) { return ivec2(i & 4095, i >> 12); }
+// Row widths are powers of two chosen by the host to fit the driver's texture size
+// (renderer.texture_layout): 2^idx_shift texels of tex_idx, 2^cyl_shift cylinders of tex_cyl.
+uniform int idx_shift;
+uniform int cyl_shift;
+ivec2 texel(int i) { return ivec2(i & ((1 << idx_shift) - 1), i >> idx_shift); }
 const int TOP = 0, TIP = 1, N2 = 2, COL = 3;
-// Texel `j` of cylinder `id`: 1024 cylinders per row of 4096 texels.
-vec4 cyl(int id, int j) { return texelFetch(tex_cyl, ivec2(((id & 1023) << 2) | j, id >> 10), 0); }
+// Texel `j` of cylinder `id`.
+vec4 cyl(int id, int j) { return texelFetch(tex_cyl, ivec2(((id & ((1 << cyl_shift) - 1)) << 2) | j, id >> cyl_shift), 0); }
 
 // Fixed per-sample hash (lowbias32); the reference tracer computes the same integers.
 uint hash32(uint x) {
