@@ -31,6 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hairio import InputError
+
 SHARP_BEND_DEG = 80.0
 _COS_SHARP = np.cos(np.radians(SHARP_BEND_DEG))
 MERGE_EPS = 1e-7
@@ -88,10 +90,46 @@ def _distinct_points(strands, strand_of_point):
     return keep
 
 
+# How many times its radius the float32 spacing at a strand's coordinates may be before the
+# strand counts as unresolved. Past a few radii the strand zigzags by more than its width,
+# but it still renders where it is (coarsely); far past it a small head's points round onto
+# each other, its cylinders vanish, and the image comes out empty without a word (a 0.2 mm
+# head of radius 1e-6 at 1e4 m: spacing 1e3 radii). 16 keeps scenes that render coarsely
+# but visibly (0.1 mm hair 1e4 m out: spacing ~10 radii) and stops the collapse.
+SPACING_PER_RADIUS_MAX = 16.0
+
+
+def check_float32_precision(strands):
+    """InputError when float32 points (SPEC §0) cannot resolve the thinnest strand: when the
+    float32 spacing at the strands' coordinates exceeds SPACING_PER_RADIUS_MAX times the
+    smallest strand radius (a strand's largest radius), and the image would otherwise come
+    out empty or wrong without a word (SPEC §9)."""
+    if not strands.num_points:
+        return
+    # A strand's thickness is its largest radius: tapered tips go towards zero by design
+    # and may fall below the spacing without harm (they are thinner than anything drawn).
+    nonempty = strands.counts > 0
+    thick = np.maximum.reduceat(strands.radius, strands.offsets[nonempty]) if nonempty.any() else strands.radius[:0]
+    pos = thick[thick > 0]
+    if not pos.size:
+        return
+    far = float(np.abs(strands.points).max())
+    spacing = float(np.spacing(np.float32(far)))
+    rmin = float(pos.min())
+    if spacing > SPACING_PER_RADIUS_MAX * rmin:
+        raise InputError(f"points: coordinates reach {far:.6g}, where float32 numbers lie {spacing:.3g} apart, "
+                         f"more than {SPACING_PER_RADIUS_MAX:g} times the thinnest strand's radius {rmin:.3g}; "
+                         "the strands cannot be resolved. "
+                         "Recentre the strands near the origin, e.g. subtract their bounds' centre "
+                         "(and move the camera and lights by the same amount)")
+
+
 def strands_to_cylinders(strands):
     """hairio.Strands -> Cylinders (float32 arrays for the GPU; the reference promotes them).
     Whole-array float32 work: the GPU consumes float32, and the reference promotes exactly
-    these values, so both trace the same cylinders."""
+    these values, so both trace the same cylinders. InputError where float32 cannot resolve
+    the strands (check_float32_precision)."""
+    check_float32_precision(strands)
     counts = strands.counts.astype(np.int64)
     strand_of_point = np.repeat(np.arange(len(counts), dtype=np.int32), counts)
     keep = _distinct_points(strands, strand_of_point)

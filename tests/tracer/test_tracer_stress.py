@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from hairio import InputError, Strands
-from tracer import Camera, RenderSettings
+from tracer import Camera, RenderSettings, reference_render
 
 from tracer_scenes import curls, make_strands
 
@@ -70,6 +70,23 @@ def test_tiny_radius_offsets_and_scales(renderer, scale, offset):
     img = _finite(renderer.render(cam, SETTINGS))
     if scale != 1e-6:
         assert img[..., 3].max() > 0   # still visible after the offset: no precision collapse
+
+
+@pytest.mark.parametrize("offset", [1e4, -3e3])
+def test_radius_below_float32_spacing_raises_naming_points(renderer, offset):
+    # A 0.2 mm head (radius 1e-6) far from the origin: float32 points lie ~1e-3 apart there,
+    # the cylinders collapse, and the image once came out empty without a word.
+    head = curls(8, 8, radius=1e-6)
+    near = Strands.from_arrays(head.points * 2e-4, head.counts, radius=head.radius, color=head.color)
+    s = Strands.from_arrays(head.points * 2e-4 + offset, head.counts, radius=head.radius, color=head.color)
+    with pytest.raises(InputError, match=r"points:.*float32.*Recentre the strands near the origin"):
+        renderer.set_strands(s)
+    cam = Camera.frame_bounds(*s.bounds(), (8, 8))
+    with pytest.raises(InputError, match=r"points:.*thinnest strand.s radius 1e-06"):
+        reference_render(s, cam, SETTINGS)
+    # The same head near the origin renders.
+    renderer.set_strands(near)
+    assert _finite(renderer.render(Camera.frame_bounds(*near.bounds(), (16, 16)), SETTINGS))[..., 3].max() > 0
 
 
 def test_nan_and_inf_input_rejected_naming_the_array():
