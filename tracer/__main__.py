@@ -58,19 +58,31 @@ def parse_camera(text, strands, size):
     return Camera.look_at(eye, target, fov_deg=fov, size=size)
 
 
-def main(argv=None):
+def build_parser():
     parser = argparse.ArgumentParser(prog="python -m tracer", description="Render strands with the GPU ray tracer.")
     sub = parser.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a strand file to a PNG")
-    r.add_argument("input")
-    r.add_argument("--out", required=True)
-    r.add_argument("--size", default="512x512")
-    r.add_argument("--spp", type=int, default=1)
-    r.add_argument("--shadows", dest="shadows", action="store_true", default=True)
-    r.add_argument("--no-shadows", dest="shadows", action="store_false")
-    r.add_argument("--layers", type=int, default=4)
-    r.add_argument("--shading", choices=("phong", "kajiya-kay"), default="kajiya-kay")
-    r.add_argument("--camera", default="auto")
+    r.add_argument("input", help="strand file to render (.npz, or any format hairio.formats reads)")
+    r.add_argument("--out", required=True, help="PNG image to write (RGBA, transparent background); "
+                   "its folder must exist")
+    r.add_argument("--size", default="512x512", help="image size WIDTHxHEIGHT in pixels, each 1..16384 (default %(default)s)")
+    r.add_argument("--spp", type=int, default=1,
+                   help="samples per pixel, a square number (1, 4, 9, ...) for stratified sampling (default %(default)s)")
+    r.add_argument("--shadows", dest="shadows", action="store_true", default=True,
+                   help="trace shadow rays toward the lights (the default)")
+    r.add_argument("--no-shadows", dest="shadows", action="store_false", help="no shadow rays: faster, flatter")
+    r.add_argument("--layers", type=int, default=4,
+                   help="semi-transparent hits composited front to back per ray, 1..64 (default %(default)s)")
+    r.add_argument("--shading", choices=("phong", "kajiya-kay"), default="kajiya-kay",
+                   help="shading model (default %(default)s)")
+    r.add_argument("--camera", default="auto",
+                   help="auto (frame the strands' bounds from the front) or EYE:TARGET:FOV as "
+                        "x,y,z:tx,ty,tz:degrees, e.g. 0,-3,1:0,0,1:40 (default %(default)s)")
+    return parser
+
+
+def main(argv=None):
+    parser = build_parser()
     args = parser.parse_args(argv)
     try:
         size = parse_size(args.size)

@@ -140,3 +140,10 @@ def test_worker_that_cannot_start_raises(tmp_path):
 def test_write_png_is_atomic(tmp_path):
     with pytest.raises(FileNotFoundError):
         write_png(tmp_path / "missing-folder" / "x.png", np.zeros((2, 2, 4)))
+
+
+def test_every_render_option_has_help():
+    from tracer.__main__ import build_parser
+    sub = next(a for a in build_parser()._actions if a.dest == "command").choices["render"]
+    missing = [a.dest for a in sub._actions if a.dest != "help" and not (a.help or "").strip()]
+    assert missing == []
