@@ -33,6 +33,14 @@ def _errors():
     return (SceneError, InputError)
 
 
+def _scalp_or_report(op, context):
+    """The scalp the operator works on, or None after reporting why there is none."""
+    scalp = find_scalp(context)
+    if scalp is None:
+        op.report({'ERROR'}, "Select a scalp mesh first")
+    return scalp
+
+
 def _poll_scalp(cls, context):
     if find_scalp(context) is None:
         cls.poll_message_set("Select a scalp mesh, or one of its key strands or its hair")
@@ -139,9 +147,8 @@ class HAIR_OT_add_key_strand(Operator):
         import numpy as np
         from groom import place_key
         from groom.frames import root_frames
-        scalp = find_scalp(context)
+        scalp = _scalp_or_report(self, context)
         if scalp is None:
-            self.report({'ERROR'}, "Select a scalp mesh first")
             return {'CANCELLED'}
         settings = scalp.keystrand_hair
         try:
@@ -178,9 +185,8 @@ class HAIR_OT_generate(Operator):
 
     def execute(self, context):
         from .hair import generate
-        scalp = find_scalp(context)
+        scalp = _scalp_or_report(self, context)
         if scalp is None:
-            self.report({'ERROR'}, "Select a scalp mesh first")
             return {'CANCELLED'}
         try:
             hair, result, t = generate(scalp, context.evaluated_depsgraph_get())
@@ -206,9 +212,8 @@ class HAIR_OT_render_preview(Operator):
     def execute(self, context):
         from . import preview
         from .hair import existing_hair
-        scalp = find_scalp(context)
+        scalp = _scalp_or_report(self, context)
         if scalp is None:
-            self.report({'ERROR'}, "Select a scalp mesh first")
             return {'CANCELLED'}
         hair = existing_hair(scalp)
         if hair is None:
@@ -255,9 +260,8 @@ class HAIR_OT_load_preset(Operator):
     def execute(self, context):
         from groom import load_preset
         from .properties import dict_to_settings
-        scalp = find_scalp(context)
+        scalp = _scalp_or_report(self, context)
         if scalp is None:
-            self.report({'ERROR'}, "Select a scalp mesh first")
             return {'CANCELLED'}
         source = self.filepath or str(preset_files().get(self.preset, ""))
         if not source:
@@ -309,9 +313,8 @@ class HAIR_OT_save_preset(Operator, ExportHelper):
     def execute(self, context):
         from groom import save_preset
         from .properties import groom_params
-        scalp = find_scalp(context)
+        scalp = _scalp_or_report(self, context)
         if scalp is None:
-            self.report({'ERROR'}, "Select a scalp mesh first")
             return {'CANCELLED'}
         try:
             keys = scene_data.read_keys(scalp)
