@@ -69,11 +69,12 @@ def root_frames(normals, up=DEFAULT_UP, front=DEFAULT_FRONT, inner_deg=10.0, out
     s = x * x * (3.0 - 2.0 * x)
     v = (1.0 - s)[:, None] * _project(-up, n) + s[:, None] * _project(front, n)
     side = np.cross(up, front)
-    for fallback in (_project(side, n), _project(front, n), _project(up, n)):
+    # Fallbacks are projected only for the rows that need them (almost none on a scalp).
+    for fallback in (side, front, up):
         short = np.linalg.norm(v, axis=1) < 1e-9
         if not short.any():
             break
-        v[short] = fallback[short]
+        v[short] = _project(fallback, n[short])
     # n is parallel to none of up, front, side at once, but guard the last possibility anyway.
     short = np.linalg.norm(v, axis=1) < 1e-9
     if short.any():
