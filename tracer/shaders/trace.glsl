@@ -307,10 +307,13 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
                 float t = hit_cylinder(id, o, d, widen_per_t, widen_const, surf, asc);
                 // A hit outside this cell's [tcur, texit) belongs to another cell the
                 // cylinder is also listed in (half-open, so a hit on a face counts once).
-                if (t > 0.0 && t >= tcur && (t < texit || last) && (n < LAYERS || t < ht[LAYERS - 1])) {
+                // Equal distances are ordered by id, so the result does not depend on the
+                // order of the cell's list (the GPU grid build fills lists with atomics).
+                if (t > 0.0 && t >= tcur && (t < texit || last)
+                        && (n < LAYERS || t < ht[LAYERS - 1] || (t == ht[LAYERS - 1] && id < hid[LAYERS - 1]))) {
                     int j = n < LAYERS ? n : LAYERS - 1;
                     if (n < LAYERS) ++n;
-                    for (; j > 0 && ht[j - 1] > t; --j) {
+                    for (; j > 0 && (ht[j - 1] > t || (ht[j - 1] == t && hid[j - 1] > id)); --j) {
                         ht[j] = ht[j - 1]; ha[j] = ha[j - 1]; hid[j] = hid[j - 1]; hs[j] = hs[j - 1];
                     }
                     ht[j] = t; hid[j] = id; hs[j] = surf;
