@@ -102,29 +102,45 @@ def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=
 
 def strand_attributes(seed, ids, counts, along, base_radius, base_color, params):
     """Per-point radius, colour and alpha (SPEC §6), float32, for strands with `counts` points
-    at fractions `along` (P,) of their length (0 at the root, 1 at the tip), so a profile is
-    the same whatever the resolution. Radius: r(1 - s) ('linear', the thesis's r(1 - i/res)),
-    r ('constant'), or constant up to taper_start then linear to 0 ('taper_from'). Colour:
-    base + U(-1,1)·variation per strand and per point, clamped to [0, 1]. Alpha: 1 up to
-    alpha_start, then linear to alpha_tip at the tip."""
+    at fractions `along` of their length (0 at the root, 1 at the tip), so a profile is the
+    same whatever the resolution: `along` is flat (P,), or (n,) shared by every strand when
+    all counts are n (fixed resolution: the profiles are then made once and broadcast).
+    Radius: r(1 - s) ('linear', the thesis's r(1 - i/res)), r ('constant'), or constant up to
+    taper_start then linear to 0 ('taper_from'). Colour: base + U(-1,1)·variation per strand
+    and per point, clamped to [0, 1]. Alpha: 1 up to alpha_start, then linear to alpha_tip."""
     n_pts = int(counts.sum())
+    shared = along.shape != (n_pts,)
     s = along.astype(np.float32)
-    r = np.repeat(base_radius.astype(np.float32), counts)
+    # Per-strand values meet per-point ones row by row (shared profile) or repeated per point.
+    if shared:
+        def per_point(x):
+            return x[:, None]
+
+        def flat(x):
+            return x.reshape((n_pts,) + x.shape[2:])
+    else:
+        def per_point(x):
+            return np.repeat(x, counts, axis=0)
+
+        def flat(x):
+            return x
+    r = per_point(base_radius.astype(np.float32))
     if params.radius_mode == "linear":
         radius = r * (np.float32(1.0) - s)
     elif params.radius_mode == "constant":
-        radius = r
+        radius = r * np.ones_like(s)
     else:
         span = np.float32(max(1.0 - params.taper_start, 1e-12))
         radius = r * np.clip((np.float32(1.0) - s) / span, 0.0, 1.0)
     var = np.asarray(params.color_variation)
-    color = base_color.copy()
+    color = base_color
     if var.any():
         u = np.stack([rng.uniform(seed, ids, rng.CH_COLOR + c) for c in range(3)], 1)
         color = color + (2.0 * u - 1.0) * var
-    color = np.repeat(color.astype(np.float32), counts, axis=0)
+    color = color.astype(np.float32)
     var_p = np.asarray(params.color_variation_point)
     if var_p.any():
+        color = np.repeat(color, counts, axis=0)
         strand = np.repeat(np.arange(len(counts)), counts)
         offsets = np.zeros(len(counts), np.int64)
         np.cumsum(counts[:-1], out=offsets[1:])
@@ -132,13 +148,24 @@ def strand_attributes(seed, ids, counts, along, base_radius, base_color, params)
         sid = ids[strand]
         u = np.stack([rng.uniform(seed, sid, rng.CH_COLOR_POINT + 3 * k + c) for c in range(3)], 1)
         color += ((2.0 * u - 1.0) * var_p).astype(np.float32)
-    np.clip(color, 0.0, 1.0, out=color)
+        np.clip(color, 0.0, 1.0, out=color)
+    else:
+        # One colour per strand: clamp it once, then copy it to the strand's points.
+        np.clip(color, 0.0, 1.0, out=color)
+        if shared:
+            n = len(along)
+            color = np.broadcast_to(color[:, None, :], (len(counts), n, 3)).reshape(n_pts, 3)
+        else:
+            color = np.repeat(color, counts, axis=0)
     if params.alpha_start >= 1.0 or params.alpha_tip == 1.0:
         alpha = np.ones(n_pts, np.float32)
     else:
         t = np.clip((s - params.alpha_start) / (1.0 - params.alpha_start), 0.0, 1.0)
         alpha = (1.0 + (params.alpha_tip - 1.0) * t).astype(np.float32)
-    return radius, color, alpha
+        if shared:
+            alpha = np.broadcast_to(alpha, (len(counts), len(along)))
+        alpha = flat(np.ascontiguousarray(alpha))
+    return flat(radius), color, alpha
 
 
 def _segment_distances(points, a, b):

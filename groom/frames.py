@@ -54,37 +54,57 @@ def root_frames(normals, up=DEFAULT_UP, front=DEFAULT_FRONT, inner_deg=10.0, out
     normals (N,3) need not be exactly unit. A local offset (x, y, z) maps to the world as
     frame @ (x, y, z): x runs down the head, y across it, z out of the scalp.
     """
+    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    axes = frame_axes(n.T, up, front, inner_deg, outer_deg)
+    return np.stack([a.T for a in axes], axis=2)
+
+
+def frame_axes(normals, up=DEFAULT_UP, front=DEFAULT_FRONT, inner_deg=10.0, outer_deg=40.0):
+    """root_frames component-major: normals (3, N); returns (main tangent, second tangent,
+    normal), each (3, N) float64. Whole-array work on one contiguous row per component is
+    several times faster than on (N,3) rows of three."""
     up = _axis("up", up)
     front = _axis("front", front)
     if abs(float(up @ front)) > 0.999:
         raise InputError("front: must not be parallel to up; give the direction the face looks")
     if not 0.0 <= inner_deg < outer_deg <= 180.0:
         raise InputError("crown blend angles: need 0 <= inner_deg < outer_deg <= 180")
-    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-    length = np.linalg.norm(n, axis=1, keepdims=True)
-    n = np.where(length > 1e-300, n / np.where(length > 1e-300, length, 1.0), up)
-    c = n @ up
+    n = np.asarray(normals, dtype=np.float64).reshape(3, -1)
+    length = _norm(n)
+    ok = length > 1e-300
+    n = np.where(ok, n / np.where(ok, length, 1.0), up[:, None])
+    c = _dot(up, n)
     lo, hi = np.cos(np.radians(outer_deg)), np.cos(np.radians(inner_deg))
     x = np.clip((c - lo) / (hi - lo), 0.0, 1.0)
     s = x * x * (3.0 - 2.0 * x)
-    v = (1.0 - s)[:, None] * _project(-up, n) + s[:, None] * _project(front, n)
+    # (1 - s)·proj_N(-up) + s·proj_N(front), with proj_N(v) = v - (v·N) N
+    v = (1.0 - s) * (c * n - up[:, None]) + s * (front[:, None] - _dot(front, n) * n)
     side = np.cross(up, front)
     # Fallbacks are projected only for the rows that need them (almost none on a scalp).
     for fallback in (side, front, up):
-        short = np.linalg.norm(v, axis=1) < 1e-9
+        short = _norm(v) < 1e-9
         if not short.any():
             break
-        v[short] = _project(fallback, n[short])
+        v[:, short] = _project(fallback, n[:, short].T).T
     # n is parallel to none of up, front, side at once, but guard the last possibility anyway.
-    short = np.linalg.norm(v, axis=1) < 1e-9
+    short = _norm(v) < 1e-9
     if short.any():
-        e = np.eye(3)[np.argmin(np.abs(n[short]), axis=1)]
-        v[short] = _project(e, n[short])
-    v = _project(v, n)  # exact tangency after the blend
-    t = v / np.linalg.norm(v, axis=1, keepdims=True)
-    b = np.cross(n, t)
-    b /= np.linalg.norm(b, axis=1, keepdims=True)
-    return np.stack([t, b, n], axis=2)
+        e = np.eye(3)[np.argmin(np.abs(n[:, short]), axis=0)]
+        v[:, short] = _project(e, n[:, short].T).T
+    v -= _dot(v, n) * n  # exact tangency after the blend
+    t = v / _norm(v)
+    b = np.stack([n[1] * t[2] - n[2] * t[1], n[2] * t[0] - n[0] * t[2], n[0] * t[1] - n[1] * t[0]])
+    b /= _norm(b)
+    return t, b, n
+
+
+def _dot(a, b):
+    """Row-wise dot product of component-major (3, N) arrays (either may be a plain 3-vector)."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _norm(v):
+    return np.sqrt(_dot(v, v))
 
 
 def whorl_direction(up=DEFAULT_UP, front=DEFAULT_FRONT, inner_deg=10.0, outer_deg=40.0):
@@ -107,17 +127,15 @@ def rotation_xyz(angles):
     """Rotation matrices (N,3,3) = Rz(angles[:,2]) @ Ry(angles[:,1]) @ Rx(angles[:,0]):
     angles about the frame's main tangent (x), second tangent (y), normal (z), in radians."""
     a = np.asarray(angles, dtype=np.float64).reshape(-1, 3)
-    cx, sx = np.cos(a[:, 0]), np.sin(a[:, 0])
-    cy, sy = np.cos(a[:, 1]), np.sin(a[:, 1])
-    cz, sz = np.cos(a[:, 2]), np.sin(a[:, 2])
-    r = np.empty((len(a), 3, 3))
-    r[:, 0, 0] = cz * cy
-    r[:, 0, 1] = cz * sy * sx - sz * cx
-    r[:, 0, 2] = cz * sy * cx + sz * sx
-    r[:, 1, 0] = sz * cy
-    r[:, 1, 1] = sz * sy * sx + cz * cx
-    r[:, 1, 2] = sz * sy * cx - cz * sx
-    r[:, 2, 0] = -sy
-    r[:, 2, 1] = cy * sx
-    r[:, 2, 2] = cy * cx
-    return r
+    return np.stack(rotation_entries(a.T), axis=1).reshape(-1, 3, 3)
+
+
+def rotation_entries(angles):
+    """rotation_xyz entry-major: angles (3, N); returns the nine entries, entry (i, j) at
+    3i + j, each (N,)."""
+    cx, sx = np.cos(angles[0]), np.sin(angles[0])
+    cy, sy = np.cos(angles[1]), np.sin(angles[1])
+    cz, sz = np.cos(angles[2]), np.sin(angles[2])
+    return [cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx,
+            sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx,
+            -sy, cy * sx, cy * cx]

@@ -13,14 +13,14 @@ import numpy as np
 from hairio import InputError, Strands
 
 from .cylinders import adaptive_sigma, strand_attributes
-from .frames import root_frames
-from .interpolate import (KEY_SAMPLES, evaluate_strands, key_table, length_fractions,
-                          strand_transforms, tidiness_angles, uniform_sigma)
+from .frames import frame_axes, root_frames
+from .interpolate import (KEY_SAMPLES, curvature_bound, evaluate_strands, key_offsets, key_rows,
+                          length_fractions, strand_transforms, tidiness_angles, uniform_sigma)
 from .keys import KeyStrand
 from .params import GroomParams
 from .sampling import sample_roots
 from .scalp import Scalp
-from .wisps import guide_weights, root_groups_for
+from .wisps import guide_weights_by_guide, root_groups_for
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,7 +55,11 @@ def _check_inputs(scalp, keys, params):
 
 class Generator:
     """Incremental generator. `generate()` gives the full result; `update_keys({i: KeyStrand})`
-    replaces keys and returns the new result, recomputing only affected strands."""
+    replaces keys and returns the new result, recomputing only affected strands.
+
+    Per-strand arrays are kept component-major (one contiguous row per component), the
+    layout whole-array numpy code reads fastest; results are returned in the (S, 3) layout
+    of GroomResult."""
 
     def __init__(self, scalp, keys, params, samples=None):
         """samples: optional sampling.RootSamples to grow from instead of sampling
@@ -66,90 +70,111 @@ class Generator:
         if samples is None:
             samples = sample_roots(scalp, p.count, p.seed, p.sampling_mode)
         self.samples = samples
+        self._roots = np.ascontiguousarray(samples.points.T)
         normals = scalp.normals_at(samples.tri, samples.bary, p.normal_mode)
-        self.frames = root_frames(normals, p.up, p.front)
+        self._axes = frame_axes(normals.T, p.up, p.front)
         self.root_uv = scalp.uv_at(samples.tri, samples.bary)
         self.root_groups = root_groups_for(scalp, samples.tri, samples.bary, samples.points, p)
         ids = samples.ids
         self.frac = length_fractions(p.seed, ids, p.min_length, p.max_length)
-        self.transforms = strand_transforms(self.frames, tidiness_angles(p.seed, ids, p.tidiness, p.theta_max),
-                                            p.intelligence)
-        self._key_data = [self._prepare_key(k) for k in self.keys]
+        angles = tidiness_angles(p.seed, ids, p.tidiness, p.theta_max)
+        self.transforms = strand_transforms(self._axes, angles, p.intelligence)
+        self._key_data = self._prepare_keys(self.keys)
         self._result = None
         self._cache = None
         self.last_recomputed = 0  # strands recomputed by the last update_keys
 
-    def _prepare_key(self, key):
-        tri, bary, _ = self.scalp.closest_points(key.root[None])
-        normal = self.scalp.normals_at(tri, bary, self.params.normal_mode)
-        frame = root_frames(normal, self.params.up, self.params.front)[0]
-        table, bound = key_table(key, frame, self.params.intelligence, KEY_SAMPLES)
-        radius = self.params.radius if key.root_radius is None else key.root_radius
-        color = np.asarray(self.params.color if key.color is None else key.color, dtype=np.float64)
-        return {"table": table, "bound": bound, "root": key.root.copy(), "group": key.group,
-                "radius": radius, "color": color}
+    @property
+    def frames(self):
+        """Root frames (S,3,3), columns (main tangent, second tangent, normal)."""
+        return np.stack([a.T for a in self._axes], axis=2)
+
+    def _prepare_keys(self, keys):
+        """Per key: its blend rows, curvature bound (adaptive resolution only), root, group,
+        radius and colour. The keys' roots are placed on the scalp all at once."""
+        p = self.params
+        tri, bary, _ = self.scalp.closest_points(np.array([k.root for k in keys]))
+        normal = self.scalp.normals_at(tri, bary, p.normal_mode)
+        frames = root_frames(normal, p.up, p.front)
+        out = []
+        for key, frame in zip(keys, frames):  # a few keys, not strands
+            table, length = key_offsets(key, frame, p.intelligence, KEY_SAMPLES)
+            bound = curvature_bound(table, length) if p.resolution_mode == "adaptive" else None
+            radius = p.radius if key.root_radius is None else key.root_radius
+            color = np.asarray(p.color if key.color is None else key.color, dtype=np.float64)
+            out.append({"rows": key_rows(table), "bound": bound, "root": key.root.copy(),
+                        "group": key.group, "radius": radius, "color": color})
+        return out
 
     def _assign(self):
         kd = self._key_data
         key_roots = np.array([d["root"] for d in kd])
         key_groups = np.array([d["group"] for d in kd], np.int32)
-        return guide_weights(self.samples.points, key_roots, self.params.neighbour_mode,
-                             self.params.n_influence, self.root_groups, key_groups)
+        g, w = guide_weights_by_guide(self.samples.points, key_roots, self.params.neighbour_mode,
+                                      self.params.n_influence, self.root_groups, key_groups)
+        return np.stack(g), np.stack(w)
 
     def evaluate(self, sel, cylinders):
         """Points of strands `sel` at the given numbers of equal steps in σ (S,) (measurement:
-        dense samples of the exact curve). Returns (points (P,3) float64, counts (S,))."""
+        dense samples of the exact curve). Returns (points (P,3) float32, counts (S,))."""
         if self._result is None:
             self.generate()
         sel = np.asarray(sel, np.int64)
-        tables = np.stack([d["table"] for d in self._key_data])
+        rows = np.stack([d["rows"] for d in self._key_data])
         sigma, counts = uniform_sigma(self.frac[sel], np.asarray(cylinders, np.int64))
-        pts = evaluate_strands(self.samples.points[sel], self.transforms[sel], self._guides[sel],
-                               self._weights[sel], counts, sigma, tables)
+        pts = evaluate_strands(self._roots[:, sel], self.transforms[:, sel], self._guides[:, sel],
+                               self._weights[:, sel].astype(np.float32), counts, rows, sigma=sigma)
         return pts, counts
 
     def _strands(self, sel, guides, weights):
-        """Points and attributes of the strands `sel` (indices into the roots), in that order."""
+        """Points and attributes of the strands `sel` (indices into the roots, in that order;
+        None: all of them). guides (3, S), weights (3, S) as from _assign."""
         p, kd = self.params, self._key_data
-        tables = np.stack([d["table"] for d in kd])
-        g, w = guides[sel], weights[sel]
+
+        def pick(x):
+            return x if sel is None else x[..., sel]
+        g, w = pick(guides), pick(weights)
+        frac, ids = pick(self.frac), pick(self.samples.ids)
         radii = np.array([d["radius"] for d in kd], dtype=np.float64)
-        base_radius = w[:, 0] * radii[g[:, 0]] + w[:, 1] * radii[g[:, 1]] + w[:, 2] * radii[g[:, 2]]
+        base_radius = w[0] * radii[g[0]] + w[1] * radii[g[1]] + w[2] * radii[g[2]]
         colors = np.stack([d["color"] for d in kd])
-        base_color = (w[:, 0, None] * colors[g[:, 0]] + w[:, 1, None] * colors[g[:, 1]]
-                      + w[:, 2, None] * colors[g[:, 2]])
+        base_color = np.stack([w[0] * colors[g[0], c] + w[1] * colors[g[1], c] + w[2] * colors[g[2], c]
+                               for c in range(3)], axis=1)
         max_cyl = p.points_per_strand - 1
+        rows = np.stack([d["rows"] for d in kd])
+        args = (pick(self._roots), pick(self.transforms), g, w.astype(np.float32))
         if p.resolution_mode == "fixed":
-            sigma, counts = uniform_sigma(self.frac[sel], np.full(len(sel), max_cyl, np.int64))
+            # Every strand the same count: σ and the attribute profiles are made per chunk / once.
+            counts = np.full(len(frac), max_cyl + 1, np.int64)
+            pts = evaluate_strands(*args, counts, rows, frac=frac)
+            along = np.arange(max_cyl + 1) / max_cyl
         else:
-            tol = p.tolerance * (base_radius if p.tolerance_units == "radius" else np.ones(len(sel)))
+            tol = p.tolerance * (base_radius if p.tolerance_units == "radius" else np.ones(len(frac)))
             tol = np.maximum(tol, 1e-300)
             bins = np.stack([d["bound"] for d in kd])
-            sigma, counts = adaptive_sigma(self.frac[sel], g, w, bins, tol, max_cyl)
-        pts = evaluate_strands(self.samples.points[sel], self.transforms[sel], g, w, counts, sigma, tables)
-        along = sigma / np.repeat(self.frac[sel], counts)
-        radius, color, alpha = strand_attributes(p.seed, self.samples.ids[sel], counts, along, base_radius,
-                                                 base_color, p)
+            sigma, counts = adaptive_sigma(frac, g.T, w.T, bins, tol, max_cyl)
+            pts = evaluate_strands(*args, counts, rows, sigma=sigma)
+            along = sigma / np.repeat(frac, counts)
+        radius, color, alpha = strand_attributes(p.seed, ids, counts, along, base_radius, base_color, p)
         return pts, counts, radius, color, alpha
 
     def _build(self, guides, weights, parts):
         pts, counts, radius, color, alpha = parts
         s = self.samples
-        strands = Strands.from_arrays(pts, counts.astype(np.int32), radius, color, alpha,
-                                      guides[:, 0].astype(np.int32))
-        # float32, as Strands keeps them: splicing then copies half the bytes.
-        self._cache = {"pts": strands.points, "counts": counts, "radius": strands.radius,
-                       "color": strands.color, "alpha": strands.alpha}
-        self._result = GroomResult(strands, s.points, self.root_uv, guides.astype(np.int32),
-                                   weights.astype(np.float32), s.ids, s.tri, s.bary)
+        # The arrays are groom's own, already float32/int32 and checked where their inputs
+        # entered (finite keys and scalp, radii >= 0, colours clamped, alpha in [0, 1]), so
+        # the Strands is made directly instead of re-validating and copying 3M points.
+        strands = Strands(pts, counts.astype(np.int32), radius, color, alpha, guides[0].astype(np.int32))
+        self._cache = {"pts": pts, "counts": counts, "radius": radius, "color": color, "alpha": alpha}
+        self._result = GroomResult(strands, s.points, self.root_uv, guides.T.astype(np.int32),
+                                   weights.T.astype(np.float32), s.ids, s.tri, s.bary)
         self._guides, self._weights = guides, weights
         return self._result
 
     def generate(self):
         """Full regeneration from the current keys."""
         guides, weights = self._assign()
-        sel = np.arange(len(self.samples.points))
-        return self._build(guides, weights, self._strands(sel, guides, weights))
+        return self._build(guides, weights, self._strands(None, guides, weights))
 
     @property
     def result(self):
@@ -169,18 +194,19 @@ class Generator:
             if not isinstance(k, KeyStrand):
                 raise InputError(f"update_keys[{i}]: expected a groom.KeyStrand, got {type(k).__name__}")
         old_data = list(self._key_data)
-        for i, k in changes.items():
-            self.keys[i] = k
-            self._key_data[i] = self._prepare_key(k)
+        order = sorted(changes)
+        for i, d in zip(order, self._prepare_keys([changes[i] for i in order])):
+            self.keys[i] = changes[i]
+            self._key_data[i] = d
         try:
             guides, weights = self._assign()
         except InputError:
             self._key_data = old_data
             raise
-        changed = np.array(sorted(changes), np.int64)
+        changed = np.array(order, np.int64)
         old_g, old_w = self._guides, self._weights
-        dirty = (np.isin(guides, changed).any(axis=1) | np.isin(old_g, changed).any(axis=1)
-                 | (guides != old_g).any(axis=1) | (weights != old_w).any(axis=1))
+        dirty = (np.isin(guides, changed).any(axis=0) | np.isin(old_g, changed).any(axis=0)
+                 | (guides != old_g).any(axis=0) | (weights != old_w).any(axis=0))
         sel = np.flatnonzero(dirty)
         self.last_recomputed = len(sel)
         return self._build(guides, weights, self._splice(sel, self._strands(sel, guides, weights)))

@@ -26,7 +26,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from . import rng
-from .frames import rotation_xyz
+from .frames import rotation_entries
 
 # Arc-length samples per key table (1024 steps): the lerp between samples is off the exact
 # curve by at most |D''|·h²/8 with h = 1/1024, about 1e-7 of the length for a curl of 20 turns.
@@ -40,11 +40,24 @@ _CURVATURE_SAFETY = 1.05
 def key_table(key, frame, intelligence, samples=KEY_SAMPLES, bins=CURVATURE_BINS):
     """(table (samples,3) float64, bound (bins,) float64): offsets of the key from its root
     at equal arc-length steps (in the key's root frame when `intelligence`, else world axes),
-    and for each of `bins` equal ranges of σ an upper bound of |d²D/dσ²| there (the largest
-    sampled curvature·length² over the bin's samples and one beyond each end, times a margin)."""
+    and the curvature bound of `curvature_bound`."""
+    table, length = key_offsets(key, frame, intelligence, samples)
+    return table, curvature_bound(table, length, bins)
+
+
+def key_offsets(key, frame, intelligence, samples=KEY_SAMPLES):
+    """(table (samples,3) float64, length): the first half of `key_table`, all that fixed
+    resolution needs."""
     table, length = key.arc_length_table(samples)
     if intelligence:
         table = table @ frame  # rows: F_x^T D
+    return table, length
+
+
+def curvature_bound(table, length, bins=CURVATURE_BINS):
+    """For each of `bins` equal ranges of σ an upper bound of |d²D/dσ²| there (the largest
+    sampled curvature·length² over the bin's samples and one beyond each end, times a margin)."""
+    samples = len(table)
     steps = samples - 1
     # |D''(σ)| = κ·L² for a curve parametrised by arc-length fraction. κ from the circle through
     # three neighbouring samples (Menger curvature), which is blind to the small uneven spacing
@@ -62,8 +75,18 @@ def key_table(key, frame, intelligence, samples=KEY_SAMPLES, bins=CURVATURE_BINS
     padded = np.concatenate([[second[0]], second, [second[-1]]])
     # bin b covers samples b·per .. (b+1)·per; padded index = sample + 1, widened by one each side
     idx = np.arange(bins)[:, None] * per + np.arange(per + 3)[None, :]
-    bound = padded[idx].max(axis=1) * _CURVATURE_SAFETY
-    return table, bound
+    return padded[idx].max(axis=1) * _CURVATURE_SAFETY
+
+
+def key_rows(table):
+    """The rows the strand blend gathers, (samples, 8) float32: sample i as
+    (x, y, z, 0, dx, dy, dz, 0), d the step to sample i+1 (0 after the last). One 32-byte row
+    per guide and point is a single fixed-size copy in numpy's take, where six separate
+    component gathers cost about five times as much."""
+    rows = np.zeros((len(table), 8), np.float32)
+    rows[:, :3] = table
+    rows[:-1, 4:7] = np.diff(table, axis=0)
+    return rows
 
 
 def length_fractions(seed, ids, lo, hi):
@@ -72,37 +95,36 @@ def length_fractions(seed, ids, lo, hi):
 
 
 def tidiness_angles(seed, ids, tidiness, theta_max):
-    """Angles (S,3) about the root's main tangent, second tangent and normal, each uniform in
-    ±(1 - tidiness)·theta_max; exactly 0 at tidiness 1."""
+    """Angles (3, S) about the root's main tangent, second tangent and normal, each uniform
+    in ±(1 - tidiness)·theta_max; exactly 0 at tidiness 1."""
     amp = (1.0 - tidiness) * theta_max
-    u = np.stack([rng.uniform(seed, ids, c) for c in (rng.CH_TIDY_X, rng.CH_TIDY_Y, rng.CH_TIDY_Z)], 1)
+    u = np.stack([rng.uniform(seed, ids, c) for c in (rng.CH_TIDY_X, rng.CH_TIDY_Y, rng.CH_TIDY_Z)])
     return (2.0 * u - 1.0) * amp
 
 
-def strand_transforms(frames, angles, intelligence):
-    """B_j (S,3,3) applied to the blended table offsets (see module docstring)."""
+def strand_transforms(axes, angles, intelligence):
+    """B_j (see module docstring) entry-major, (9, S) float32: row 3a + c holds entry (a, c)
+    of every strand's matrix, the layout the blend reads. axes: frames.frame_axes of the
+    roots; angles (3, S) from tidiness_angles. Computed in float64, stored in the float32
+    the blend works in."""
+    t, b, n = axes
+    # frame[i, j] = axis j, component i
+    frame = [axes[j][i] for i in range(3) for j in range(3)]
     if not np.any(angles):  # tidiness 1: no rotation at all
-        return frames.copy() if intelligence else np.broadcast_to(np.eye(3), frames.shape).copy()
-    rot = rotation_xyz(angles)
-    b = _matmul3(frames, rot)
+        if intelligence:
+            return np.array(frame, np.float32)
+        return np.eye(3, dtype=np.float32).reshape(9, 1).repeat(t.shape[1], axis=1)
+    out = _matmul3(frame, rotation_entries(angles))
     if not intelligence:
-        b = _matmul3(b, np.transpose(frames, (0, 2, 1)))
-    return b
+        out = _matmul3(out, [frame[3 * j + i] for i in range(3) for j in range(3)])  # · F^T
+    return np.array(out, np.float32)
 
 
 def _matmul3(a, b):
-    """Batched 3x3 products written out, so each result depends only on its own inputs.
-
-    The nine entries are first laid out entry-major (one contiguous row per entry): the
-    strided reads of an (S,3,3) array made this 2.7x slower at 100k strands."""
-    shape = np.broadcast_shapes(a.shape, b.shape)
-    a = np.broadcast_to(a, shape).reshape(-1, 9).T.copy()
-    b = np.broadcast_to(b, shape).reshape(-1, 9).T.copy()
-    out = np.empty_like(a)
-    for i in range(3):
-        for j in range(3):
-            out[3 * i + j] = a[3 * i] * b[j] + a[3 * i + 1] * b[3 + j] + a[3 * i + 2] * b[6 + j]
-    return np.ascontiguousarray(out.T).reshape(shape)
+    """Products of 3x3 matrices given entry-major (lists of 9 arrays, entry 3i + j), written
+    out so each result depends only on its own inputs."""
+    return [a[3 * i] * b[j] + a[3 * i + 1] * b[3 + j] + a[3 * i + 2] * b[6 + j]
+            for i in range(3) for j in range(3)]
 
 
 def uniform_sigma(frac, cylinders):
@@ -120,72 +142,83 @@ def uniform_sigma(frac, cylinders):
     return frac[strand] * (k / cylinders[strand]), counts
 
 
-def evaluate_strands(roots, transforms, guides, weights, counts, sigma, tables, chunk_points=1 << 16,
-                     threads=None):
-    """Points of strands at flat curve parameters σ (P,) (counts (S,) points per strand, in
-    order): C_j(σ) = R_j + B_j Σ_g w_jg D_g(σ).
+def evaluate_strands(roots, transforms, guides, weights, counts, rows, sigma=None, frac=None,
+                     chunk_points=1 << 14, threads=None):
+    """Points of strands at curve parameters σ: C_j(σ) = R_j + B_j Σ_g w_jg D_g(σ).
 
-    roots (S,3) f64, transforms (S,3,3), guides (S,3), weights (S,3), tables (K, M, 3).
+    All per-strand inputs are component-major, one contiguous row per component: roots
+    (3, S) f64, transforms (9, S) f32 (strand_transforms), guides (3, S) key indices, weights
+    (3, S) f32; rows (K, M, 8) f32 from key_rows; counts (S,) points per strand. σ is either
+    `sigma`, flat (P,), or, when every strand has the same count n, None with `frac` (S,):
+    σ = f_j·k/(n - 1), made a chunk at a time (the same numbers as uniform_sigma).
+
     Returns points (P,3) float32 (the precision Strands keeps). The blend runs in float32
     (offsets from the root: relative precision 6e-8 of the strand length wherever the head
-    is) in chunks of whole strands of
-    about `chunk_points` points that stay in cache; the root is added in float64. Chunks
-    write disjoint rows and numpy releases the GIL in its loops, so they run on `threads`
-    threads (default: one per CPU); a chunk's numbers do not depend on the thread."""
-    n_keys, samples, _ = tables.shape
-    # Component-major 1-D tables (value and step to the next sample, for the lerp): 1-D
-    # gathers into contiguous arrays are about twice as fast as gathering 6-wide rows.
-    step = np.concatenate([np.diff(tables, axis=1), np.zeros((n_keys, 1, 3))], axis=1)
-    value_c = [np.ascontiguousarray(tables[..., c].ravel(), np.float32) for c in range(3)]
-    step_c = [np.ascontiguousarray(step[..., c].ravel(), np.float32) for c in range(3)]
-    w_c = [np.ascontiguousarray(weights[:, k], np.float32) for k in range(3)]
-    b_c = [np.ascontiguousarray(transforms[:, i // 3, i % 3], np.float32) for i in range(9)]
-    root_c = [np.ascontiguousarray(roots[:, c]) for c in range(3)]
-    g_c = [np.ascontiguousarray(guides[:, k], np.int64) * samples for k in range(3)]
+    is); the root is added in float64. Per point: one 32-byte row gathered per guide, the
+    weighted sum of the rows, then the lerp σ·(M-1) between the sample and the next (linear,
+    so it commutes with the blend), then B_j. Chunks of whole strands of about
+    `chunk_points` points stay in cache and write disjoint rows; numpy releases the GIL in
+    its loops, so they run on `threads` threads (default: one per CPU). A strand's numbers
+    depend only on its own inputs, never on its chunk or thread."""
+    n_keys, samples, _ = rows.shape
+    table = rows.reshape(n_keys * samples, 8)
+    first_row = [np.asarray(g, np.int64) * samples for g in guides]
     counts = np.asarray(counts, np.int64)
     ends = np.cumsum(counts)
     out = np.empty((int(ends[-1]) if len(ends) else 0, 3), np.float32)
-    bounds = []
-    first = 0
-    while first < len(counts):  # chunks of whole strands, ~64k points each, for the cache
-        start = int(ends[first - 1]) if first else 0
-        last = max(int(np.searchsorted(ends, start + chunk_points, side="right")), first + 1)
-        bounds.append((first, last, start, int(ends[last - 1])))
-        first = last
+    equal = len(counts) > 0 and bool((counts == counts[0]).all())
+    if sigma is None and not equal:
+        raise ValueError("evaluate_strands: sigma is needed unless every strand has the same count")
+    if equal:
+        n = int(counts[0])
+        grid = np.arange(n) / (n - 1)
+        per_chunk = max(1, chunk_points // n)
+        bounds = [(lo, min(lo + per_chunk, len(counts))) for lo in range(0, len(counts), per_chunk)]
+    else:
+        bounds, first = [], 0
+        while first < len(counts):  # chunks of whole strands of about chunk_points points
+            start = int(ends[first - 1]) if first else 0
+            last = max(int(np.searchsorted(ends, start + chunk_points, side="right")), first + 1)
+            bounds.append((first, last))
+            first = last
 
     def chunk(bound):
-        first, last, start, stop = bound
-        n_pts = counts[first:last]
-        if n_pts[0] == n_pts[-1] and (n_pts == n_pts[0]).all():
-            # Equal counts (fixed resolution): per-strand data broadcasts, nothing is gathered
-            # per point.
-            shape = (last - first, int(n_pts[0]))
+        first, last = bound
+        start = int(ends[first - 1]) if first else 0
+        stop = int(ends[last - 1])
+        if equal:
+            # Per-strand values broadcast along each strand's row of points; nothing is
+            # gathered per point.
+            shape = (last - first, n)
             sl = slice(first, last)
 
             def per_strand(x):
                 return x[sl, None]
+            pos = (frac[sl, None] * grid if sigma is None else sigma[start:stop].reshape(shape)) * (samples - 1)
         else:
             shape = (stop - start,)
-            strand = np.repeat(np.arange(first, last), n_pts)
+            strand = np.repeat(np.arange(first, last), counts[first:last])
 
             def per_strand(x):
                 return x[strand]
-        pos = sigma[start:stop].reshape(shape) * (samples - 1)
+            pos = sigma[start:stop] * (samples - 1)
         i0 = np.minimum(pos.astype(np.int64), samples - 2)
         fr = (pos - i0).astype(np.float32)
-        acc = [None, None, None]
+        acc = None
         for k in range(3):  # the three guides
-            idx = per_strand(g_c[k]) + i0
-            wk = per_strand(w_c[k])
-            wf = wk * fr
-            for c in range(3):
-                term = wk * value_c[c].take(idx) + wf * step_c[c].take(idx)
-                acc[c] = term if acc[c] is None else acc[c] + term
+            row = table.take(per_strand(first_row[k]) + i0, axis=0)
+            row *= per_strand(weights[k])[..., None]
+            if acc is None:
+                acc = row
+            else:
+                acc += row
+        # Offsets in the keys' frame: sample + fraction · step, per component.
+        d = [acc[..., c] + fr * acc[..., 4 + c] for c in range(3)]
         dst = out[start:stop].reshape(shape + (3,))
         for a in range(3):
-            # B_j · acc in float32 (offsets), plus the root in float64, stored as float32.
-            dst[..., a] = (per_strand(b_c[3 * a]) * acc[0] + per_strand(b_c[3 * a + 1]) * acc[1]
-                           + per_strand(b_c[3 * a + 2]) * acc[2]) + per_strand(root_c[a])
+            # B_j · d in float32 (offsets), plus the root in float64, stored as float32.
+            dst[..., a] = (per_strand(transforms[3 * a]) * d[0] + per_strand(transforms[3 * a + 1]) * d[1]
+                           + per_strand(transforms[3 * a + 2]) * d[2]) + per_strand(roots[a])
 
     threads = threads or os.cpu_count() or 1
     if threads > 1 and len(bounds) > 1:

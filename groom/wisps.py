@@ -15,48 +15,54 @@ from .params import NEIGHBOUR_MODES
 def nearest_keys(roots, key_roots, k, root_groups=None, key_groups=None):
     """The k nearest key roots of every root: (index (S,k) int64, distance (S,k) float64),
     nearest first; ties go to the lower key index. Keys of another group are never chosen;
-    where a group has fewer than k keys the rest is index -1, distance inf.
+    where a group has fewer than k keys the rest is index -1, distance inf."""
+    idx, dist = _nearest_keys(roots, key_roots, k, root_groups, key_groups)
+    return np.ascontiguousarray(idx.T), np.ascontiguousarray(dist.T)
+
+
+def _nearest_keys(roots, key_roots, k, root_groups=None, key_groups=None):
+    """nearest_keys, key-major: (index (k,S), distance (k,S)).
     Chunked over roots so memory stays near 4M distances whatever the key count."""
     roots = np.asarray(roots, dtype=np.float64)
     key_roots = np.asarray(key_roots, dtype=np.float64)
     n_keys = len(key_roots)
     k_eff = min(k, n_keys)
-    idx = np.full((len(roots), k), -1, np.int64)
-    dist = np.full((len(roots), k), np.inf)
+    idx = np.full((k, len(roots)), -1, np.int64)
+    dist = np.full((k, len(roots)), np.inf)
     chunk = max(1, (1 << 22) // max(n_keys, 1))
     for lo in range(0, len(roots), chunk):  # chunks of ~4M distances, not strands
         r = roots[lo:lo + chunk]
         # Squared distances order the keys as well; only the chosen few get a square root.
-        # One coordinate at a time keeps the temporaries (roots x keys), not (roots x keys x 3).
-        d = (r[:, 0, None] - key_roots[None, :, 0]) ** 2
-        d += (r[:, 1, None] - key_roots[None, :, 1]) ** 2
-        d += (r[:, 2, None] - key_roots[None, :, 2]) ** 2
+        if n_keys <= 32:
+            # Few keys: one key at a time over contiguous coordinate rows (the same sums).
+            rx, ry, rz = (np.ascontiguousarray(r[:, c]) for c in range(3))
+            d = np.empty((len(r), n_keys))
+            for j, (kx, ky, kz) in enumerate(key_roots):
+                dj = (rx - kx) ** 2
+                dj += (ry - ky) ** 2
+                dj += (rz - kz) ** 2
+                d[:, j] = dj
+        else:
+            # One coordinate at a time keeps the temporaries (roots x keys), not (roots x keys x 3).
+            d = (r[:, 0, None] - key_roots[None, :, 0]) ** 2
+            d += (r[:, 1, None] - key_roots[None, :, 1]) ** 2
+            d += (r[:, 2, None] - key_roots[None, :, 2]) ** 2
         if root_groups is not None:
             d[root_groups[lo:lo + chunk, None] != key_groups[None, :]] = np.inf
-        if n_keys <= 32:
-            # Few keys: k passes of argmin (first minimum = lower index on ties) beat sorting.
-            rows = np.arange(len(d))
-            sel = np.empty((len(d), k_eff), np.int64)
-            sq = np.empty((len(d), k_eff))
-            for j in range(k_eff):
-                sel[:, j] = np.argmin(d, axis=1)
-                sq[:, j] = d[rows, sel[:, j]]
-                d[rows, sel[:, j]] = np.inf
-            sd = np.sqrt(sq)
+        if k_eff < n_keys and n_keys > 32:
+            part = np.argpartition(d, k_eff - 1, axis=1)[:, :k_eff]
+            # argpartition is not stable; re-sort the chosen few by (distance, index).
+            part.sort(axis=1)
+            pd = np.take_along_axis(d, part, axis=1)
+            order = np.argsort(pd, axis=1, kind="stable")
+            sel = np.take_along_axis(part, order, axis=1)
         else:
-            if k_eff < n_keys:
-                part = np.argpartition(d, k_eff - 1, axis=1)[:, :k_eff]
-                # argpartition is not stable; re-sort the chosen few by (distance, index).
-                part.sort(axis=1)
-                pd = np.take_along_axis(d, part, axis=1)
-                order = np.argsort(pd, axis=1, kind="stable")
-                sel = np.take_along_axis(part, order, axis=1)
-            else:
-                sel = np.argsort(d, axis=1, kind="stable")
-            sd = np.sqrt(np.take_along_axis(d, sel, axis=1))
+            # A stable sort of a few keys per root: equal distances keep the lower index first.
+            sel = np.argsort(d, axis=1, kind="stable")[:, :k_eff]
+        sd = np.sqrt(np.take_along_axis(d, sel, axis=1))
         sel = np.where(np.isfinite(sd), sel, -1)
-        idx[lo:lo + chunk, :k_eff] = sel
-        dist[lo:lo + chunk, :k_eff] = sd
+        idx[:k_eff, lo:lo + chunk] = sel.T
+        dist[:k_eff, lo:lo + chunk] = sd.T
     return idx, dist
 
 
@@ -107,6 +113,14 @@ def guide_weights(roots, key_roots, mode="interpolate", n_influence=50.0, root_g
     with no division by zero. A missing neighbour (fewer than 3 keys in the group) repeats
     the main index with weight 0.
     """
+    g, w = guide_weights_by_guide(roots, key_roots, mode, n_influence, root_groups, key_groups)
+    return np.stack(g, axis=1).astype(np.int32), np.stack(w, axis=1)
+
+
+def guide_weights_by_guide(roots, key_roots, mode="interpolate", n_influence=50.0, root_groups=None,
+                           key_groups=None):
+    """guide_weights guide-major: ([main, n1, n2] each (S,) int64, [w0, w1, w2] each (S,)
+    float64), the layout whole-array code reads fastest (one contiguous row per guide)."""
     if mode not in NEIGHBOUR_MODES:
         raise InputError(f"neighbour_mode: expected one of {NEIGHBOUR_MODES}, got {mode!r}")
     roots = np.asarray(roots, dtype=np.float64)
@@ -116,34 +130,44 @@ def guide_weights(roots, key_roots, mode="interpolate", n_influence=50.0, root_g
     if root_groups is None:
         root_groups = np.zeros(len(roots), np.int32)
     check_groups(root_groups, key_groups)
+    # One group everywhere: nothing to mask.
+    grouped = bool((key_groups != key_groups[0]).any())
     want = 4 if mode == "interpolate" else 3
-    idx, dist = nearest_keys(roots, key_roots, want, root_groups, key_groups)
+    idx, dist = _nearest_keys(roots, key_roots, want, root_groups if grouped else None,
+                              key_groups if grouped else None)
     if mode == "key":
         # Neighbours of each key among the keys of its own group (excluding itself).
-        kidx, _ = nearest_keys(key_roots, key_roots, 3, key_groups, key_groups)
-        main = idx[:, 0]
-        nb = kidx[main, 1:3]
-        idx = np.concatenate([idx[:, :1], nb], axis=1)
-        safe = np.where(nb >= 0, nb, 0)
-        dnb = np.sqrt(((roots[:, None, :] - key_roots[safe]) ** 2).sum(axis=2))
-        dist = np.concatenate([dist[:, :1], np.where(nb >= 0, dnb, np.inf)], axis=1)
-    d0 = dist[:, :1]
-    present = idx[:, 1:3] >= 0
+        kidx, _ = _nearest_keys(key_roots, key_roots, 3, key_groups, key_groups)
+        main = idx[0]
+        nb = kidx[1:3, main]
+        idx = np.concatenate([idx[:1], nb])
+        dnb = []
+        for j in range(2):
+            k = key_roots[np.where(nb[j] >= 0, nb[j], 0)]
+            d = np.sqrt((roots[:, 0] - k[:, 0]) ** 2 + (roots[:, 1] - k[:, 1]) ** 2 + (roots[:, 2] - k[:, 2]) ** 2)
+            dnb.append(np.where(nb[j] >= 0, d, np.inf))
+        dist = np.stack([dist[0]] + dnb)
+    d0 = dist[0]
+
+    def near_ratio(j):
+        """d0/dj for a present key j, else 0."""
+        present = idx[j] >= 0
+        return np.where(present, _ratio(d0, np.where(present, dist[j], 1.0)), 0.0)
+
     if mode == "interpolate":
-        r = np.where(present, _ratio(d0, np.where(present, dist[:, 1:3], 1.0)), 0.0)
-        inv_max = np.where(idx[:, 3:4] >= 0, _ratio(d0, np.where(idx[:, 3:4] >= 0, dist[:, 3:4], 1.0)), 0.0)
-        w = np.concatenate([1.0 - inv_max, np.where(present, r - inv_max, 0.0)], axis=1)
-        w = np.maximum(w, 0.0) ** interpolate_sharpness(n_influence)
-        total = w[:, 0:1] + w[:, 1:2] + w[:, 2:3]
+        inv_max = near_ratio(3)
+        w = [1.0 - inv_max] + [np.where(idx[j] >= 0, near_ratio(j) - inv_max, 0.0) for j in (1, 2)]
+        gamma = interpolate_sharpness(n_influence)
+        w = [np.maximum(x, 0.0) ** gamma for x in w]
+        total = w[0] + w[1] + w[2]
         # All of main and neighbours as far as the 4th key: nothing singles one out; the main wins.
-        flat = total[:, 0] <= 0
-        w[flat] = (1.0, 0.0, 0.0)
-        total[flat] = 1.0
+        flat = total <= 0
+        if flat.any():
+            w[0][flat], w[1][flat], w[2][flat] = 1.0, 0.0, 0.0
+            total[flat] = 1.0
     else:
-        r = np.where(present, _ratio(d0, np.where(present, dist[:, 1:3], 1.0)), 0.0)
-        w = np.concatenate([np.full_like(d0, 101.0 - n_influence), r], axis=1)
-        total = w[:, 0:1] + w[:, 1:2] + w[:, 2:3]
-    w = w / total
-    idx = idx[:, :3]
-    idx = np.where(idx >= 0, idx, idx[:, :1])
-    return idx.astype(np.int32), w
+        w = [np.full_like(d0, 101.0 - n_influence), near_ratio(1), near_ratio(2)]
+        total = w[0] + w[1] + w[2]
+    w = [x / total for x in w]
+    g = [idx[0]] + [np.where(idx[j] >= 0, idx[j], idx[0]) for j in (1, 2)]
+    return g, w
