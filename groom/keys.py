@@ -81,11 +81,16 @@ class KeyStrand:
             return _de_casteljau(rel, t)
         k = self.num_segments
         seg = np.minimum((t * k).astype(np.int64), k - 1)
-        u = (t * k - seg)[:, None]
+        u = t * k - seg
         v = 1.0 - u
-        # Cubic Bernstein form, all segments at once.
-        c0, c1, c2, c3 = (rel[3 * seg + i] for i in range(4))
-        return (v * v * v) * c0 + (3.0 * v * v * u) * c1 + (3.0 * v * u * u) * c2 + (u * u * u) * c3
+        # Cubic Bernstein form, all segments at once, one coordinate at a time (rows of three
+        # would make every operation loop over three numbers).
+        weights = (v * v * v, 3.0 * v * v * u, 3.0 * v * u * u, u * u * u)
+        first = 3 * seg
+        out = np.empty((len(t), 3))
+        for d, column in enumerate(rel.T):
+            out[:, d] = sum(w * column.take(first + i) for i, w in enumerate(weights))
+        return out
 
     def arc_length_table(self, samples, dense=None):
         """Offsets from the root at `samples` points equally spaced in arc length (float64),

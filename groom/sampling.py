@@ -68,5 +68,6 @@ def sample_roots(scalp, m, seed=0, mode="uniform"):
     u = rng.uniform(seed, ids, rng.CH_TRIANGLE_A)
     b = rng.uniform(seed, ids, rng.CH_TRIANGLE_B)
     a = np.sqrt(u) if mode == "uniform" else u
-    bary = np.stack([a * b, a * (1.0 - b), 1.0 - a], axis=1)
-    return RootSamples(scalp.points_at(tri, bary), tri, bary, ids)
+    bary = [a * b, a * (1.0 - b), 1.0 - a]
+    points = scalp.corner_blend(scalp.vertices, tri, bary)
+    return RootSamples(np.ascontiguousarray(points.T), tri, np.stack(bary, axis=1), ids)

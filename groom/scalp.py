@@ -110,25 +110,43 @@ class Scalp:
 
     def points_at(self, tri, bary):
         """Positions at triangle ids (N,) with barycentrics (N,3)."""
-        p = self.vertices[self.triangles[tri]]
-        return np.einsum("nc,ncd->nd", bary, p)
+        return np.ascontiguousarray(self.corner_blend(self.vertices, tri, bary).T)
+
+    def corner_blend(self, values, tri, bary):
+        """Per-vertex `values` (V, d) blended barycentrically at surface points, component-major
+        (d, N): one contiguous row per component, the layout whole-array code over many
+        roots reads fastest. bary may be (N,3) or its three columns."""
+        corners = [self.triangles[:, c].take(tri) for c in range(3)]
+        b = [np.ascontiguousarray(bary[:, c]) for c in range(3)] if isinstance(bary, np.ndarray) else bary
+        out = np.empty((values.shape[1], len(corners[0])))
+        for d, column in enumerate(values.T):
+            out[d] = b[0] * column.take(corners[0]) + b[1] * column.take(corners[1]) + b[2] * column.take(corners[2])
+        return out
 
     def normals_at(self, tri, bary, mode="interpolated"):
         """Unit normals at surface points: 'interpolated' (vertex normals blended, default)
         or 'face' (the triangle's own normal, the thesis)."""
+        return np.ascontiguousarray(self.normals_blend(tri, bary, mode).T)
+
+    def normals_blend(self, tri, bary, mode="interpolated"):
+        """normals_at component-major, (3, N)."""
         if mode == "face":
-            return self.face_normals[tri].copy()
+            return self.face_normals.T.take(tri, axis=1)
         if mode != "interpolated":
             raise InputError(f"normal_mode: expected 'interpolated' or 'face', got {mode!r}")
-        n = np.einsum("nc,ncd->nd", bary, self.vertex_normals[self.triangles[tri]])
-        # Opposing vertex normals (a fold) can cancel; the face normal is then the honest answer.
-        out, ok = _unit(n, self.face_normals[tri])
-        return out
+        n = self.corner_blend(self.vertex_normals, tri, bary)
+        length = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+        ok = length > 1e-300
+        n /= np.where(ok, length, 1.0)
+        if not ok.all():
+            # Opposing vertex normals (a fold) can cancel; the face normal is then the honest answer.
+            n[:, ~ok] = self.face_normals[np.asarray(tri)[~ok]].T
+        return n
 
     def uv_at(self, tri, bary):
         if self.uv is None:
             return None
-        return np.einsum("nc,ncd->nd", bary, self.uv[self.triangles[tri]])
+        return np.ascontiguousarray(self.corner_blend(self.uv, tri, bary).T)
 
     def groups_at(self, tri, bary):
         """Group id of each surface point: that of the triangle's vertex with the largest weight."""
@@ -140,41 +158,48 @@ class Scalp:
     def closest_points(self, points):
         """Nearest surface point of each query (Q,3): returns (tri (Q,), bary (Q,3), point (Q,3)).
 
-        Brute force over all triangles, one query at a time: meant for a few key roots."""
+        Brute force over all triangles, queries x triangles at once in chunks of about a
+        million pairs: meant for a few key roots."""
         q = check_finite("query points", np.asarray(points, dtype=np.float64).reshape(-1, 3))
         a, b, c = (self.vertices[self.triangles[:, i]] for i in range(3))
-        tris, barys = [], []
-        for p in q:
-            bary = _closest_on_triangles(p, a, b, c)
-            pts = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
-            i = int(np.argmin(np.einsum("td,td->t", pts - p, pts - p)))
-            tris.append(i)
-            barys.append(bary[i])
-        tri = np.array(tris, np.int64)
-        bary = np.array(barys)
+        tri = np.empty(len(q), np.int64)
+        bary = np.empty((len(q), 3))
+        step = max(1, (1 << 20) // len(a))
+        for lo in range(0, len(q), step):  # chunks of queries, not single ones
+            p = q[lo:lo + step, None, :]
+            on = _closest_on_triangles(p, a, b, c)
+            pts = on[..., :1] * a + on[..., 1:2] * b + on[..., 2:] * c
+            i = np.argmin(_dot(pts - p, pts - p), axis=1)
+            tri[lo:lo + step] = i
+            bary[lo:lo + step] = on[np.arange(len(i)), i]
         return tri, bary, self.points_at(tri, bary)
 
 
+def _dot(u, v):
+    """Dot products over the last axis (3)."""
+    return u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1] + u[..., 2] * v[..., 2]
+
+
 def _closest_on_triangles(p, a, b, c):
-    """Barycentrics of the point of each triangle nearest to p (Ericson, Real-Time Collision
-    Detection §5.1.5), vectorised over triangles; degenerate triangles fall to an edge or vertex."""
+    """Barycentrics (..., T, 3) of the point of each triangle nearest to p (Ericson, Real-Time
+    Collision Detection §5.1.5), vectorised over triangles (T,3) and queries p (..., 1, 3);
+    degenerate triangles fall to an edge or vertex."""
     ab, ac, ap = b - a, c - a, p - a
-    d1, d2 = np.einsum("td,td->t", ab, ap), np.einsum("td,td->t", ac, ap)
+    d1, d2 = _dot(ab, ap), _dot(ac, ap)
     bp = p - b
-    d3, d4 = np.einsum("td,td->t", ab, bp), np.einsum("td,td->t", ac, bp)
+    d3, d4 = _dot(ab, bp), _dot(ac, bp)
     cp = p - c
-    d5, d6 = np.einsum("td,td->t", ab, cp), np.einsum("td,td->t", ac, cp)
+    d5, d6 = _dot(ab, cp), _dot(ac, cp)
     va = d3 * d6 - d5 * d4
     vb = d5 * d2 - d1 * d6
     vc = d1 * d4 - d3 * d2
-    n = len(a)
-    out = np.zeros((n, 3))
-    done = np.zeros(n, bool)
+    out = np.zeros(d1.shape + (3,))
+    done = np.zeros(d1.shape, bool)
 
     def put(mask, bary):
         nonlocal done
         m = mask & ~done
-        out[m] = bary[m] if np.ndim(bary) == 2 else bary
+        out[m] = bary[m] if np.ndim(bary) > 1 else bary
         done |= m
 
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -182,16 +207,16 @@ def _closest_on_triangles(p, a, b, c):
         put((d3 >= 0) & (d4 <= d3), np.array([0, 1.0, 0]))
         put((d6 >= 0) & (d5 <= d6), np.array([0, 0, 1.0]))
         v = np.clip(d1 / (d1 - d3), 0, 1)
-        put((vc <= 0) & (d1 >= 0) & (d3 <= 0), np.stack([1 - v, v, 0 * v], 1))
+        put((vc <= 0) & (d1 >= 0) & (d3 <= 0), np.stack([1 - v, v, 0 * v], -1))
         w = np.clip(d2 / (d2 - d6), 0, 1)
-        put((vb <= 0) & (d2 >= 0) & (d6 <= 0), np.stack([1 - w, 0 * w, w], 1))
+        put((vb <= 0) & (d2 >= 0) & (d6 <= 0), np.stack([1 - w, 0 * w, w], -1))
         w = np.clip((d4 - d3) / ((d4 - d3) + (d5 - d6)), 0, 1)
-        put((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0), np.stack([0 * w, 1 - w, w], 1))
+        put((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0), np.stack([0 * w, 1 - w, w], -1))
         denom = va + vb + vc
         ok = np.abs(denom) > 0
-        inner = np.stack([va, vb, vc], 1) / np.where(ok, denom, 1.0)[:, None]
-        inner = np.where(ok[:, None] & np.isfinite(inner), inner, np.array([1.0, 0, 0]))
-        put(np.ones(n, bool), inner)
+        inner = np.stack([va, vb, vc], -1) / np.where(ok, denom, 1.0)[..., None]
+        inner = np.where(ok[..., None] & np.isfinite(inner), inner, np.array([1.0, 0, 0]))
+        put(np.ones(d1.shape, bool), inner)
     return out
 
 

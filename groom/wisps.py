@@ -79,6 +79,8 @@ def root_groups_for(scalp, tri, bary, points, params):
 
 
 def check_groups(root_groups, key_groups):
+    if (key_groups == key_groups[0]).all() and (root_groups == key_groups[0]).all():
+        return  # one group (the usual case): nothing to sort
     missing = np.setdiff1d(np.unique(root_groups), np.unique(key_groups))
     if missing.size:
         raise InputError(f"key strands: roots fall in group(s) {missing.tolist()} but no key strand has that "
@@ -118,9 +120,10 @@ def guide_weights(roots, key_roots, mode="interpolate", n_influence=50.0, root_g
 
 
 def guide_weights_by_guide(roots, key_roots, mode="interpolate", n_influence=50.0, root_groups=None,
-                           key_groups=None):
+                           key_groups=None, check=True):
     """guide_weights guide-major: ([main, n1, n2] each (S,) int64, [w0, w1, w2] each (S,)
-    float64), the layout whole-array code reads fastest (one contiguous row per guide)."""
+    float64), the layout whole-array code reads fastest (one contiguous row per guide).
+    check=False skips check_groups (a caller that checked all roots at once)."""
     if mode not in NEIGHBOUR_MODES:
         raise InputError(f"neighbour_mode: expected one of {NEIGHBOUR_MODES}, got {mode!r}")
     roots = np.asarray(roots, dtype=np.float64)
@@ -129,7 +132,8 @@ def guide_weights_by_guide(roots, key_roots, mode="interpolate", n_influence=50.
         key_groups = np.zeros(len(key_roots), np.int32)
     if root_groups is None:
         root_groups = np.zeros(len(roots), np.int32)
-    check_groups(root_groups, key_groups)
+    if check:
+        check_groups(root_groups, key_groups)
     # One group everywhere: nothing to mask.
     grouped = bool((key_groups != key_groups[0]).any())
     want = 4 if mode == "interpolate" else 3

@@ -1,0 +1,41 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Whole-array work split over threads.
+
+numpy releases the GIL inside its loops, so ranges of strands processed by separate threads
+run on separate cores. Every per-strand computation in groom is element-wise, so a strand's
+numbers do not depend on the range it falls in: splitting never changes a result.
+"""
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+# Below this many strands a job is too small to be worth handing to another thread.
+MIN_SPLIT = 4096
+
+_POOLS = {}
+_PREFIX = "groom-worker"
+
+
+def cpu_threads():
+    return os.cpu_count() or 1
+
+
+def run_jobs(jobs, threads=None):
+    """Call every job() (no arguments), on up to `threads` threads (default: one per CPU),
+    and return their results in order. The worker threads are made once per process and
+    kept: starting threads on every call cost more than a small job itself."""
+    threads = min(threads or cpu_threads(), len(jobs))
+    # A job that itself runs jobs would wait for the workers it occupies: it runs them itself.
+    if threads <= 1 or threading.current_thread().name.startswith(_PREFIX):
+        return [job() for job in jobs]
+    pool = _POOLS.get(threads)
+    if pool is None:
+        pool = _POOLS[threads] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix=_PREFIX)
+    return list(pool.map(lambda job: job(), jobs))
+
+
+def ranges(n, threads=None, min_size=MIN_SPLIT):
+    """[(lo, hi), ...]: 0..n in one contiguous range per thread, or one range when n is small."""
+    parts = max(1, min(threads or cpu_threads(), n // max(min_size, 1)))
+    edges = [n * i // parts for i in range(parts + 1)]
+    return list(zip(edges[:-1], edges[1:]))
