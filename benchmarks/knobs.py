@@ -14,33 +14,30 @@ MAX_GRID_CELLS = 1 << 25     # 32 M cells: 256 MiB of cell table
 
 @contextlib.contextmanager
 def grid_scale(scale):
-    """Build every grid with `scale` times the tracer's own cells per axis."""
-    from tracer import renderer as rmod
-    from tracer.grid import build_grid
-    original = rmod.build_grid
+    """Build every grid (numpy or GPU build) with `scale` times the tracer's own cells per axis."""
+    from tracer import grid as gmod
+    original = gmod.grid_dims
 
-    def scaled(cylinders, pad_factor=1.0, dims=None):
-        auto = build_grid(cylinders, pad_factor=pad_factor) if dims is None else None
-        d = np.asarray(auto.dims if dims is None else dims, np.float64) * scale
+    def scaled(box_size, extent):
+        d = np.asarray(original(box_size, extent), np.float64) * scale
         # Keep the cell table within what a run can afford (the tracer caps its own choice too).
         over = np.prod(d) / MAX_GRID_CELLS
         if over > 1:
             d = d / over ** (1 / 3)
-        d = np.clip(np.round(d), 1, 1024).astype(np.int64)
-        return build_grid(cylinders, pad_factor=pad_factor, dims=d)
+        return np.clip(np.round(d), 1, 1024).astype(np.int64)
 
-    rmod.build_grid = scaled
+    gmod.grid_dims = scaled
     try:
         yield
     finally:
-        rmod.build_grid = original
+        gmod.grid_dims = original
 
 
 @contextlib.contextmanager
 def no_screen_bounds(renderer):
     """Trace every pixel of the image, not only the hair's projected box."""
     def whole(camera):
-        empty = renderer.cylinders is None or len(renderer.cylinders) == 0
+        empty = not renderer.num_cylinders
         return None if empty else (0, 0, camera.size[0], camera.size[1])
 
     renderer.screen_bounds = whole

@@ -76,16 +76,32 @@ class Cylinders:
 _FIELDS = ("top", "tip", "n2", "radius", "color", "alpha", "strand", "flags", "extension")
 
 
+def column_bounds(points):
+    """(lo, hi) float64 (3,) of (N,3) points, column by column: numpy's min(axis=0) walks
+    (N,3) arrays three values at a time and is ~10x slower on millions of points."""
+    lo = np.array([points[:, i].min() for i in range(3)], np.float64)
+    hi = np.array([points[:, i].max() for i in range(3)], np.float64)
+    return lo, hi
+
+
+def repeat_distance(points):
+    """Points closer than this to their predecessor repeat it (MERGE_EPS times the scene
+    size, which is at least a thousandth of the farthest coordinate)."""
+    if len(points) < 2:
+        return 0.0
+    lo, hi = column_bounds(points)
+    scale = max(float(np.max(hi - lo)), float(np.max(np.abs(np.concatenate([lo, hi])))) * 1e-3, 1e-30)
+    return MERGE_EPS * scale
+
+
 def _distinct_points(strands, strand_of_point):
     """Mask of points kept: drops points that repeat their predecessor within a strand."""
     pts = strands.points
     keep = np.ones(len(pts), bool)
     if len(pts) < 2:
         return keep
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
-    scale = max(float(np.max(hi - lo)), float(np.max(np.abs(np.concatenate([lo, hi])))) * 1e-3, 1e-30)
     step = pts[1:] - pts[:-1]
-    keep[1:] = np.einsum("ij,ij->i", step, step) > (MERGE_EPS * scale) ** 2
+    keep[1:] = np.einsum("ij,ij->i", step, step) > repeat_distance(pts) ** 2
     keep[1:] |= strand_of_point[1:] != strand_of_point[:-1]    # a root never repeats anything
     return keep
 
@@ -124,13 +140,49 @@ def check_float32_precision(strands):
                          "(and move the camera and lights by the same amount)")
 
 
-def strands_to_cylinders(strands):
-    """hairio.Strands -> Cylinders (float32 arrays for the GPU; the reference promotes them).
-    Whole-array float32 work: the GPU consumes float32, and the reference promotes exactly
-    these values, so both trace the same cylinders. InputError where float32 cannot resolve
-    the strands (check_float32_precision)."""
+@dataclass(frozen=True, eq=False)
+class CylinderPlan:
+    """What the cylinders of a set of strands are made from, before any per-cylinder work:
+    the points left after dropping repeats (points (P,3), radius, alpha (P,), color (P,3),
+    strand (P,) index of each point's strand or None, counts (S,) points left per strand)
+    and `top_point` (N,): cylinder k runs from point top_point[k] to the next point. The numpy build (strands_to_cylinders) and the
+    GPU build (tracer/shaders/cylinders_build.glsl) both start from it."""
+    points: np.ndarray
+    radius: np.ndarray
+    color: np.ndarray
+    alpha: np.ndarray
+    strand: np.ndarray
+    counts: np.ndarray
+    top_point: np.ndarray
+
+    def __len__(self):
+        return len(self.top_point)
+
+
+def plan_cylinders(strands, drop_repeats=True, candidates=None):
+    """hairio.Strands -> CylinderPlan. InputError where float32 cannot resolve the strands
+    (check_float32_precision). With drop_repeats False, points that repeat their
+    predecessor are kept and `strand` is None: for a caller that checks for repeats itself
+    (the GPU build does, while it makes the cylinders) and comes back for the full plan
+    when there are any, with `candidates`: the points whose successors may repeat them (a
+    superset; only these are checked, by the same rule)."""
     check_float32_precision(strands)
     counts = strands.counts.astype(np.int64)
+    if not drop_repeats:
+        return CylinderPlan(strands.points, strands.radius, strands.color, strands.alpha, None,
+                            counts, _top_points(counts))
+    if candidates is not None:
+        # Few points to check and drop: no per-point pass, one copy of each array.
+        c = np.asarray(candidates, np.int64)
+        ends = np.cumsum(counts)
+        owner = np.searchsorted(ends, c, side="right")
+        c = c[(c + 1 < ends[np.minimum(owner, len(ends) - 1)]) & (owner < len(ends))]
+        step = strands.points[c + 1] - strands.points[c]
+        drop = c[np.einsum("ij,ij->i", step, step) <= repeat_distance(strands.points) ** 2] + 1
+        counts = counts - np.bincount(np.searchsorted(ends, drop, side="right"), minlength=len(counts))
+        return CylinderPlan(*(np.delete(a, drop, axis=0) for a in
+                              (strands.points, strands.radius, strands.color, strands.alpha)),
+                            None, counts, _top_points(counts))
     strand_of_point = np.repeat(np.arange(len(counts), dtype=np.int32), counts)
     keep = _distinct_points(strands, strand_of_point)
     if keep.all():      # the usual case: no copies
@@ -139,15 +191,33 @@ def strands_to_cylinders(strands):
     else:
         pts, sid = strands.points[keep], strand_of_point[keep]
         radius, color, alpha = strands.radius[keep], strands.color[keep], strands.alpha[keep]
-    if len(pts) < 2:
-        return _empty()
     # Point j starts a cylinder when point j+1 belongs to the same strand.
-    starts = sid[:-1] == sid[1:]
-    if not starts.any():
+    top_point = np.flatnonzero(sid[:-1] == sid[1:]).astype(np.int32) if len(pts) > 1 else np.zeros(0, np.int32)
+    return CylinderPlan(pts, radius, color, alpha, sid, np.bincount(sid, minlength=len(counts)), top_point)
+
+
+def _top_points(counts):
+    """Every point but the last of its strand starts a cylinder (strands of `counts` points,
+    none repeated)."""
+    starts = np.ones(int(counts.sum()), bool)
+    full = counts > 0
+    starts[(np.cumsum(counts) - 1)[full]] = False
+    return np.flatnonzero(starts).astype(np.int32)
+
+
+def strands_to_cylinders(strands):
+    """hairio.Strands -> Cylinders (float32 arrays for the GPU; the reference promotes them).
+    Whole-array float32 work: the GPU consumes float32, and the reference promotes exactly
+    these values, so both trace the same cylinders. InputError where float32 cannot resolve
+    the strands (check_float32_precision)."""
+    plan = plan_cylinders(strands)
+    if not len(plan):
         return _empty()
-    top = pts[:-1][starts]
-    tip = pts[1:][starts]
-    strand = sid[:-1][starts]
+    i = plan.top_point
+    pts = plan.points
+    top = pts[i]
+    tip = pts[i + 1]
+    strand = plan.strand[i]
     axis = tip - top
     length = np.sqrt(np.einsum("ij,ij->i", axis, axis))
     u1 = axis / length[:, None]
@@ -165,12 +235,12 @@ def strands_to_cylinders(strands):
     first = np.ones(len(top), bool)
     first[1:] = ~has_next[:-1] | sharp[:-1]
     flags = first.astype(np.uint8) | ((~has_next | sharp).astype(np.uint8) << 1)
-    r = radius[:-1][starts]
+    r = plan.radius[i]
     cosang = np.clip(cosang, _COS_SHARP, 1.0)
     ext = r * np.sqrt(1.0 - cosang * cosang) / cosang
     return Cylinders(
         top=top, tip=tip, n2=u2.astype(np.float32), radius=r,
-        color=np.ascontiguousarray(color[:-1][starts]), alpha=alpha[:-1][starts],
+        color=plan.color[i], alpha=plan.alpha[i],
         strand=strand, flags=flags, extension=ext.astype(np.float32))
 
 

@@ -26,7 +26,8 @@ class Grid:
     dims: np.ndarray        # (3,) int64 cells along x, y, z
     cell_start: np.ndarray  # (nx*ny*nz,) int32 first slot in `indices`; cell id = x + nx*(y + ny*z)
     cell_count: np.ndarray  # (nx*ny*nz,) int32
-    indices: np.ndarray     # (R,) int32 cylinder ids, each cell's run sorted by id
+    indices: np.ndarray     # (R,) int32 cylinder ids, each cell's run sorted by id; None when
+                            # the lists exist only on the GPU (Renderer.grid_indices reads them)
 
     @property
     def hi(self):
@@ -58,7 +59,7 @@ def expected_refs(box_size, h):
     return float(np.mean((1.0 + e[:, 0]) * (1.0 + e[:, 1] / m) * (1.0 + e[:, 2] / m)))
 
 
-def choose_resolution(box_lo, box_hi, scene_lo, extent, max_refs=None):
+def choose_resolution(box_size, extent, max_refs=None):
     """Cell counts per axis: the smallest cell size h at which a cylinder is listed in about
     `max_refs` cells on average (found by bisection on a sample of boxes).
 
@@ -67,11 +68,11 @@ def choose_resolution(box_lo, box_hi, scene_lo, extent, max_refs=None):
     listing each segment in dozens of cells. Measured on 100,000 wavy strands (1.5 M
     cylinders, 512x512, llvmpipe on 2 cores, empty blocks skipped): build + trace is about
     flat from 6 to 9 references per cylinder, the trace alone keeps improving up to ~9-12;
-    8 balances the two. A floor keeps the cell count within MAX_CELLS and MAX_DIM per axis."""
+    8 balances the two. A floor keeps the cell count within MAX_CELLS and MAX_DIM per axis.
+    `box_size` (N,3): sizes of the cylinders' padded boxes, or of a sample of them."""
     max_refs = MAX_REFS_PER_CYLINDER if max_refs is None else max_refs
-    n = len(box_lo)
-    size = box_hi - box_lo
-    sample = size if n <= 20_000 else size[:: n // 20_000 + 1]
+    n = len(box_size)
+    sample = box_size if n <= 20_000 else box_size[:: n // 20_000 + 1]
     floor_h = max(float(extent.max()) / MAX_DIM, float(np.prod(extent) / MAX_CELLS) ** (1 / 3))
     lo_h, hi_h = floor_h, max(floor_h, float(extent.max()))
     if expected_refs(sample, lo_h) <= max_refs:
@@ -80,6 +81,28 @@ def choose_resolution(box_lo, box_hi, scene_lo, extent, max_refs=None):
         m = 0.5 * (lo_h + hi_h)
         lo_h, hi_h = (m, hi_h) if expected_refs(sample, m) > max_refs else (lo_h, m)
     return _dims_for(extent, hi_h)
+
+
+def grid_frame(lo, hi, box_size, dims=None):
+    """(corner, cell size, cell counts) of the grid over the scene box lo..hi whose
+    cylinders have padded boxes of sizes `box_size` (N,3, or a sample); `dims` overrides the
+    resolution."""
+    lo = np.asarray(lo, np.float64)
+    extent = np.asarray(hi, np.float64) - lo
+    # A flat scene (all hair in one plane) still needs a non-zero cell along that axis.
+    extent = np.maximum(extent, max(float(extent.max()) * 1e-3, 1e-12))
+    # Widen by a hair so boxes on the far faces fall inside the last cell, not past it.
+    lo = lo - extent * 1e-6
+    extent = extent * (1 + 2e-6)
+    if dims is None:
+        dims = grid_dims(box_size, extent)
+    dims = np.asarray(dims, np.int64)
+    return lo, extent / dims, dims
+
+
+def grid_dims(box_size, extent):
+    """The resolution every build uses (a seam for measuring other resolutions)."""
+    return choose_resolution(box_size, extent)
 
 
 def _cells_touched(cylinders, pad_factor, lo, cs, dims):
@@ -164,17 +187,7 @@ def build_grid(cylinders, pad_factor=1.0, dims=None):
     blo, bhi = cylinders.bounds(pad_factor)
     blo = blo.astype(np.float64)
     bhi = bhi.astype(np.float64)
-    lo, hi = blo.min(axis=0), bhi.max(axis=0)
-    extent = hi - lo
-    # A flat scene (all hair in one plane) still needs a non-zero cell along that axis.
-    extent = np.maximum(extent, max(float(extent.max()) * 1e-3, 1e-12))
-    # Widen by a hair so boxes on the far faces fall inside the last cell, not past it.
-    lo = lo - extent * 1e-6
-    extent = extent * (1 + 2e-6)
-    if dims is None:
-        dims = choose_resolution(blo, bhi, lo, extent)
-    dims = np.asarray(dims, np.int64)
-    cs = extent / dims
+    lo, cs, dims = grid_frame(blo.min(axis=0), bhi.max(axis=0), bhi - blo, dims)
     ncell = int(np.prod(dims))
     # Small chunks of cylinders on all cores (numpy drops the GIL in its loops). Small, so the
     # dozen temporaries per reference stay in cache instead of streaming ~40 MB arrays

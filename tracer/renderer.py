@@ -11,8 +11,9 @@ import time
 import numpy as np
 
 from hairio import InputError, Strands
-from .cylinders import strands_to_cylinders
-from .grid import build_grid
+from .cylinders import SHARP_BEND_DEG, CylinderPlan, column_bounds, plan_cylinders, repeat_distance, strands_to_cylinders
+from .grid import Grid, build_grid, grid_frame
+from .gpu_build import GpuBuilder, compute_available
 from .settings import GRID_WIDEN_CAP, RenderSettings
 
 BLOCK = 4          # cells per side of the empty-space-skipping blocks (the shader's BLOCK)
@@ -32,6 +33,8 @@ void main() {   // one triangle that covers the screen; the scissor picks the pi
 """
 
 _CONTEXT = None
+_BUILDER = None
+BUILDS = ("auto", "gpu", "numpy")
 
 
 def shared_context():
@@ -49,6 +52,14 @@ def shared_context():
 
 def load_shader(name):
     return (SHADER_DIR / name).read_text()
+
+
+def gpu_builder():
+    """The compute passes of the shared context (compiled on first use)."""
+    global _BUILDER
+    if _BUILDER is None:
+        _BUILDER = GpuBuilder(shared_context(), load_shader)
+    return _BUILDER
 
 
 def texture_layout(name, n_texels, max_size, base_width=TEX_W):
@@ -78,17 +89,27 @@ class Renderer:
     projected bounds that were traced), and with RenderSettings(count=True) also
     shadow_rays, layers_traced, cells_visited, cylinder_tests (summed over samples)."""
 
-    def __init__(self, max_texture_size=None, base_width=TEX_W):
+    def __init__(self, max_texture_size=None, base_width=TEX_W, build="auto"):
         """`max_texture_size` (default: the driver's GL_MAX_TEXTURE_SIZE) and `base_width`
-        shape the 2D textures (texture_layout); smaller values exercise big-scene layouts."""
+        shape the 2D textures (texture_layout); smaller values exercise big-scene layouts.
+        `build`: where cylinders and grid are made — "gpu" (compute shaders, GL 4.3+),
+        "numpy", or "auto" (the GPU where the driver has compute shaders)."""
         self.ctx = shared_context()
         self.max_texture_size = int(max_texture_size or self.ctx.info["GL_MAX_TEXTURE_SIZE"])
         self.base_width = int(base_width)
-        self._shift = {}     # log2 row width of tex_cyl and tex_idx
+        if build not in BUILDS:
+            raise InputError(f"build: expected one of {', '.join(BUILDS)}, got {build!r}")
+        if build == "gpu" and not compute_available(self.ctx):
+            raise InputError(f"build: 'gpu' needs compute shaders (OpenGL 4.3); this driver offers "
+                             f"{self.ctx.info['GL_VERSION']}; use 'numpy' or 'auto'")
+        self.build = "numpy" if build == "numpy" or not compute_available(self.ctx) else "gpu"
+        self._shift = {}     # log2 row width of tex_cyl, tex_idx (and tex_pts, tex_cp)
         self._programs = {}
         self._fbos = {}
         self._tex = {}
-        self.cylinders = None
+        self._cylinders = None
+        self._plan = None
+        self.num_cylinders = None     # None until set_strands
         self.grid = None
         self.strands = None
         self.all_opaque = True
@@ -99,26 +120,62 @@ class Renderer:
                       "render_s": 0.0, "renders": 0}
 
     # --- data ---------------------------------------------------------------------------
+    @property
+    def cylinders(self):
+        """The scene's tracer.cylinders.Cylinders. The GPU build never needs them on the CPU,
+        so there they are made on first access (for tests and tools), not on upload."""
+        if self._cylinders is None and self.strands is not None:
+            self._cylinders = strands_to_cylinders(self.strands)
+        return self._cylinders
+
     def set_strands(self, strands):
         """Upload `strands` (hairio.Strands) and build the grid."""
         if not isinstance(strands, Strands):
             raise InputError(f"strands: expected hairio.Strands, got {type(strands).__name__}; "
                              "build one with Strands.from_arrays")
         t0 = time.perf_counter()
+        # The GPU build checks for repeated points itself while it makes the cylinders.
+        plan = plan_cylinders(strands, drop_repeats=self.build != "gpu")
         self.strands = strands
-        self.cylinders = strands_to_cylinders(strands)
-        t1 = time.perf_counter()
-        self._upload_cylinders(0, len(self.cylinders), full=True)
-        t2 = time.perf_counter()
-        self._build_and_upload_grid()
-        self.stats["cylinders_s"] = t1 - t0
-        self.stats["upload_s"] = t2 - t1 + self.stats.pop("_grid_upload_s")
-        self.stats["num_cylinders"] = len(self.cylinders)
+        self._cylinders = None
+        self._plan = plan
+        self.num_cylinders = len(plan)
+        if self.build == "gpu" and len(plan):
+            t1 = time.perf_counter()
+            self._upload_points(plan)
+            t2 = time.perf_counter()
+            # Twice the numpy build's distance: float32 rounding on the GPU cannot hide a
+            # repeat, and plan_cylinders checks the candidates by the numpy rule.
+            repeats = self._make_cylinders_gpu(2.0 * repeat_distance(plan.points))
+            if repeats is None or len(repeats):
+                # Some points may repeat their predecessor: drop them as the numpy build does.
+                self._plan = plan = plan_cylinders(strands, candidates=repeats)
+                self.num_cylinders = len(plan)
+                t1b = time.perf_counter()
+                self._upload_points(plan)
+                t2 += time.perf_counter() - t1b
+                self._make_cylinders_gpu(0.0)
+            self.stats["uploads"] += 1
+            self._set_all_opaque(plan)
+            t3 = time.perf_counter()
+            self._build_and_upload_grid()
+            self.stats["cylinders_s"] = (t1 - t0) + (t3 - t2)
+            self.stats["upload_s"] = (t2 - t1) + self.stats.pop("_grid_upload_s")
+        else:
+            self._cylinders = strands_to_cylinders(strands)
+            t1 = time.perf_counter()
+            self._upload_cylinders(0, len(self._cylinders), full=True)
+            t2 = time.perf_counter()
+            self._build_and_upload_grid()
+            self.stats["cylinders_s"] = t1 - t0
+            self.stats["upload_s"] = t2 - t1 + self.stats.pop("_grid_upload_s")
+        self.stats["num_cylinders"] = self.num_cylinders
 
     def update_strands(self, strand_ids, strands):
         """`strands` is the whole new set; only strands `strand_ids` changed. When their point
-        counts are unchanged, only their cylinders' texture rows are re-uploaded (and the grid
-        is rebuilt, which is cheap); otherwise everything is uploaded again."""
+        counts are unchanged, only their data is re-uploaded (their cylinders' texture rows
+        with the numpy build, their points' rows with the GPU build, which then remakes just
+        their cylinders) and the grid is rebuilt; otherwise everything is uploaded again."""
         if self.strands is None or not isinstance(strands, Strands) \
                 or not np.array_equal(strands.counts, self.strands.counts):
             self.set_strands(strands)
@@ -128,6 +185,9 @@ class Renderer:
             raise InputError(f"strand_ids: values must lie in [0, {strands.num_strands}); got {ids.min()}..{ids.max()}")
         if not ids.size:
             self.strands = strands
+            return
+        if self.build == "gpu" and self.num_cylinders:
+            self._update_strands_gpu(ids, strands)
             return
         t0 = time.perf_counter()
         sub = _select_strands(strands, ids)
@@ -147,15 +207,118 @@ class Renderer:
         self.strands = strands
         t1 = time.perf_counter()
         per = self._cyl_per_row
-        rows = np.unique(dest // per)
-        # Consecutive rows go up in one write.
-        breaks = np.flatnonzero(np.diff(rows) > 1)
-        for a, b in zip(np.concatenate([[0], breaks + 1]), np.concatenate([breaks, [len(rows) - 1]])):
-            self._upload_cylinders(int(rows[a]) * per, min(len(old), (int(rows[b]) + 1) * per))
+        for a, b in _row_runs(dest // per):
+            self._upload_cylinders(a * per, min(len(old), b * per))
         t2 = time.perf_counter()
         self._build_and_upload_grid()
         self.stats["cylinders_s"] = t1 - t0
         self.stats["upload_s"] = t2 - t1 + self.stats.pop("_grid_upload_s")
+
+    def _update_strands_gpu(self, ids, strands):
+        t0 = time.perf_counter()
+        old = self._plan
+        sub = plan_cylinders(_select_strands(strands, ids))
+        if not np.array_equal(sub.counts, old.counts[ids]):
+            self.set_strands(strands)    # a repeated point appeared or vanished
+            return
+        # The same points per strand are left: point and cylinder numbering are unchanged.
+        first_point = np.concatenate([[0], np.cumsum(old.counts)])
+        if len(old.points) == strands.num_points:      # nothing dropped: the arrays as they are
+            self._plan = CylinderPlan(strands.points, strands.radius, strands.color, strands.alpha,
+                                      None, old.counts, old.top_point)
+        else:       # the plan holds its own copies: write the changed strands into them
+            dest = np.repeat(first_point[ids], sub.counts) + (
+                np.arange(len(sub.points)) - np.repeat(np.cumsum(sub.counts) - sub.counts, sub.counts))
+            for f in ("points", "radius", "color", "alpha"):
+                getattr(old, f)[dest] = getattr(sub, f)
+        self.strands = strands
+        self._cylinders = None
+        self._set_all_opaque(self._plan)
+        counts = self._plan.counts.astype(np.int64)
+        per_strand = np.maximum(counts - 1, 0)
+        t1 = time.perf_counter()
+        point_first = first_point[ids]
+        ends = point_first + counts[ids]
+        # Runs of consecutive changed strands are one write per texture and one dispatch each.
+        breaks = np.flatnonzero(np.diff(ids) > 1)
+        runs = list(zip(np.concatenate([[0], breaks + 1]), np.concatenate([breaks, [len(ids) - 1]])))
+        for a, b in runs:
+            self._upload_points(self._plan, int(point_first[a]), int(ends[b]))
+        t2 = time.perf_counter()
+        cyl_first = np.concatenate([[0], np.cumsum(per_strand)])
+        for a, b in runs:
+            first, last = int(cyl_first[ids[a]]), int(cyl_first[ids[b] + 1])
+            self._make_cylinders_gpu(0.0, first, last - first)
+        t3 = time.perf_counter()
+        self._build_and_upload_grid()
+        self.stats["cylinders_s"] = (t1 - t0) + (t3 - t2)
+        self.stats["upload_s"] = (t2 - t1) + self.stats.pop("_grid_upload_s")
+
+    def _set_all_opaque(self, plan):
+        self.all_opaque = bool(len(plan) == 0 or plan.alpha[plan.top_point].min() >= 1.0)
+
+    _POINT_TEXTURES = (("tex_pos", "points", 3), ("tex_rad", "radius", 1), ("tex_col", "color", 3),
+                       ("tex_alpha", "alpha", 1))
+
+    def _upload_points(self, plan, a=None, b=None):
+        """Points a..b (all by default): the plan's arrays as they are, one texture each, in
+        rows of 2^shift points; the full upload also sends the cylinder -> top point index."""
+        if a is None:
+            n = len(plan.points)
+            shift, rows = texture_layout("tex_pos", n, self.max_texture_size, self.base_width)
+            self._shift["tex_pts"] = shift
+            for name, field, comps in self._POINT_TEXTURES:
+                self._gpu_texture(name, (1 << shift, rows), comps, "f4")
+            a, b = 0, n
+            shift, rows = texture_layout("tex_cp", len(plan), self.max_texture_size, self.base_width)
+            self._shift["tex_cp"] = shift
+            cp = np.zeros(rows << shift, np.int32)
+            cp[:len(plan)] = plan.top_point
+            self._texture("tex_cp", (1 << shift, rows), 1, "i4", cp)
+        # Whole rows in one write, the partial rows at either end in one each: no copies.
+        w = 1 << self._shift["tex_pts"]
+        pieces = []
+        r0, r1 = -(-a // w), b // w
+        if r1 > r0:
+            pieces.append((r0 * w, r1 * w, (0, r0, w, r1 - r0)))
+            if a < r0 * w:
+                pieces.append((a, r0 * w, (a % w, a // w, r0 * w - a, 1)))
+            if b > r1 * w:
+                pieces.append((r1 * w, b, (0, r1, b - r1 * w, 1)))
+        else:   # within one row
+            pieces.append((a, b, (a % w, a // w, b - a, 1)))
+        for name, field, _ in self._POINT_TEXTURES:
+            data = getattr(plan, field)
+            for p0, p1, viewport in pieces:
+                chunk = np.ascontiguousarray(data[p0:p1], np.float32)
+                self._tex[name].write(chunk, viewport=viewport)
+                self.stats["bytes_uploaded"] += chunk.nbytes
+
+    def _make_cylinders_gpu(self, repeat_dist, first=0, count=None):
+        """Makes cylinders first..first+count (all, into a new texture, by default); returns
+        the top points of those that may join repeated points (checked when repeat_dist > 0;
+        None: too many to list)."""
+        n = self.num_cylinders
+        if count is None:
+            shift, rows = texture_layout("tex_cyl", n * TEXELS_PER_CYL, self.max_texture_size, self.base_width)
+            self._shift["tex_cyl"] = shift
+            self._gpu_texture("tex_cyl", (1 << shift, rows), 4, "f4")
+        return gpu_builder().make_cylinders(self._tex, self._shift["tex_pts"], self._shift["tex_cp"], n,
+                                            self._shift["tex_cyl"] - 2, repeat_dist, first, count)
+
+    def _gpu_texture(self, name, size, components, dtype):
+        """A texture the GPU passes fill: the one already there when its shape and format
+        fit (allocating hundreds of MB costs as much as filling them on a CPU driver), else a
+        new one."""
+        tex = self._tex.get(name)
+        if tex is not None and tex.size == tuple(size) and tex.components == components and tex.dtype == dtype:
+            return tex
+        if tex is not None:
+            tex.release()
+        tex = self.ctx.texture(size, components, dtype=dtype)
+        _nearest(tex)
+        self._tex[name] = tex
+        return tex
 
     def _texture(self, name, size, components, dtype, data):
         limit = self.ctx.info["GL_MAX_3D_TEXTURE_SIZE"] if len(size) == 3 else self.max_texture_size
@@ -169,8 +332,7 @@ class Renderer:
             tex = self.ctx.texture3d(size, components, data, dtype=dtype)
         else:
             tex = self.ctx.texture(size, components, data, dtype=dtype)
-        import moderngl
-        tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        _nearest(tex)
         self._tex[name] = tex
         self.stats["bytes_uploaded"] += data.nbytes
         return tex
@@ -208,14 +370,22 @@ class Renderer:
 
     def _build_and_upload_grid(self):
         t0 = time.perf_counter()
-        self.grid = build_grid(self.cylinders, pad_factor=self._grid_pad)
-        t1 = time.perf_counter()
+        self.grid = None
+        if self.build == "gpu" and self.num_cylinders:
+            self.grid, upload_s = self._build_grid_gpu()
+        self.stats["grid_build"] = "gpu" if self.grid is not None else "numpy"
+        if self.grid is None:      # the numpy build, or a scene the GPU passes cannot list
+            self.grid = build_grid(self.cylinders, pad_factor=self._grid_pad)
+            t1 = time.perf_counter()
+            g = self.grid
+            shift, rows = texture_layout("tex_idx", len(g.indices), self.max_texture_size, self.base_width)
+            self._shift["tex_idx"] = shift
+            idx = np.zeros(rows << shift, np.int32)
+            idx[:len(g.indices)] = g.indices
+            self._texture("tex_idx", (1 << shift, rows), 1, "i4", idx)
+            upload_s = time.perf_counter() - t1
         g = self.grid
-        shift, rows = texture_layout("tex_idx", len(g.indices), self.max_texture_size, self.base_width)
-        self._shift["tex_idx"] = shift
-        idx = np.zeros(rows << shift, np.int32)
-        idx[:len(g.indices)] = g.indices
-        self._texture("tex_idx", (1 << shift, rows), 1, "i4", idx)
+        t2 = time.perf_counter()
         cells = np.column_stack([g.cell_start, g.cell_count]).astype(np.int32)
         # An empty cell's start is unused; -1 there says its whole block of BLOCK³ cells is
         # empty, so the DDA learns "skip the block" from the one texel it reads per cell.
@@ -225,11 +395,59 @@ class Renderer:
                                  np.arange(nx)[None, None, :] // BLOCK].ravel()
         cells[~in_full_block, 0] = -1
         self._texture("tex_cell", tuple(int(x) for x in g.dims), 2, "i4", cells)
-        self.stats["grid_s"] = t1 - t0
-        self.stats["_grid_upload_s"] = time.perf_counter() - t1
+        t3 = time.perf_counter()
+        self.stats["grid_s"] = (t3 - t0) - upload_s - (t3 - t2)
+        self.stats["_grid_upload_s"] = upload_s + (t3 - t2)
         self.stats["grid_dims"] = tuple(int(x) for x in g.dims)
-        self.stats["grid_refs"] = len(g.indices)
+        self.stats["grid_refs"] = self._grid_refs
         self.stats["cylinders_per_full_cell"], self.stats["full_cell_fraction"] = g.occupancy()
+
+    @property
+    def _grid_refs(self):
+        return int(self.grid.cell_count.sum(dtype=np.int64))
+
+    def _build_grid_gpu(self):
+        """(Grid with indices None, seconds spent uploading), or (None, 0) when a cylinder
+        spans more cells than one invocation may list (the caller builds in numpy)."""
+        plan = self._plan
+        pad = self._grid_pad
+        pts = plan.points
+        # Every capsule lies within its points' box widened by its radius times the pad, plus
+        # the reach of a bent cylinder past its tip (at most r·tan(SHARP_BEND_DEG), see
+        # tracer/cylinders.py): the scene box without per-cylinder work.
+        rmax = float(plan.radius.max())
+        reach = rmax * (pad + np.tan(np.radians(SHARP_BEND_DEG))) * (1 + 1e-6)
+        lo, hi = column_bounds(pts)
+        lo, hi = lo - reach, hi + reach
+        # The resolution from a sample of the cylinders' padded boxes, as the numpy build does.
+        step = max(1, len(plan) // 20_000 + 1)
+        top = plan.top_point[::step]
+        a, b = pts[top].astype(np.float64), pts[top + 1].astype(np.float64)
+        size = np.abs(b - a) + 2 * pad * plan.radius[top][:, None]
+        lo, cs, dims = grid_frame(lo, hi, size)
+        builder = gpu_builder()
+        n, tex_cyl, cyl_shift = self.num_cylinders, self._tex["tex_cyl"], self._shift["tex_cyl"] - 2
+        counted = builder.count(n, tex_cyl, cyl_shift, lo, cs, dims, pad)
+        if counted is None:
+            return None, 0.0
+        counts, cells = counted
+        start = np.cumsum(counts) - counts
+        total = int(start[-1] + counts[-1])
+        shift, rows = texture_layout("tex_idx", total, self.max_texture_size, self.base_width)
+        self._shift["tex_idx"] = shift
+        # Rows rounded up, so a rebuild with a few more references reuses the texture.
+        tex_idx = self._gpu_texture("tex_idx", (1 << shift, min(self.max_texture_size, -(-rows // 64) * 64)), 1, "i4")
+        builder.fill(n, tex_cyl, cyl_shift, lo, cs, dims, pad, cells, start, tex_idx, shift)
+        # Counted as uploads: the zeroed counters and the cursors the two passes start from.
+        self.stats["bytes_uploaded"] += 2 * counts.size * 4
+        return Grid(lo, cs, dims, start.astype(np.int32), counts.astype(np.int32), None), 0.0
+
+    def grid_indices(self):
+        """The grid's cell lists as int32 (read back from the GPU when built there)."""
+        if self.grid.indices is not None:
+            return self.grid.indices
+        raw = self._tex["tex_idx"].read()
+        return np.frombuffer(raw, np.int32)[:self._grid_refs].copy()
 
     # --- rendering ----------------------------------------------------------------------
     def _program(self, settings, camera, layers):
@@ -276,7 +494,7 @@ class Renderer:
     def screen_bounds(self, camera):
         """Pixel rectangle (x0, y0, x1, y1), y from the top, that the grid box can cover;
         None when nothing can be seen."""
-        if self.cylinders is None or len(self.cylinders) == 0:
+        if not self.num_cylinders:
             return None
         lo, hi = self.grid.lo, self.grid.hi
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
@@ -298,7 +516,7 @@ class Renderer:
         """(H, W, 4) float32 linear RGBA, premultiplied, row 0 = top of the image."""
         settings = settings or RenderSettings()
         settings.check()
-        if self.cylinders is None:
+        if self.num_cylinders is None:
             raise InputError("render: no strands; call set_strands first")
         t0 = time.perf_counter()
         if settings.min_pixel_width and self._grid_pad < GRID_WIDEN_CAP:
@@ -386,6 +604,19 @@ def block_occupancy(grid):
     full = np.zeros((bz * BLOCK, by * BLOCK, bx * BLOCK), bool)
     full[:nz, :ny, :nx] = (grid.cell_count > 0).reshape(nz, ny, nx)
     return full.reshape(bz, BLOCK, by, BLOCK, bx, BLOCK).any(axis=(1, 3, 5)).astype(np.uint8)
+
+
+def _nearest(tex):
+    import moderngl
+    tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+
+
+def _row_runs(rows):
+    """[first, end) pairs of the runs of consecutive texture rows among `rows` (any order)."""
+    rows = np.unique(rows)
+    breaks = np.flatnonzero(np.diff(rows) > 1)
+    return [(int(rows[a]), int(rows[b]) + 1)
+            for a, b in zip(np.concatenate([[0], breaks + 1]), np.concatenate([breaks, [len(rows) - 1]]))]
 
 
 def _set(prog, name, value):

@@ -1,0 +1,166 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The GPU build (compute shaders) against the numpy build it must agree with."""
+import numpy as np
+import pytest
+
+from hairio import InputError
+from tracer import Camera, Light, RenderSettings, Renderer, strands_to_cylinders
+from tracer import renderer as rmod
+from tracer.grid import _cells_touched
+from tracer.gpu_build import MAX_VISITS, compute_available
+from tracer.renderer import TEXELS_PER_CYL, shared_context
+
+from test_tracer_grid import _cell_of, _surface_samples
+from tracer_scenes import curls, make_strands
+
+pytestmark = pytest.mark.skipif(not compute_available(shared_context()),
+                                reason="this driver has no compute shaders (OpenGL 4.3)")
+
+
+@pytest.fixture(scope="module")
+def gpu():
+    return Renderer(build="gpu")
+
+
+def _gpu_cylinder_texels(r):
+    raw = np.frombuffer(r._tex["tex_cyl"].read(), np.float32)
+    return raw.reshape(-1, TEXELS_PER_CYL, 4)[:r.num_cylinders]
+
+
+def _numpy_cylinder_texels(c):
+    out = np.zeros((len(c), TEXELS_PER_CYL, 4), np.float32)
+    out[:, 0, :3], out[:, 0, 3] = c.top, c.radius
+    out[:, 1, :3], out[:, 1, 3] = c.tip, c.alpha
+    out[:, 2, :3], out[:, 2, 3] = c.n2, c.flags
+    out[:, 3, :3] = c.color
+    return out
+
+
+def _hairpin_and_repeats():
+    """Sharp bends (caps), a strand with a repeated point, a strand that collapses to one
+    point, a straight one."""
+    hairpin = np.array([[0, 0, 0], [0, 0, 0.2], [0.02, 0, 0.25], [0.04, 0, 0.2], [0.04, 0, 0.0]])
+    repeated = np.array([[0.2, 0, 0], [0.2, 0, 0.1], [0.2, 0, 0.1], [0.25, 0.02, 0.2], [0.3, 0, 0.3]])
+    single = np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 0.5]])
+    straight = np.array([[-0.2, 0, 0], [-0.2, 0.1, 0.1], [-0.2, 0.2, 0.2]])
+    lines = [hairpin, repeated, single, straight]
+    return make_strands(lines, radius=np.linspace(0.004, 0.001, sum(len(p) for p in lines)),
+                        alpha=np.linspace(1.0, 0.4, sum(len(p) for p in lines)))
+
+
+@pytest.mark.parametrize("scene", ["curls", "hairpin_and_repeats"])
+def test_gpu_cylinders_are_the_numpy_cylinders(gpu, scene):
+    s = curls(25, 14) if scene == "curls" else _hairpin_and_repeats()
+    gpu.set_strands(s)
+    c = strands_to_cylinders(s)
+    assert gpu.num_cylinders == len(c)
+    got, want = _gpu_cylinder_texels(gpu), _numpy_cylinder_texels(c)
+    # Copies of the input are exact; the plane-2 normal is computed in float32 on both sides
+    # and may differ in the last bit; the cap flags must agree.
+    for j in (0, 1, 3):
+        np.testing.assert_array_equal(got[:, j], want[:, j])
+    np.testing.assert_allclose(got[:, 2, :3], want[:, 2, :3], atol=1e-6)
+    np.testing.assert_array_equal(got[:, 2, 3], want[:, 2, 3])
+    if scene == "hairpin_and_repeats":
+        assert (want[:, 2, 3].astype(int) & 2).sum() > 1     # the scene has caps to check
+
+
+def test_every_surface_point_lies_in_a_cell_whose_gpu_list_has_its_cylinder(gpu):
+    rng = np.random.default_rng(5)
+    s = curls(30, 12, radius=0.01)
+    gpu.set_strands(s)
+    assert gpu.stats["grid_build"] == "gpu"
+    g, idx, c = gpu.grid, gpu.grid_indices(), strands_to_cylinders(s)
+    assert g.num_cells > 8 and len(idx) == g.cell_count.sum()
+    for k in rng.choice(len(c), 60, replace=False):
+        for cell in np.unique(_cell_of(g, _surface_samples(c, k, rng))):
+            run = idx[g.cell_start[cell]:g.cell_start[cell] + g.cell_count[cell]]
+            assert k in run, f"cylinder {k} missing from cell {cell}"
+
+
+def test_gpu_lists_are_the_numpy_listing_in_the_same_grid(gpu):
+    s = curls(40, 16, radius=0.006)
+    gpu.set_strands(s)
+    g = gpu.grid
+    idx = gpu.grid_indices()
+    got = set(zip(np.repeat(np.arange(g.num_cells), g.cell_count).tolist(), idx.tolist()))
+    cyl, cell = _cells_touched(strands_to_cylinders(s), 1.0, g.lo, g.cell_size, g.dims)
+    want = set(zip(cell.tolist(), cyl.tolist()))
+    # Same slabs and pads on both sides; float32 rounding in the shader may move a boundary
+    # by far less than the thousandth of a cell both add, so the listings agree but for
+    # references within that margin.
+    assert len(got ^ want) <= 1e-3 * len(want)
+    assert len(got) == len(idx)         # no cylinder listed twice in a cell
+
+
+def _scene_camera(s, size=(48, 40)):
+    lo, hi = s.bounds()
+    centre = 0.5 * (lo + hi)
+    return Camera.look_at(centre + np.array([0.3, -1.6, 0.5]), centre, size=size, fov_deg=35)
+
+
+@pytest.mark.parametrize("shadows", ["hard", "transmittance"])
+def test_gpu_and_numpy_builds_render_the_same_image(gpu, shadows):
+    s = curls(20, 12, radius=0.01, alpha=0.6)
+    cam = _scene_camera(s)
+    settings = RenderSettings(spp=1, layers=3, shadows=True, shadow_mode=shadows,
+                              lights=(Light(vector=(0.3, 0.5, -1.0)),))
+    gpu.set_strands(s)
+    a = gpu.render(cam, settings)
+    cpu = Renderer(build="numpy")
+    cpu.set_strands(s)
+    b = cpu.render(cam, settings)
+    assert (a[..., 3] > 0).mean() > 0.05
+    np.testing.assert_array_equal(a[..., 3] > 0, b[..., 3] > 0)
+    # Different grids (the GPU build bounds the scene by its points): the same hits, found
+    # in other cells; transmittance multiplies the same factors in another order.
+    np.testing.assert_allclose(a, b, atol=1e-5)
+
+
+def test_update_on_the_gpu_equals_a_fresh_upload(gpu):
+    s = curls(30, 10)
+    gpu.set_strands(s)
+    pts = s.points.copy()
+    changed = np.array([3, 4, 17])
+    for i in changed:
+        a = s.offsets[i]
+        pts[a:a + s.counts[i]] += np.array([0.01, -0.02, 0.0], np.float32)
+    s2 = type(s).from_arrays(pts, s.counts, radius=s.radius, color=s.color, alpha=s.alpha)
+    before = gpu.stats["bytes_uploaded"]
+    gpu.update_strands(changed, s2)
+    sent = gpu.stats["bytes_uploaded"] - before
+    texels = _gpu_cylinder_texels(gpu).copy()
+    cam = _scene_camera(s2)
+    img = gpu.render(cam)
+    fresh = Renderer(build="gpu")
+    fresh.set_strands(s2)
+    before = fresh.stats["bytes_uploaded"]
+    np.testing.assert_array_equal(texels, _gpu_cylinder_texels(fresh))
+    np.testing.assert_array_equal(img, fresh.render(cam))
+    assert sent < before            # only the changed strands' points went up
+
+
+def test_a_cylinder_too_big_for_one_invocation_falls_back_to_the_numpy_grid(gpu):
+    rng = np.random.default_rng(2)
+    tiny = [np.array([p, p + [0, 0, 0.002]]) for p in rng.uniform(0, 1, (3000, 3))]
+    fat = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    s = make_strands(tiny + [fat], radius=np.concatenate([np.full(6000, 2e-4), [0.25, 0.25]]))
+    gpu.set_strands(s)
+    g = gpu.grid
+    # The fat cylinder spans far more cells than one invocation may visit.
+    span = np.prod(np.minimum(g.dims, np.ceil(1.5 / g.cell_size)))
+    assert span > MAX_VISITS
+    assert gpu.stats["grid_build"] == "numpy"
+    cam = _scene_camera(s)
+    cpu = Renderer(build="numpy")
+    cpu.set_strands(s)
+    np.testing.assert_allclose(gpu.render(cam), cpu.render(cam), atol=1e-5)
+
+
+def test_build_choice_is_checked(monkeypatch):
+    with pytest.raises(InputError, match="build"):
+        Renderer(build="cuda")
+    monkeypatch.setattr(rmod, "compute_available", lambda ctx: False)
+    with pytest.raises(InputError, match="compute shaders"):
+        Renderer(build="gpu")
+    assert Renderer(build="auto").build == "numpy"

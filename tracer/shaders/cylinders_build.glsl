@@ -1,0 +1,74 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+// Continual cylinders made on the GPU (GL 4.3 compute) from the strand points, written
+// straight into the cylinder texture the trace shader reads: the same four texels per
+// cylinder, by the same rules, as tracer/cylinders.py (which the reference tracer uses):
+//   TOP: xyz top, w radius   TIP: xyz tip, w alpha   N2: xyz unit normal of plane 2, w cap
+//   flags   COL: rgb colour
+// Cylinder k runs from point p = cyl_point[k] to p + 1 of the same strand; plane 2 is
+// square to the next axis unless the strand ends there or bends sharper than
+// SHARP_BEND_DEG (then square to its own axis, and a cap).
+layout(local_size_x = 64) in;
+
+uniform int n_items;        // cylinders to make in this dispatch
+uniform int first_item;     // index of the first of them
+uniform int n_cyl;          // cylinders in the scene
+uniform int pts_shift;      // log2 points per row of the point textures
+uniform int cp_shift;       // log2 texels per row of tex_cp
+uniform int cyl_shift;      // log2 cylinders per row of the cylinder image
+uniform float cos_sharp;    // cos(SHARP_BEND_DEG)
+uniform float repeat2;      // squared distance below which a point repeats its predecessor
+                            // (0: the host dropped repeats already)
+
+// Per point, the arrays of SPEC §0 as they are (no packing on the host).
+uniform sampler2D tex_pos;      // xyz
+uniform sampler2D tex_rad;      // radius
+uniform sampler2D tex_col;      // rgb
+uniform sampler2D tex_alpha;    // alpha
+uniform isampler2D tex_cp;      // per cylinder: index of its top point
+layout(rgba32f, binding = 0) uniform writeonly image2D cyl_img;
+// Segments no longer than the repeat distance (the host passes twice the numpy build's, so
+// float32 rounding cannot hide one): texel 0 counts them, texels 1.. list the first
+// MAX_REPEATS of their top points. The host checks each by the numpy rule, drops the repeated
+// points (tracer/cylinders.py) and makes the cylinders again: one rule for both builds.
+layout(r32i, binding = 1) uniform iimage2D repeat_img;
+
+ivec2 pt(int p) { return ivec2(p & ((1 << pts_shift) - 1), p >> pts_shift); }
+vec3 pos(int p) { return texelFetch(tex_pos, pt(p), 0).xyz; }
+int top_point(int k) { return texelFetch(tex_cp, ivec2(k & ((1 << cp_shift) - 1), k >> cp_shift), 0).x; }
+// As numpy: the axis divided by its float32 length.
+vec3 unit(vec3 v) { return v / sqrt(v.x * v.x + v.y * v.y + v.z * v.z); }
+
+void main() {
+    int k = first_item + int(gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * 64
+            + int(gl_LocalInvocationID.x);
+    if (k >= first_item + n_items || k >= n_cyl) return;
+    int p = top_point(k);
+    // Consecutive cylinders of a strand have consecutive top points.
+    bool first = k == 0 || top_point(k - 1) != p - 1;
+    bool has_next = k + 1 < n_cyl && top_point(k + 1) == p + 1;
+    vec3 A = pos(p), B = pos(p + 1);
+    vec3 ax = B - A;
+    if (ax.x * ax.x + ax.y * ax.y + ax.z * ax.z <= repeat2) {
+        int i = imageAtomicAdd(repeat_img, ivec2(0, 0), 1);
+        if (i < MAX_REPEATS) imageStore(repeat_img, ivec2(i + 1, 0), ivec4(p));
+    }
+    vec3 u1 = unit(ax);
+    vec3 u2 = u1;
+    bool sharp = false;
+    if (has_next) {
+        u2 = unit(pos(p + 2) - B);
+        sharp = u1.x * u2.x + u1.y * u2.y + u1.z * u2.z < cos_sharp;
+        if (sharp) u2 = u1;
+    }
+    bool cap1 = first;
+    if (!first) {
+        vec3 u0 = unit(A - pos(p - 1));
+        cap1 = u0.x * u1.x + u0.y * u1.y + u0.z * u1.z < cos_sharp;
+    }
+    int flags = (cap1 ? 1 : 0) | (!has_next || sharp ? 2 : 0);
+    int row = k >> cyl_shift, col = (k & ((1 << cyl_shift) - 1)) << 2;
+    imageStore(cyl_img, ivec2(col, row), vec4(A, texelFetch(tex_rad, pt(p), 0).x));
+    imageStore(cyl_img, ivec2(col + 1, row), vec4(B, texelFetch(tex_alpha, pt(p), 0).x));
+    imageStore(cyl_img, ivec2(col + 2, row), vec4(u2, float(flags)));
+    imageStore(cyl_img, ivec2(col + 3, row), vec4(texelFetch(tex_col, pt(p), 0).rgb, 0.0));
+}
