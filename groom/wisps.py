@@ -32,37 +32,43 @@ def _nearest_keys(roots, key_roots, k, root_groups=None, key_groups=None):
     chunk = max(1, (1 << 22) // max(n_keys, 1))
     for lo in range(0, len(roots), chunk):  # chunks of ~4M distances, not strands
         r = roots[lo:lo + chunk]
+        cols = np.arange(len(r))
         # Squared distances order the keys as well; only the chosen few get a square root.
         if n_keys <= 32:
-            # Few keys: one key at a time over contiguous coordinate rows (the same sums).
+            # Few keys: key-major (keys x roots), one contiguous row per key, sorted down the
+            # columns; equal distances keep the lower key index first (a stable sort).
             rx, ry, rz = (np.ascontiguousarray(r[:, c]) for c in range(3))
-            d = np.empty((len(r), n_keys))
+            d = np.empty((n_keys, len(r)))
             for j, (kx, ky, kz) in enumerate(key_roots):
-                dj = (rx - kx) ** 2
-                dj += (ry - ky) ** 2
-                dj += (rz - kz) ** 2
-                d[:, j] = dj
+                d[j] = (rx - kx) ** 2
+                d[j] += (ry - ky) ** 2
+                d[j] += (rz - kz) ** 2
+            if root_groups is not None:
+                d[key_groups[:, None] != root_groups[None, lo:lo + chunk]] = np.inf
+            sel = np.argsort(d, axis=0, kind="stable")[:k_eff]
+            flat = sel * len(r) + cols
         else:
             # One coordinate at a time keeps the temporaries (roots x keys), not (roots x keys x 3).
             d = (r[:, 0, None] - key_roots[None, :, 0]) ** 2
             d += (r[:, 1, None] - key_roots[None, :, 1]) ** 2
             d += (r[:, 2, None] - key_roots[None, :, 2]) ** 2
-        if root_groups is not None:
-            d[root_groups[lo:lo + chunk, None] != key_groups[None, :]] = np.inf
-        if k_eff < n_keys and n_keys > 32:
-            part = np.argpartition(d, k_eff - 1, axis=1)[:, :k_eff]
-            # argpartition is not stable; re-sort the chosen few by (distance, index).
-            part.sort(axis=1)
-            pd = np.take_along_axis(d, part, axis=1)
-            order = np.argsort(pd, axis=1, kind="stable")
-            sel = np.take_along_axis(part, order, axis=1)
-        else:
-            # A stable sort of a few keys per root: equal distances keep the lower index first.
-            sel = np.argsort(d, axis=1, kind="stable")[:, :k_eff]
-        sd = np.sqrt(np.take_along_axis(d, sel, axis=1))
-        sel = np.where(np.isfinite(sd), sel, -1)
-        idx[:k_eff, lo:lo + chunk] = sel.T
-        dist[:k_eff, lo:lo + chunk] = sd.T
+            if root_groups is not None:
+                d[root_groups[lo:lo + chunk, None] != key_groups[None, :]] = np.inf
+            if k_eff < n_keys:
+                part = np.argpartition(d, k_eff - 1, axis=1)[:, :k_eff]
+                # argpartition is not stable; re-sort the chosen few by (distance, index).
+                part.sort(axis=1)
+                pd = np.take_along_axis(d, part, axis=1)
+                order = np.argsort(pd, axis=1, kind="stable")
+                sel = np.take_along_axis(part, order, axis=1).T
+            else:
+                sel = np.argsort(d, axis=1, kind="stable").T
+            flat = cols * n_keys + sel
+        idx[:k_eff, lo:lo + chunk] = sel
+        dist[:k_eff, lo:lo + chunk] = np.sqrt(d.take(flat))
+    missing = np.isinf(dist)  # another group's keys only
+    if missing.any():
+        idx[missing] = -1
     return idx, dist
 
 
@@ -89,8 +95,10 @@ def check_groups(root_groups, key_groups):
 
 def _ratio(num, den):
     """num/den for distances with num <= den; 0/0 = 1 (two keys at one point are equally near)."""
-    safe = np.where(den > 0, den, 1.0)
-    return np.where(den > 0, num / safe, 1.0)
+    zero = den <= 0
+    if not zero.any():
+        return num / den
+    return np.where(zero, 1.0, num / np.where(zero, 1.0, den))
 
 
 def interpolate_sharpness(n_influence):
@@ -153,14 +161,21 @@ def guide_weights_by_guide(roots, key_roots, mode="interpolate", n_influence=50.
         dist = np.stack([dist[0]] + dnb)
     d0 = dist[0]
 
+    all_present = bool((idx >= 0).all())
+
     def near_ratio(j):
         """d0/dj for a present key j, else 0."""
+        if all_present:
+            return _ratio(d0, dist[j])
         present = idx[j] >= 0
         return np.where(present, _ratio(d0, np.where(present, dist[j], 1.0)), 0.0)
 
+    def where_present(j, x):
+        return x if all_present else np.where(idx[j] >= 0, x, 0.0)
+
     if mode == "interpolate":
         inv_max = near_ratio(3)
-        w = [1.0 - inv_max] + [np.where(idx[j] >= 0, near_ratio(j) - inv_max, 0.0) for j in (1, 2)]
+        w = [1.0 - inv_max] + [where_present(j, near_ratio(j) - inv_max) for j in (1, 2)]
         gamma = interpolate_sharpness(n_influence)
         w = [np.maximum(x, 0.0) ** gamma for x in w]
         total = w[0] + w[1] + w[2]
@@ -173,5 +188,5 @@ def guide_weights_by_guide(roots, key_roots, mode="interpolate", n_influence=50.
         w = [np.full_like(d0, 101.0 - n_influence), near_ratio(1), near_ratio(2)]
         total = w[0] + w[1] + w[2]
     w = [x / total for x in w]
-    g = [idx[0]] + [np.where(idx[j] >= 0, idx[j], idx[0]) for j in (1, 2)]
+    g = [idx[0]] + [idx[j] if all_present else np.where(idx[j] >= 0, idx[j], idx[0]) for j in (1, 2)]
     return g, w
