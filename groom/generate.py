@@ -106,8 +106,8 @@ class Generator:
         normal = self.scalp.normals_at(tri, bary, p.normal_mode)
         frames = root_frames(normal, p.up, p.front)
         out = []
-        for key, frame in zip(keys, frames):  # a few keys, not strands
-            table, length = key_offsets(key, frame, p.intelligence, KEY_SAMPLES)
+        tables = key_offsets(keys, frames, p.intelligence, KEY_SAMPLES)
+        for key, (table, length) in zip(keys, tables):  # a few keys, not strands
             bound = curvature_bound(table, length) if p.resolution_mode == "adaptive" else None
             radius = p.radius if key.root_radius is None else key.root_radius
             color = np.asarray(p.color if key.color is None else key.color, dtype=np.float64)
@@ -220,15 +220,22 @@ class Generator:
         for i, d in zip(order, self._prepare_keys([changes[i] for i in order])):
             self.keys[i] = changes[i]
             self._key_data[i] = d
-        try:
-            guides, weights = self._assign()
-        except InputError:
-            self._key_data = old_data
-            raise
         changed = np.array(order, np.int64)
         old_g, old_w = self._guides, self._weights
-        dirty = (np.isin(guides, changed).any(axis=0) | np.isin(old_g, changed).any(axis=0)
-                 | (guides != old_g).any(axis=0) | (weights != old_w).any(axis=0))
+        if all(np.array_equal(old_data[i]["root"], self._key_data[i]["root"])
+               and old_data[i]["group"] == self._key_data[i]["group"] for i in order):
+            # Only key shapes, radii or colours changed: guides and weights depend on the key
+            # roots and groups alone, so they stay; the strands guided by a changed key redo.
+            guides, weights = old_g, old_w
+            dirty = np.isin(guides, changed).any(axis=0)
+        else:
+            try:
+                guides, weights = self._assign()
+            except InputError:
+                self._key_data = old_data
+                raise
+            dirty = (np.isin(guides, changed).any(axis=0) | np.isin(old_g, changed).any(axis=0)
+                     | (guides != old_g).any(axis=0) | (weights != old_w).any(axis=0))
         sel = np.flatnonzero(dirty)
         self.last_recomputed = len(sel)
         return self._build(guides, weights, self._splice(sel, self._strands(sel, guides, weights)))
@@ -246,8 +253,14 @@ class Generator:
         np.cumsum(parts[1][:-1], out=part_off[1:])
         n_new = int(parts[1].sum())
         out = {}
-        if np.array_equal(parts[1], old_counts[sel]):
-            # Same counts (always so at fixed resolution): overwrite the changed rows in place.
+        if len(old_counts) and (old_counts == old_counts[0]).all() and (parts[1] == old_counts[0]).all():
+            # One count for all (fixed resolution): overwrite whole strands, one row each.
+            for name, new in new_arrays.items():
+                arr = c[name].copy()
+                arr.reshape(len(old_counts), -1)[sel] = new.reshape(len(sel), -1)
+                out[name] = arr
+        elif np.array_equal(parts[1], old_counts[sel]):
+            # Same counts: overwrite the changed points in place.
             rows = np.repeat(old_off[sel] - part_off, parts[1]) + np.arange(n_new)
             for name, new in new_arrays.items():
                 arr = c[name].copy()

@@ -24,6 +24,7 @@ import numpy as np
 
 from . import rng
 from .frames import rotation_entries
+from .keys import arc_length_tables
 from .parallel import cpu_threads, run_jobs
 
 # Arc-length samples per key table (1024 steps): the lerp between samples is off the exact
@@ -39,17 +40,17 @@ def key_table(key, frame, intelligence, samples=KEY_SAMPLES, bins=CURVATURE_BINS
     """(table (samples,3) float64, bound (bins,) float64): offsets of the key from its root
     at equal arc-length steps (in the key's root frame when `intelligence`, else world axes),
     and the curvature bound of `curvature_bound`."""
-    table, length = key_offsets(key, frame, intelligence, samples)
+    (table, length), = key_offsets([key], [frame], intelligence, samples)
     return table, curvature_bound(table, length, bins)
 
 
-def key_offsets(key, frame, intelligence, samples=KEY_SAMPLES):
-    """(table (samples,3) float64, length): the first half of `key_table`, all that fixed
-    resolution needs."""
-    table, length = key.arc_length_table(samples)
-    if intelligence:
-        table = table @ frame  # rows: F_x^T D
-    return table, length
+def key_offsets(keys, frames, intelligence, samples=KEY_SAMPLES):
+    """[(table (samples,3) float64, length)] per key: the first half of `key_table`, all that
+    fixed resolution needs; the keys are resampled in one batch."""
+    out = []
+    for (table, length), frame in zip(arc_length_tables(keys, samples), frames):
+        out.append((table @ frame if intelligence else table, length))  # rows: F_x^T D
+    return out
 
 
 def curvature_bound(table, length, bins=CURVATURE_BINS):

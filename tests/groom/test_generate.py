@@ -57,6 +57,23 @@ def test_incremental_update_equals_full_regeneration(scalp, mode, resolution, ke
     _same(inc, generate(scalp, keys, params))
 
 
+def test_reshaping_a_key_recomputes_only_the_strands_it_guides(scalp, keys_around):
+    params = GroomParams(count=2000, seed=2, resolution_mode="fixed")
+    keys = keys_around(scalp, 6)
+    gen = Generator(scalp, keys, params)
+    before = gen.generate()
+    # Same root, new shape: wisps and weights stay, so only key 1's strands are redone.
+    reshaped = KeyStrand(keys[1].points + [[0, 0, 0], [0.0, 0.01, 0], [0.01, 0, 0], [0, 0, 0.01]])
+    after = gen.update_keys({1: reshaped})
+    guided = (before.guides == 1).any(axis=1)
+    assert gen.last_recomputed == guided.sum() > 0
+    np.testing.assert_array_equal(after.guide_weights, before.guide_weights)
+    pts_before = before.strands.points.reshape(2000, -1, 3)
+    pts_after = after.strands.points.reshape(2000, -1, 3)
+    np.testing.assert_array_equal(pts_after[~guided], pts_before[~guided])
+    assert (pts_after[guided] != pts_before[guided]).any(axis=(1, 2)).mean() > 0.5
+
+
 def test_tidiness_one_means_no_rotation(scalp, curl_key):
     key = curl_key([0, 0, 0.1])
     base = dict(count=500, seed=2, min_length=1.0, max_length=1.0, resolution_mode="fixed", theta_max=0.6)
