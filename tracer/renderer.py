@@ -573,9 +573,13 @@ class Renderer:
 
     def _set_uniforms(self, prog, camera, settings):
         g = self.grid
-        for i, name in enumerate(("tex_cyl", "tex_idx", "tex_cell")):
-            self._tex[name].use(location=i)
+        for i, (name, inv) in enumerate((("tex_cyl", "cyl_inv"), ("tex_idx", "idx_inv"), ("tex_cell", "cell_inv"))):
+            tex = self._tex[name]
+            tex.use(location=i)
             _set(prog, name, i)
+            # The shader reads texels at their centres with textureLod (cheaper than
+            # texelFetch on llvmpipe), which needs the reciprocal sizes.
+            _set(prog, inv, tuple(1.0 / float(x) for x in tex.size))
         _set(prog, "cyl_shift", self._shift["tex_cyl"] - 2)     # log2 cylinders per row
         _set(prog, "idx_shift", self._shift["tex_idx"])
         _set(prog, "grid_lo", tuple(float(x) for x in g.lo))
