@@ -424,7 +424,7 @@ class Renderer:
         top = plan.top_point[::step]
         a, b = pts[top].astype(np.float64), pts[top + 1].astype(np.float64)
         size = np.abs(b - a) + 2 * pad * plan.radius[top][:, None]
-        lo, cs, dims = grid_frame(lo, hi, size)
+        lo, cs, dims = grid_frame(lo, hi, size, count=len(plan))
         builder = gpu_builder()
         n, tex_cyl, cyl_shift = self.num_cylinders, self._tex["tex_cyl"], self._shift["tex_cyl"] - 2
         counted = builder.count(n, tex_cyl, cyl_shift, lo, cs, dims, pad)
