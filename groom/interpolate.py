@@ -20,6 +20,8 @@ whole-array chunks of strands, never a loop over strands. Every operation is ele
 per strand, so evaluating a subset of strands gives bit-identical results to evaluating
 them all (incremental regeneration relies on it).
 """
+import threading
+
 import numpy as np
 
 from . import rng
@@ -198,32 +200,75 @@ def evaluate_strands(roots, transforms, guides, weights, counts, rows, sigma=Non
 
             def per_strand(x):
                 return x[sl, None]
-            pos = (frac[sl, None] * grid if sigma is None else sigma[start:stop].reshape(shape)) * (samples - 1)
+            src = None if sigma is None else sigma[start:stop].reshape(shape)
         else:
             shape = (stop - start,)
             strand = np.repeat(np.arange(first, last), counts[first:last])
 
             def per_strand(x):
                 return x[strand]
-            pos = sigma[start:stop] * (samples - 1)
-        i0 = np.minimum(pos.astype(np.int64), samples - 2)
-        fr = (pos - i0).astype(np.float32)
-        acc = None
+            src = sigma[start:stop]
+        # Every temporary lives in this thread's scratch arrays (out=): fresh arrays of this
+        # size would have the allocator map and fault in new pages on every chunk.
+        buf = _scratch(shape)
+        pos, i0, fr, idx, acc, row, d, term = (buf[name] for name in ("pos", "i0", "fr", "idx", "acc", "row", "d",
+                                                                     "term"))
+        if src is None:
+            np.multiply(frac[sl, None], grid, out=pos)  # σ, as uniform_sigma makes it
+            src = pos
+        np.multiply(src, samples - 1, out=pos)
+        np.copyto(i0, pos, casting="unsafe")  # truncation = floor, σ >= 0
+        np.minimum(i0, samples - 2, out=i0)
+        np.subtract(pos, i0, out=pos)
+        np.copyto(fr, pos, casting="same_kind")
         for k in range(3):  # the three guides
-            row = table.take(per_strand(first_row[k]) + i0, axis=0)
-            row *= per_strand(weights[k])[..., None]
-            if acc is None:
-                acc = row
+            np.add(per_strand(first_row[k]), i0, out=idx)
+            # mode="clip" (the indices are valid anyway) lets take write into `out` unbuffered.
+            table.take(idx, axis=0, out=acc if k == 0 else row, mode="clip")
+            if k == 0:
+                acc *= per_strand(weights[k])[..., None]
             else:
+                row *= per_strand(weights[k])[..., None]
                 acc += row
         # Offsets in the keys' frame: sample + fraction · step, per component.
-        d = [acc[..., c] + fr * acc[..., 4 + c] for c in range(3)]
+        for c in range(3):
+            np.multiply(fr, acc[..., 4 + c], out=d[c])
+            d[c] += acc[..., c]
         dst = out[start:stop].reshape(shape + (3,))
         for a in range(3):
             # B_j · d in float32 (offsets), plus the root in float64, stored as float32.
-            dst[..., a] = (per_strand(transforms[3 * a]) * d[0] + per_strand(transforms[3 * a + 1]) * d[1]
-                           + per_strand(transforms[3 * a + 2]) * d[2]) + per_strand(roots[a])
+            e = buf["e"]
+            np.multiply(per_strand(transforms[3 * a]), d[0], out=e)
+            np.multiply(per_strand(transforms[3 * a + 1]), d[1], out=term)
+            e += term
+            np.multiply(per_strand(transforms[3 * a + 2]), d[2], out=term)
+            e += term
+            np.add(e, per_strand(roots[a]), out=dst[..., a], casting="same_kind")
 
     also = list(also)
     done = run_jobs(also + [lambda b=b: chunk(b) for b in bounds], threads)
     return out, done[:len(also)]
+
+
+_SCRATCH = threading.local()
+
+
+def _scratch(shape):
+    """This thread's work arrays for a chunk of `shape` points, kept between chunks and calls
+    (a few MB per thread at the default chunk size)."""
+    size = int(np.prod(shape))
+    have = getattr(_SCRATCH, "arrays", None)
+    if have is None or have["size"] < size:
+        have = _SCRATCH.arrays = {"size": size, "pos": np.empty(size), "i0": np.empty(size, np.int64), "fr": np.empty(size, np.float32),
+                                  "idx": np.empty(size, np.int64), "acc": np.empty((size, 8), np.float32),
+                                  "row": np.empty((size, 8), np.float32), "d": np.empty((3, size), np.float32),
+                                  "term": np.empty(size, np.float32), "e": np.empty(size, np.float32)}
+    out = {}
+    for name, a in have.items():
+        if name == "size":
+            continue
+        if name == "d":
+            out[name] = a[:, :size].reshape((3,) + shape)
+        else:
+            out[name] = a[:size].reshape(shape + a.shape[1:])
+    return out

@@ -78,7 +78,7 @@ class KeyStrand:
         t = np.clip(np.asarray(t, dtype=np.float64).ravel(), 0.0, 1.0)
         if self.kind == "bezier":
             return _de_casteljau(self.points - self.points[0], t)
-        return _cubic_offsets([self], [t])
+        return _cubic_offsets(self, t)
 
     def arc_length_table(self, samples, dense=None):
         """Offsets from the root at `samples` points equally spaced in arc length (float64),
@@ -95,63 +95,44 @@ class KeyStrand:
         return self.arc_length_table(2)[1]
 
 
-def _cubic_offsets(keys, ts):
-    """Points relative to their roots of cubic keys `keys` at parameters `ts` (one array per
-    key, clipped to [0, 1]), all keys in one batch: (sum of lengths, 3), key after key.
-    Cubic Bernstein form, one coordinate at a time (rows of three would make every
-    operation loop over three numbers); each point depends only on its own key and t."""
-    rel = np.concatenate([k.points - k.points[0] for k in keys])
-    base = np.cumsum([0] + [len(k.points) for k in keys[:-1]])
-    segs = np.concatenate([np.full(len(t), k.num_segments) for k, t in zip(keys, ts)])
-    t = np.concatenate(ts)
-    seg = np.minimum((t * segs).astype(np.int64), segs - 1)
-    u = t * segs - seg
+def _cubic_offsets(key, t):
+    """Points relative to the root of a cubic key at parameters t (clipped to [0, 1]).
+    Cubic Bernstein form, all segments at once, one coordinate at a time (rows of three
+    would make every operation loop over three numbers)."""
+    rel = key.points - key.points[0]
+    k = key.num_segments
+    seg = np.minimum((t * k).astype(np.int64), k - 1)
+    u = t * k - seg
     v = 1.0 - u
     weights = (v * v * v, 3.0 * v * v * u, 3.0 * v * u * u, u * u * u)
-    first = 3 * seg + np.repeat(base, [len(x) for x in ts])
+    first = 3 * seg
     out = np.empty((len(t), 3))
     for d, column in enumerate(rel.T):
         out[:, d] = sum(w * column.take(first + i) for i, w in enumerate(weights))
     return out
 
 
-def _offsets_of(keys, ts):
-    """Offsets of many keys at per-key parameters: the cubic ones in one batch."""
-    cubic = [i for i, k in enumerate(keys) if k.kind == "cubic"]
-    out = [None] * len(keys)
-    if cubic:
-        pts = _cubic_offsets([keys[i] for i in cubic], [ts[i] for i in cubic])
-        ends = np.cumsum([len(ts[i]) for i in cubic])
-        for i, part in zip(cubic, np.split(pts, ends[:-1])):
-            out[i] = part
-    for i, k in enumerate(keys):
-        if out[i] is None:
-            out[i] = k.evaluate_offsets(ts[i])
-    return out
-
-
 def arc_length_tables(keys, samples, dense=None):
-    """KeyStrand.arc_length_table of several keys at once: [(offsets (samples,3), length)].
-    The cubic keys are evaluated in one batch, so many keys cost about as much as one."""
-    ts = [np.linspace(0.0, 1.0, dense or max(2048, 128 * k.num_segments, 4 * samples)) for k in keys]
-    out, again = [None] * len(keys), []
-    for i, (k, t, pts) in enumerate(zip(keys, ts, _offsets_of(keys, ts))):
-        step = np.sqrt(np.einsum("nd,nd->n", *(np.diff(pts, axis=0),) * 2))
+    """KeyStrand.arc_length_table of several keys: [(offsets (samples,3), length)]. One key
+    at a time on purpose: batching them made arrays large enough for the allocator to map
+    fresh pages on every call, which cost more than the calls it saved."""
+    out = []
+    for k in keys:
+        t = np.linspace(0.0, 1.0, dense or max(2048, 128 * k.num_segments, 4 * samples))
+        pts = k.evaluate_offsets(t)
+        step = np.diff(pts, axis=0)
+        step = np.sqrt(np.einsum("nd,nd->n", step, step))
         cum = np.concatenate([[0.0], np.cumsum(step)])
         length = float(cum[-1])
         scale = float(np.abs(k.points - k.points[0]).max())
         if not length > 1e-12 * max(scale, 1e-300) or length == 0.0:
-            out[i] = (np.zeros((samples, 3)), 0.0)
+            out.append((np.zeros((samples, 3)), 0.0))
             continue
         # Keep strictly increasing arc lengths only: zero-speed stretches would make the
         # inverse ambiguous (any parameter there gives the same point anyway).
         keep = np.concatenate([[True], step > 0])
         target = np.linspace(0.0, length, samples)
-        again.append((i, np.interp(target, cum[keep], t[keep]), length))
-    if again:
-        tables = _offsets_of([keys[i] for i, _, _ in again], [t for _, t, _ in again])
-        for (i, _, length), table in zip(again, tables):
-            out[i] = (table, length)
+        out.append((k.evaluate_offsets(np.interp(target, cum[keep], t[keep])), length))
     return out
 
 
