@@ -158,20 +158,37 @@ class Scalp:
     def closest_points(self, points):
         """Nearest surface point of each query (Q,3): returns (tri (Q,), bary (Q,3), point (Q,3)).
 
-        Brute force over all triangles, queries x triangles at once in chunks of about a
-        million pairs: meant for a few key roots."""
+        Meant for a few key roots. The nearest corner of any triangle bounds the distance to
+        the surface from above, so only triangles whose bounding sphere comes that close can
+        hold the nearest point: those few are solved exactly, and the result is the one a
+        search of every triangle gives (ties to the lower triangle index)."""
         q = check_finite("query points", np.asarray(points, dtype=np.float64).reshape(-1, 3))
         a, b, c = (self.vertices[self.triangles[:, i]] for i in range(3))
-        tri = np.empty(len(q), np.int64)
-        bary = np.empty((len(q), 3))
-        step = max(1, (1 << 20) // len(a))
-        for lo in range(0, len(q), step):  # chunks of queries, not single ones
+        centre = (a + b + c) / 3.0
+        radius = np.sqrt(np.maximum(np.maximum(_dot(a - centre, a - centre), _dot(b - centre, b - centre)),
+                                    _dot(c - centre, c - centre)))
+        corners = self.vertices[np.unique(self.triangles)]
+        size = float(np.abs(self.vertices).max())
+        qi, ti = [], []
+        step = max(1, (1 << 14) // max(len(a), len(corners)))
+        for lo in range(0, len(q), step):  # a few queries at a time: small (queries x triangles) arrays
             p = q[lo:lo + step, None, :]
-            on = _closest_on_triangles(p, a, b, c)
-            pts = on[..., :1] * a + on[..., 1:2] * b + on[..., 2:] * c
-            i = np.argmin(_dot(pts - p, pts - p), axis=1)
-            tri[lo:lo + step] = i
-            bary[lo:lo + step] = on[np.arange(len(i)), i]
+            near = np.sqrt(_dot(p - corners, p - corners).min(axis=1))
+            reach = np.sqrt(_dot(p - centre, p - centre)) - radius
+            # The margin covers rounding of these bounds; excluded triangles are truly farther.
+            i, j = np.nonzero(reach <= near[:, None] * (1.0 + 1e-9) + 1e-12 * size)
+            qi.append(i + lo)
+            ti.append(j)
+        qi, ti = np.concatenate(qi), np.concatenate(ti)
+        on = _closest_on_triangles(q[qi], a[ti], b[ti], c[ti])
+        pts = on[:, :1] * a[ti] + on[:, 1:2] * b[ti] + on[:, 2:] * c[ti]
+        d2 = _dot(pts - q[qi], pts - q[qi])
+        # Per query the smallest distance, then the lowest triangle index (pairs come in
+        # (query, triangle) order, lexsort is stable).
+        order = np.lexsort((d2, qi))
+        first = order[np.flatnonzero(np.r_[True, np.diff(qi[order]) != 0])]
+        tri = ti[first]
+        bary = on[first]
         return tri, bary, self.points_at(tri, bary)
 
 
@@ -181,8 +198,8 @@ def _dot(u, v):
 
 
 def _closest_on_triangles(p, a, b, c):
-    """Barycentrics (..., T, 3) of the point of each triangle nearest to p (Ericson, Real-Time
-    Collision Detection §5.1.5), vectorised over triangles (T,3) and queries p (..., 1, 3);
+    """Barycentrics (N, 3) of the point of each triangle (a, b, c: (N,3) corners) nearest to
+    its query p (N,3) (Ericson, Real-Time Collision Detection §5.1.5), vectorised;
     degenerate triangles fall to an edge or vertex."""
     ab, ac, ap = b - a, c - a, p - a
     d1, d2 = _dot(ab, ap), _dot(ac, ap)

@@ -134,3 +134,23 @@ def test_closest_points_lie_on_the_surface(scalp):
     # No vertex is nearer than the closest surface point.
     d_vert = np.linalg.norm(scalp.vertices[None] - q[:, None], axis=2).min(axis=1)
     assert (np.linalg.norm(pts - q, axis=1) <= d_vert + 1e-12).all()
+
+
+@pytest.mark.parametrize("mesh", ["head", "slivers"])
+def test_closest_points_match_a_search_of_every_triangle(scalp, mesh):
+    from groom.scalp import Scalp, _closest_on_triangles
+    if mesh == "slivers":  # zero-area and needle triangles, an unused vertex
+        v = np.array([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0.2, 0, 0], [0.1, 1e-12, 0], [0.3, 0, 0], [5, 5, 5]], float)
+        s = Scalp(v, [[0, 1, 2], [1, 3, 5], [0, 3, 4], [2, 2, 2]])
+    else:
+        s = scalp
+    rng = np.random.default_rng(4)
+    q = np.concatenate([rng.normal(scale=0.15, size=(200, 3)), s.vertices[:20], [[0, 0, 0], [1e-3, 0, 0.3]]])
+    tri, bary, pts = s.closest_points(q)
+    a, b, c = (s.vertices[s.triangles[:, i]] for i in range(3))
+    for j, p in enumerate(q):  # the plain search: every triangle, first minimum
+        on = _closest_on_triangles(np.broadcast_to(p, a.shape), a, b, c)
+        near = on[:, :1] * a + on[:, 1:2] * b + on[:, 2:] * c
+        best = int(np.argmin(((near - p) ** 2).sum(axis=1)))
+        assert np.linalg.norm(pts[j] - near[best]) <= 1e-12
+        assert tri[j] == best or np.isclose(((near[tri[j]] - p) ** 2).sum(), ((near[best] - p) ** 2).sum(), rtol=1e-12)
