@@ -55,6 +55,22 @@ def _check_inputs(scalp, keys, params):
     return keys
 
 
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def _check_float32(reach, rows, radii):
+    """Strands are made from groom's own arrays without re-validating them (see _build), so
+    make sure here that they stay finite in float32: a point lies within 4·max|table row| of
+    its root in each coordinate (B is a rotation, the weights sum to 1, the lerp stays
+    between samples), and a radius within the largest key radius."""
+    extent = float(np.abs(rows).max()) if rows.size else 0.0
+    if not reach + 4.0 * extent < _FLOAT32_MAX:
+        raise InputError(f"strand points: roots up to {reach:.3g} and key offsets up to {extent:.3g} from their roots "
+                         f"exceed float32 (SPEC §0 points are float32); scale the scalp and keys down")
+    if not float(radii.max()) < _FLOAT32_MAX:
+        raise InputError(f"radius: {float(radii.max()):.3g} exceeds float32 (SPEC §0); give a smaller radius")
+
+
 class Generator:
     """Incremental generator. `generate()` gives the full result; `update_keys({i: KeyStrand})`
     replaces keys and returns the new result, recomputing only affected strands.
@@ -73,6 +89,7 @@ class Generator:
             samples = sample_roots(scalp, p.count, p.seed, p.sampling_mode)
         self.samples = samples
         self._roots = np.ascontiguousarray(samples.points.T)
+        self._reach = float(np.abs(self._roots).max()) if self._roots.size else 0.0
         self.root_uv = scalp.uv_at(samples.tri, samples.bary)
         self.root_groups = root_groups_for(scalp, samples.tri, samples.bary, samples.points, p)
         self.frac = length_fractions(p.seed, samples.ids, p.min_length, p.max_length)
@@ -155,6 +172,7 @@ class Generator:
         radii = np.array([d["radius"] for d in kd], dtype=np.float64)
         base_radius = w[0] * radii[g[0]] + w[1] * radii[g[1]] + w[2] * radii[g[2]]
         rows = np.stack([d["rows"] for d in kd])
+        _check_float32(self._reach, rows, radii)
         args = (pick(self._roots), pick(self.transforms), g, w.astype(np.float32))
         max_cyl = p.points_per_strand - 1
         if p.resolution_mode == "fixed":

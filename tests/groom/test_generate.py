@@ -250,6 +250,13 @@ def test_moved_and_scaled_heads_give_the_same_hair_moved_and_scaled(scalp, scale
     np.testing.assert_array_equal(r.guides, ref.guides)
 
 
+def test_keys_beyond_float32_are_a_clear_error_not_infinite_points(scalp):
+    # Finite in float64, but the float32 points of SPEC §0 would overflow.
+    key = KeyStrand(np.array([[0, 0, 0.1], [0, 0, 1e38], [0, 1e38, 1e38]]))
+    with pytest.raises(InputError, match="float32"):
+        generate(scalp, [key], GroomParams(count=50))
+
+
 def test_non_finite_key_points_are_rejected_naming_the_array():
     with pytest.raises(InputError, match="key strand points"):
         KeyStrand(np.array([[0, 0, 0], [np.inf, 0, 0]]))
