@@ -27,7 +27,7 @@ import numpy as np
 from . import rng
 from .frames import rotation_entries
 from .keys import arc_length_tables
-from .parallel import cpu_threads, run_jobs
+from . import parallel
 
 # Arc-length samples per key table (1024 steps): the lerp between samples is off the exact
 # curve by at most |D''|·h²/8 with h = 1/1024, about 1e-7 of the length for a curl of 20 turns.
@@ -176,7 +176,7 @@ def evaluate_strands(roots, transforms, guides, weights, counts, rows, sigma=Non
         n = int(counts[0])
         grid = np.arange(n) / (n - 1)
         # Equal chunks, as many as a multiple of the threads, so no thread waits at the end.
-        workers = threads or cpu_threads()
+        workers = threads or parallel.cpu_threads()
         parts = workers * max(1, -(-len(out) // (workers * chunk_points)))
         edges = [len(counts) * i // parts for i in range(parts + 1)]
         bounds = [(lo, hi) for lo, hi in zip(edges[:-1], edges[1:]) if hi > lo]
@@ -246,7 +246,7 @@ def evaluate_strands(roots, transforms, guides, weights, counts, rows, sigma=Non
             np.add(e, per_strand(roots[a]), out=dst[..., a], casting="same_kind")
 
     also = list(also)
-    done = run_jobs(also + [lambda b=b: chunk(b) for b in bounds], threads)
+    done = parallel.run_jobs(also + [lambda b=b: chunk(b) for b in bounds], threads)
     return out, done[:len(also)]
 
 

@@ -17,6 +17,9 @@ _PREFIX = "groom-worker"
 
 
 def cpu_threads():
+    """CPUs this process may run on (its affinity set where the platform tells it)."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
     return os.cpu_count() or 1
 
 
@@ -28,9 +31,11 @@ def run_jobs(jobs, threads=None):
     # A job that itself runs jobs would wait for the workers it occupies: it runs them itself.
     if threads <= 1 or threading.current_thread().name.startswith(_PREFIX):
         return [job() for job in jobs]
-    pool = _POOLS.get(threads)
+    # Keyed by process too: a forked child inherits the pool but not its threads.
+    key = (os.getpid(), threads)
+    pool = _POOLS.get(key)
     if pool is None:
-        pool = _POOLS[threads] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix=_PREFIX)
+        pool = _POOLS[key] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix=_PREFIX)
     return list(pool.map(lambda job: job(), jobs))
 
 

@@ -74,6 +74,18 @@ def test_reshaping_a_key_recomputes_only_the_strands_it_guides(scalp, keys_aroun
     assert (pts_after[guided] != pts_before[guided]).any(axis=(1, 2)).mean() > 0.5
 
 
+@pytest.mark.parametrize("resolution", ["fixed", "adaptive"])
+def test_splitting_the_work_over_threads_changes_no_number(scalp, keys_around, monkeypatch, resolution):
+    import groom.parallel as parallel
+    params = GroomParams(count=9000, seed=5, resolution_mode=resolution, points_per_strand=12)
+    keys = keys_around(scalp, 6)
+    runs = {}
+    for threads in (1, 3):
+        monkeypatch.setattr(parallel, "cpu_threads", lambda t=threads: t)
+        runs[threads] = generate(scalp, keys, params)
+    _same(runs[1], runs[3])
+
+
 def test_tidiness_one_means_no_rotation(scalp, curl_key):
     key = curl_key([0, 0, 0.1])
     base = dict(count=500, seed=2, min_length=1.0, max_length=1.0, resolution_mode="fixed", theta_max=0.6)
