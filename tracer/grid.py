@@ -17,6 +17,7 @@ MAX_DIM = 1024          # 3D textures of GL 3.3 guarantee 256; every driver we t
 MAX_CELLS = 1 << 23
 MAX_REFS_PER_CYLINDER = 8.0
 MAX_CELLS_PER_CYLINDER = 4.0
+MAX_REFS = 32_000_000   # references in all (128 MB of lists), see choose_resolution
 CHUNK = 1 << 16         # cylinders per build job (see build_grid)
 
 
@@ -74,12 +75,18 @@ def choose_resolution(box_size, extent, max_refs=None, count=None):
     thousand cylinders in a head-sized box) otherwise get millions of nearly empty cells,
     which every build pays for and every ray steps through (10,000 wavy strands, 572 k
     cylinders: 8.4 M cells without the cap, 2.3 M with it; build 2.7x and render 1.4x less
-    CPU time, same image). `box_size` (N,3): sizes of the cylinders' padded boxes, or of a
-    sample of them; `count`: how many cylinders there are (default: len(box_size))."""
-    max_refs = MAX_REFS_PER_CYLINDER if max_refs is None else max_refs
+    CPU time, same image). Past MAX_REFS references in all, fewer per cylinder are aimed at:
+    building them costs the same per reference, while a ray gains less from smaller cells
+    that are already full (5.7 M cylinders, 100,000 wavy strands: 8 per cylinder cost 8.2 s
+    of CPU time for build + render, 6 per cylinder 5.7 s). `box_size` (N,3): sizes of the
+    cylinders' padded boxes, or of a sample of them; `count`: how many cylinders there are
+    (default: len(box_size))."""
     n = len(box_size)
+    count = n if count is None else count
+    if max_refs is None:
+        max_refs = min(MAX_REFS_PER_CYLINDER, MAX_REFS / max(1, count))
     sample = box_size if n <= 20_000 else box_size[:: n // 20_000 + 1]
-    cells = min(MAX_CELLS, MAX_CELLS_PER_CYLINDER * (n if count is None else count))
+    cells = min(MAX_CELLS, MAX_CELLS_PER_CYLINDER * count)
     floor_h = max(float(extent.max()) / MAX_DIM, float(np.prod(extent) / max(cells, 1)) ** (1 / 3))
     lo_h, hi_h = floor_h, max(floor_h, float(extent.max()))
     if expected_refs(sample, lo_h) <= max_refs:
