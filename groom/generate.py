@@ -164,6 +164,9 @@ class Generator:
         """Points and attributes of the strands `sel` (indices into the roots, in that order;
         None: all of them). guides (3, S), weights (3, S) as from _assign."""
         p, kd = self.params, self._key_data
+        if sel is not None and not len(sel):  # an update that touches no strand
+            return (np.zeros((0, 3), np.float32), np.zeros(0, np.int64), np.zeros(0, np.float32),
+                    np.zeros((0, 3), np.float32), np.zeros(0, np.float32))
 
         def pick(x):
             return x if sel is None else x[..., sel]
@@ -271,7 +274,9 @@ class Generator:
         np.cumsum(parts[1][:-1], out=part_off[1:])
         n_new = int(parts[1].sum())
         out = {}
-        if len(old_counts) and (old_counts == old_counts[0]).all() and (parts[1] == old_counts[0]).all():
+        if not len(sel):
+            out = {name: c[name].copy() for name in new_arrays}
+        elif (old_counts == old_counts[0]).all() and (parts[1] == old_counts[0]).all():
             # One count for all (fixed resolution): overwrite whole strands, one row each.
             for name, new in new_arrays.items():
                 arr = c[name].copy()

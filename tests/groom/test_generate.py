@@ -75,6 +75,16 @@ def test_reshaping_a_key_recomputes_only_the_strands_it_guides(scalp, keys_aroun
 
 
 @pytest.mark.parametrize("resolution", ["fixed", "adaptive"])
+def test_updating_a_key_that_guides_no_strand_changes_nothing(scalp, keys_around, resolution):
+    far = KeyStrand(np.array([[0, 0, 5.0], [0, 0, 5.1], [0, 0.1, 5.2]]))  # never among the nearest
+    gen = Generator(scalp, keys_around(scalp, 6) + [far], GroomParams(count=500, resolution_mode=resolution))
+    before = gen.generate()
+    after = gen.update_keys({6: KeyStrand(far.points + [[0, 0, 0], [0, 0.1, 0], [0, 0, 0]])})
+    assert gen.last_recomputed == 0
+    _same(before, after)
+
+
+@pytest.mark.parametrize("resolution", ["fixed", "adaptive"])
 def test_splitting_the_work_over_threads_changes_no_number(scalp, keys_around, monkeypatch, resolution):
     import groom.parallel as parallel
     params = GroomParams(count=9000, seed=5, resolution_mode=resolution, points_per_strand=12)
