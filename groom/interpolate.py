@@ -258,17 +258,12 @@ def _scratch(shape):
     (a few MB per thread at the default chunk size)."""
     size = int(np.prod(shape))
     have = getattr(_SCRATCH, "arrays", None)
-    if have is None or have["size"] < size:
-        have = _SCRATCH.arrays = {"size": size, "pos": np.empty(size), "i0": np.empty(size, np.int64), "fr": np.empty(size, np.float32),
-                                  "idx": np.empty(size, np.int64), "acc": np.empty((size, 8), np.float32),
-                                  "row": np.empty((size, 8), np.float32), "d": np.empty((3, size), np.float32),
-                                  "term": np.empty(size, np.float32), "e": np.empty(size, np.float32)}
-    out = {}
-    for name, a in have.items():
-        if name == "size":
-            continue
-        if name == "d":
-            out[name] = a[:, :size].reshape((3,) + shape)
-        else:
-            out[name] = a[:size].reshape(shape + a.shape[1:])
+    if have is None or len(have["pos"]) < size:
+        have = _SCRATCH.arrays = {
+            "pos": np.empty(size), "i0": np.empty(size, np.int64), "idx": np.empty(size, np.int64),
+            "fr": np.empty(size, np.float32), "term": np.empty(size, np.float32), "e": np.empty(size, np.float32),
+            "acc": np.empty((size, 8), np.float32), "row": np.empty((size, 8), np.float32),
+            "d": np.empty((3, size), np.float32)}
+    out = {name: a[:size].reshape(shape + a.shape[1:]) for name, a in have.items() if name != "d"}
+    out["d"] = have["d"][:, :size].reshape((3,) + shape)
     return out
