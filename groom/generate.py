@@ -90,11 +90,12 @@ class Generator:
         self.samples = samples
         self._roots = np.ascontiguousarray(samples.points.T)
         self._reach = float(np.abs(self._roots).max()) if self._roots.size else 0.0
-        self.root_uv = scalp.uv_at(samples.tri, samples.bary)
         self.root_groups = root_groups_for(scalp, samples.tri, samples.bary, samples.points, p)
-        self.frac = length_fractions(p.seed, samples.ids, p.min_length, p.max_length)
-        self.transforms = np.empty((9, len(samples.ids)), np.float32)
-        run_jobs([partial(self._transform_roots, lo, hi) for lo, hi in ranges(len(samples.ids))])
+        n = len(samples.ids)
+        self.root_uv = None if scalp.uv is None else np.empty((n, 2))
+        self.frac = np.empty(n)
+        self.transforms = np.empty((9, n), np.float32)
+        run_jobs([partial(self._per_root, lo, hi) for lo, hi in ranges(n)])
         self._key_data = self._prepare_keys(self.keys)
         self._result = None
         self._cache = None
@@ -105,9 +106,14 @@ class Generator:
         p, s = self.params, self.samples
         return frame_axes(self.scalp.normals_blend(s.tri[lo:hi], s.bary[lo:hi], p.normal_mode), p.up, p.front)
 
-    def _transform_roots(self, lo, hi):
-        p = self.params
-        angles = tidiness_angles(p.seed, self.samples.ids[lo:hi], p.tidiness, p.theta_max)
+    def _per_root(self, lo, hi):
+        """Length fraction, UV and transform B of roots lo..hi."""
+        p, s = self.params, self.samples
+        ids = s.ids[lo:hi]
+        self.frac[lo:hi] = length_fractions(p.seed, ids, p.min_length, p.max_length)
+        if self.root_uv is not None:
+            self.root_uv[lo:hi] = self.scalp.uv_at(s.tri[lo:hi], s.bary[lo:hi])
+        angles = tidiness_angles(p.seed, ids, p.tidiness, p.theta_max)
         self.transforms[:, lo:hi] = strand_transforms(self._axes(lo, hi), angles, p.intelligence)
 
     @property

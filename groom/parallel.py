@@ -11,6 +11,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 # Below this many strands a job is too small to be worth handing to another thread.
 MIN_SPLIT = 4096
+# Strands per range of whole-array work (8k float64 = 64 KB per array).
+RANGE_SIZE = 8192
 
 _POOLS = {}
 _PREFIX = "groom-worker"
@@ -39,8 +41,12 @@ def run_jobs(jobs, threads=None):
     return list(pool.map(lambda job: job(), jobs))
 
 
-def ranges(n, threads=None, min_size=MIN_SPLIT):
-    """[(lo, hi), ...]: 0..n in one contiguous range per thread, or one range when n is small."""
-    parts = max(1, min(threads or cpu_threads(), n // max(min_size, 1)))
+def ranges(n, threads=None, size=RANGE_SIZE, min_size=MIN_SPLIT):
+    """[(lo, hi), ...] covering 0..n: ranges of about `size` items, at least one per thread
+    when each still gets `min_size`. Many modest ranges rather than one per thread: a busy
+    core then holds back only a small range, and arrays of 8k float64 stay on the
+    allocator's heap instead of being mapped (and page-faulted) afresh on every call."""
+    parts = max(1, -(-n // max(size, 1)))
+    parts = max(parts, min(threads or cpu_threads(), n // max(min_size, 1)))
     edges = [n * i // parts for i in range(parts + 1)]
     return list(zip(edges[:-1], edges[1:]))

@@ -12,12 +12,14 @@ Root i's random numbers come from the counter-based stream (seed, i), so root i 
 root whoever asks for it.
 """
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
 from hairio import InputError
 
 from . import rng
+from .parallel import ranges, run_jobs
 
 SAMPLING_MODES = ("uniform", "seed")
 
@@ -65,9 +67,14 @@ def sample_roots(scalp, m, seed=0, mode="uniform"):
     counts = allocate_counts(triangle_weights(scalp), int(m))
     tri = np.repeat(np.arange(scalp.num_triangles, dtype=np.int64), counts)
     ids = np.arange(int(m), dtype=np.int64)
-    u = rng.uniform(seed, ids, rng.CH_TRIANGLE_A)
-    b = rng.uniform(seed, ids, rng.CH_TRIANGLE_B)
-    a = np.sqrt(u) if mode == "uniform" else u
-    bary = [a * b, a * (1.0 - b), 1.0 - a]
-    points = scalp.corner_blend(scalp.vertices, tri, bary)
-    return RootSamples(np.ascontiguousarray(points.T), tri, np.stack(bary, axis=1), ids)
+    points, bary = np.empty((int(m), 3)), np.empty((int(m), 3))
+
+    def place(lo, hi):
+        u = rng.uniform(seed, ids[lo:hi], rng.CH_TRIANGLE_A)
+        b = rng.uniform(seed, ids[lo:hi], rng.CH_TRIANGLE_B)
+        a = np.sqrt(u) if mode == "uniform" else u
+        corners = [a * b, a * (1.0 - b), 1.0 - a]
+        bary[lo:hi] = np.stack(corners, axis=1)
+        points[lo:hi] = scalp.corner_blend(scalp.vertices, tri[lo:hi], corners).T
+    run_jobs([partial(place, lo, hi) for lo, hi in ranges(int(m))])
+    return RootSamples(points, tri, bary, ids)
