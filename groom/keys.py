@@ -104,11 +104,13 @@ def _cubic_offsets(key, t):
     seg = np.minimum((t * k).astype(np.int64), k - 1)
     u = t * k - seg
     v = 1.0 - u
-    weights = (v * v * v, 3.0 * v * v * u, 3.0 * v * u * u, u * u * u)
+    w0, w1, w2, w3 = v * v * v, 3.0 * v * v * u, 3.0 * v * u * u, u * u * u
     first = 3 * seg
+    rows = (first, first + 1, first + 2, first + 3)
     out = np.empty((len(t), 3))
     for d, column in enumerate(rel.T):
-        out[:, d] = sum(w * column.take(first + i) for i, w in enumerate(weights))
+        c0, c1, c2, c3 = (column.take(r) for r in rows)
+        out[:, d] = w0 * c0 + w1 * c1 + w2 * c2 + w3 * c3
     return out
 
 

@@ -163,12 +163,7 @@ class Scalp:
         hold the nearest point: those few are solved exactly, and the result is the one a
         search of every triangle gives (ties to the lower triangle index)."""
         q = check_finite("query points", np.asarray(points, dtype=np.float64).reshape(-1, 3))
-        a, b, c = (self.vertices[self.triangles[:, i]] for i in range(3))
-        centre = (a + b + c) / 3.0
-        radius = np.sqrt(np.maximum(np.maximum(_dot(a - centre, a - centre), _dot(b - centre, b - centre)),
-                                    _dot(c - centre, c - centre)))
-        corners = self.vertices[np.unique(self.triangles)]
-        size = float(np.abs(self.vertices).max())
+        a, b, c, centre, radius, corners, size = self._search_data()
         qi, ti = [], []
         step = max(1, (1 << 14) // max(len(a), len(corners)))
         for lo in range(0, len(q), step):  # a few queries at a time: small (queries x triangles) arrays
@@ -190,6 +185,19 @@ class Scalp:
         tri = ti[first]
         bary = on[first]
         return tri, bary, self.points_at(tri, bary)
+
+
+    def _search_data(self):
+        """Per-triangle corners and bounding spheres for closest_points, made once: the mesh
+        does not change after it is validated."""
+        if getattr(self, "_search", None) is None:
+            a, b, c = (self.vertices[self.triangles[:, i]] for i in range(3))
+            centre = (a + b + c) / 3.0
+            radius = np.sqrt(np.maximum(np.maximum(_dot(a - centre, a - centre), _dot(b - centre, b - centre)),
+                                        _dot(c - centre, c - centre)))
+            corners = self.vertices[np.unique(self.triangles)]
+            self._search = (a, b, c, centre, radius, corners, float(np.abs(self.vertices).max()))
+        return self._search
 
 
 def _dot(u, v):
