@@ -95,8 +95,12 @@ class Generator:
         self.root_uv = None if scalp.uv is None else np.empty((n, 2))
         self.frac = np.empty(n)
         self.transforms = np.empty((9, n), np.float32)
-        run_jobs([partial(self._per_root, lo, hi) for lo, hi in ranges(n)])
-        self._key_data = self._prepare_keys(self.keys)
+        # The per-root work and the guides of the first generate() (they need only the key
+        # roots) run on the workers while this thread resamples the keys.
+        assign_jobs, self._first_assignment = self._assign_jobs([k.root for k in self.keys],
+                                                                [k.group for k in self.keys])
+        per_root = [partial(self._per_root, lo, hi) for lo, hi in ranges(n)]
+        self._key_data = run_jobs(per_root + assign_jobs, here=partial(self._prepare_keys, self.keys))[-1]
         self._result = None
         self._cache = None
         self.last_recomputed = 0  # strands recomputed by the last update_keys
@@ -139,11 +143,19 @@ class Generator:
         return out
 
     def _assign(self):
-        """Guides (3, S) int64 and weights (3, S) float64 of every root, a range of roots per thread."""
-        kd, p = self._key_data, self.params
-        key_roots = np.array([d["root"] for d in kd])
-        key_groups = np.array([d["group"] for d in kd], np.int32)
-        check_groups(self.root_groups, key_groups)  # once, so the message names every group missing
+        """Guides (3, S) int64 and weights (3, S) float64 of every root, in ranges of roots on
+        the workers."""
+        jobs, assignment = self._assign_jobs([d["root"] for d in self._key_data], [d["group"] for d in self._key_data])
+        run_jobs(jobs)
+        return assignment
+
+    def _assign_jobs(self, key_roots, key_groups):
+        """(jobs, (guides, weights)): the jobs fill the arrays. Checks the groups first, once,
+        so the message names every group that has no key."""
+        p = self.params
+        key_roots = np.array(key_roots, dtype=np.float64)
+        key_groups = np.array(key_groups, np.int32)
+        check_groups(self.root_groups, key_groups)
         n = len(self.frac)
         guides, weights = np.empty((3, n), np.int64), np.empty((3, n))
 
@@ -151,8 +163,7 @@ class Generator:
             g, w = guide_weights_by_guide(self.samples.points[lo:hi], key_roots, p.neighbour_mode, p.n_influence,
                                           self.root_groups[lo:hi], key_groups, check=False)
             guides[:, lo:hi], weights[:, lo:hi] = g, w
-        run_jobs([partial(assign, lo, hi) for lo, hi in ranges(n)])
-        return guides, weights
+        return [partial(assign, lo, hi) for lo, hi in ranges(n)], (guides, weights)
 
     def evaluate(self, sel, cylinders):
         """Points of strands `sel` at the given numbers of equal steps in σ (S,) (measurement:
@@ -222,7 +233,11 @@ class Generator:
 
     def generate(self):
         """Full regeneration from the current keys."""
-        guides, weights = self._assign()
+        if self._first_assignment is not None:  # made in __init__ for the keys as given
+            guides, weights = self._first_assignment
+            self._first_assignment = None
+        else:
+            guides, weights = self._assign()
         return self._build(guides, weights, self._strands(None, guides, weights))
 
     @property
@@ -243,6 +258,7 @@ class Generator:
             if not isinstance(k, KeyStrand):
                 raise InputError(f"update_keys[{i}]: expected a groom.KeyStrand, got {type(k).__name__}")
         old_data = list(self._key_data)
+        self._first_assignment = None
         order = sorted(changes)
         for i, d in zip(order, self._prepare_keys([changes[i] for i in order])):
             self.keys[i] = changes[i]

@@ -25,20 +25,29 @@ def cpu_threads():
     return os.cpu_count() or 1
 
 
-def run_jobs(jobs, threads=None):
+def run_jobs(jobs, threads=None, here=None):
     """Call every job() (no arguments), on up to `threads` threads (default: one per CPU),
-    and return their results in order. The worker threads are made once per process and
+    and return their results in order. `here`: one more job that the calling thread runs
+    meanwhile; its result comes last. The worker threads are made once per process and
     kept: starting threads on every call cost more than a small job itself."""
     threads = min(threads or cpu_threads(), len(jobs))
     # A job that itself runs jobs would wait for the workers it occupies: it runs them itself.
-    if threads <= 1 or threading.current_thread().name.startswith(_PREFIX):
-        return [job() for job in jobs]
+    nested = threading.current_thread().name.startswith(_PREFIX)
+    if nested or threads < 1 or (threads == 1 and (here is None or cpu_threads() == 1)):
+        return [job() for job in jobs] + ([here()] if here else [])
     # Keyed by process too: a forked child inherits the pool but not its threads.
     key = (os.getpid(), threads)
     pool = _POOLS.get(key)
     if pool is None:
         pool = _POOLS[key] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix=_PREFIX)
-    return list(pool.map(lambda job: job(), jobs))
+    futures = [pool.submit(job) for job in jobs]
+    try:
+        mine = [here()] if here else []
+    finally:
+        # Even when `here` fails, no job may still be writing when the caller goes on.
+        for f in futures:
+            f.exception()  # waits for it
+    return [f.result() for f in futures] + mine
 
 
 def ranges(n, threads=None, size=RANGE_SIZE, min_size=MIN_SPLIT):
