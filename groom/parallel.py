@@ -44,7 +44,7 @@ def run_jobs(jobs, threads=None, here=None):
     try:
         mine = [here()] if here else []
     finally:
-        # Even when `here` fails, no job may still be writing when the caller goes on.
+        # Whatever fails, no job may still be writing when the caller goes on.
         for f in futures:
             f.exception()  # waits for it
     return [f.result() for f in futures] + mine
