@@ -104,43 +104,23 @@ def strand_attributes(seed, ids, counts, along, base_radius, base_color, params)
     """Per-point radius, colour and alpha (SPEC §6), float32, for strands with `counts` points
     at fractions `along` of their length (0 at the root, 1 at the tip), so a profile is the
     same whatever the resolution: `along` is flat (P,), or (n,) shared by every strand when
-    all counts are n (fixed resolution: the profiles are then made once and broadcast).
+    all counts are n (fixed resolution: the profiles are then made once and copied).
     Radius: r(1 - s) ('linear', the thesis's r(1 - i/res)), r ('constant'), or constant up to
     taper_start then linear to 0 ('taper_from'). Colour: base + U(-1,1)·variation per strand
     and per point, clamped to [0, 1]. Alpha: 1 up to alpha_start, then linear to alpha_tip."""
     n_pts = int(counts.sum())
-    shared = along.shape != (n_pts,)
     s = along.astype(np.float32)
-    # Per-strand values meet per-point ones row by row (shared profile) or repeated per point.
-    if shared:
-        def per_point(x):
-            return x[:, None]
-
-        def flat(x):
-            return x.reshape((n_pts,) + x.shape[2:])
-    else:
-        def per_point(x):
-            return np.repeat(x, counts, axis=0)
-
-        def flat(x):
-            return x
-    r = per_point(base_radius.astype(np.float32))
-    if params.radius_mode == "linear":
-        radius = r * (np.float32(1.0) - s)
-    elif params.radius_mode == "constant":
-        radius = r * np.ones_like(s)
-    else:
-        span = np.float32(max(1.0 - params.taper_start, 1e-12))
-        radius = r * np.clip((np.float32(1.0) - s) / span, 0.0, 1.0)
-    var = np.asarray(params.color_variation)
-    color = base_color
-    if var.any():
-        u = np.stack([rng.uniform(seed, ids, rng.CH_COLOR + c) for c in range(3)], 1)
-        color = color + (2.0 * u - 1.0) * var
-    color = color.astype(np.float32)
+    color = strand_colors(seed, ids, base_color, params)
     var_p = np.asarray(params.color_variation_point)
+    if along.shape != (n_pts,) and not var_p.any():
+        out = (np.empty(n_pts, np.float32), np.empty((n_pts, 3), np.float32), np.empty(n_pts, np.float32))
+        fill_strand_rows(*out, base_radius, color, radius_profile(s, params), alpha_profile(s, params))
+        return out
+    if along.shape != (n_pts,):
+        s = np.tile(s, len(counts))
+    radius = np.repeat(base_radius.astype(np.float32), counts) * radius_profile(s, params)
+    color = np.repeat(color, counts, axis=0)
     if var_p.any():
-        color = np.repeat(color, counts, axis=0)
         strand = np.repeat(np.arange(len(counts)), counts)
         offsets = np.zeros(len(counts), np.int64)
         np.cumsum(counts[:-1], out=offsets[1:])
@@ -148,28 +128,53 @@ def strand_attributes(seed, ids, counts, along, base_radius, base_color, params)
         sid = ids[strand]
         u = np.stack([rng.uniform(seed, sid, rng.CH_COLOR_POINT + 3 * k + c) for c in range(3)], 1)
         color += ((2.0 * u - 1.0) * var_p).astype(np.float32)
-        np.clip(color, 0.0, 1.0, out=color)
-    else:
-        # One colour per strand: clamp it once, then copy it to the strand's points.
-        np.clip(color, 0.0, 1.0, out=color)
-        if shared:
-            # One strided pass per channel: np.repeat copies 12-byte rows one at a time and
-            # takes about twice as long on 100k x 32 points.
-            rows = np.empty((len(counts), len(along), 3), np.float32)
-            for c in range(3):
-                rows[:, :, c] = color[:, c, None]
-            color = rows.reshape(n_pts, 3)
-        else:
-            color = np.repeat(color, counts, axis=0)
+    np.clip(color, 0.0, 1.0, out=color)
+    alpha = alpha_profile(s, params)
+    return radius, color, np.ones(n_pts, np.float32) if alpha is None else alpha
+
+
+def strand_colors(seed, ids, base_color, params):
+    """Colour per strand, (S,3) float32: base + U(-1,1)·color_variation (not yet clamped)."""
+    var = np.asarray(params.color_variation)
+    color = base_color
+    if var.any():
+        u = np.stack([rng.uniform(seed, ids, rng.CH_COLOR + c) for c in range(3)], 1)
+        color = color + (2.0 * u - 1.0) * var
+    return color.astype(np.float32)
+
+
+def radius_profile(s, params):
+    """Radius per unit root radius at fractions s (float32) of the strand length."""
+    if params.radius_mode == "linear":
+        return np.float32(1.0) - s
+    if params.radius_mode == "constant":
+        return np.ones_like(s)
+    span = np.float32(max(1.0 - params.taper_start, 1e-12))
+    return np.clip((np.float32(1.0) - s) / span, 0.0, 1.0)
+
+
+def alpha_profile(s, params):
+    """Alpha at fractions s (float32) of the strand length; None where it is 1 everywhere."""
     if params.alpha_start >= 1.0 or params.alpha_tip == 1.0:
-        alpha = np.ones(n_pts, np.float32)
-    else:
-        t = np.clip((s - params.alpha_start) / (1.0 - params.alpha_start), 0.0, 1.0)
-        alpha = (1.0 + (params.alpha_tip - 1.0) * t).astype(np.float32)
-        if shared:
-            alpha = np.broadcast_to(alpha, (len(counts), len(along)))
-        alpha = flat(np.ascontiguousarray(alpha))
-    return flat(radius), color, alpha
+        return None
+    t = np.clip((s - params.alpha_start) / (1.0 - params.alpha_start), 0.0, 1.0)
+    return (1.0 + (params.alpha_tip - 1.0) * t).astype(np.float32)
+
+
+def fill_strand_rows(radius, color, alpha, base_radius, strand_color, radius_prof, alpha_prof):
+    """Write radius (S·n,), color (S·n,3), alpha (S·n,) of S strands of n points that share
+    the profiles radius_prof, alpha_prof (n,) (alpha_prof None: 1): each strand's radius
+    scales the profile, its colour (clamped here) is copied to its points. Whole rows per
+    strand, written in place (one strided pass per colour channel: np.repeat copies 12-byte
+    rows one at a time and takes about twice as long)."""
+    n = len(radius_prof)
+    rows = (len(base_radius), n)
+    np.multiply(base_radius.astype(np.float32)[:, None], radius_prof, out=radius.reshape(rows))
+    clamped = np.clip(strand_color, 0.0, 1.0)
+    per_point = color.reshape(rows + (3,))
+    for c in range(3):
+        per_point[:, :, c] = clamped[:, c, None]
+    alpha.reshape(rows)[...] = 1.0 if alpha_prof is None else alpha_prof
 
 
 def _segment_distances(points, a, b):

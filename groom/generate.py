@@ -13,7 +13,8 @@ import numpy as np
 
 from hairio import InputError, Strands
 
-from .cylinders import adaptive_sigma, strand_attributes
+from .cylinders import (adaptive_sigma, alpha_profile, fill_strand_rows, radius_profile, strand_attributes,
+                        strand_colors)
 from .frames import frame_axes, root_frames
 from .interpolate import (KEY_SAMPLES, curvature_bound, evaluate_strands, key_offsets, key_rows,
                           length_fractions, strand_transforms, tidiness_angles, uniform_sigma)
@@ -197,11 +198,10 @@ class Generator:
         max_cyl = p.points_per_strand - 1
         if p.resolution_mode == "fixed":
             counts = np.full(len(frac), max_cyl + 1, np.int64)
-            # Every strand has the same attribute profiles: made once, on one thread while
-            # the others blend points.
             along = np.arange(max_cyl + 1) / max_cyl
-            attributes = partial(self._attributes, ids, counts, along, g, w, base_radius)
-            pts, (attrs,) = evaluate_strands(*args, counts, rows, frac=frac, also=[attributes])
+            jobs, attrs = self._attribute_jobs(ids, counts, along, g, w, base_radius)
+            pts, done = evaluate_strands(*args, counts, rows, frac=frac, also=jobs)
+            attrs = attrs or done[0]
         else:
             tol = p.tolerance * (base_radius if p.tolerance_units == "radius" else np.ones(len(frac)))
             tol = np.maximum(tol, 1e-300)
@@ -213,10 +213,31 @@ class Generator:
 
     def _attributes(self, ids, counts, along, g, w, base_radius):
         """(radius, colour, alpha) per point (cylinders.strand_attributes) from the guides' colours."""
+        return strand_attributes(self.params.seed, ids, counts, along, base_radius, self._base_color(g, w),
+                                 self.params)
+
+    def _base_color(self, g, w):
+        """The guides' colours blended by the weights, (S,3) float64."""
         colors = np.stack([d["color"] for d in self._key_data])
-        base_color = np.stack([w[0] * colors[g[0], c] + w[1] * colors[g[1], c] + w[2] * colors[g[2], c]
-                               for c in range(3)], axis=1)
-        return strand_attributes(self.params.seed, ids, counts, along, base_radius, base_color, self.params)
+        return np.stack([w[0] * colors[g[0], c] + w[1] * colors[g[1], c] + w[2] * colors[g[2], c]
+                         for c in range(3)], axis=1)
+
+    def _attribute_jobs(self, ids, counts, along, g, w, base_radius):
+        """(jobs, arrays) for strands that all have len(along) points: the jobs fill the
+        arrays (radius, colour, alpha) a range of strands each, to run beside the blend. With
+        per-point colour variation: one job returning the arrays, and arrays None."""
+        p, n = self.params, len(along)
+        if np.any(p.color_variation_point):
+            return [partial(self._attributes, ids, counts, along, g, w, base_radius)], None
+        s = along.astype(np.float32)
+        r_prof, a_prof = radius_profile(s, p), alpha_profile(s, p)
+        n_pts = len(ids) * n
+        out = (np.empty(n_pts, np.float32), np.empty((n_pts, 3), np.float32), np.empty(n_pts, np.float32))
+
+        def fill(lo, hi):
+            color = strand_colors(p.seed, ids[lo:hi], self._base_color(g[:, lo:hi], w[:, lo:hi]), p)
+            fill_strand_rows(*(a[lo * n:hi * n] for a in out), base_radius[lo:hi], color, r_prof, a_prof)
+        return [partial(fill, lo, hi) for lo, hi in ranges(len(ids))], out
 
     def _build(self, guides, weights, parts):
         pts, counts, radius, color, alpha = parts
