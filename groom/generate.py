@@ -247,8 +247,8 @@ class Generator:
         # the Strands is made directly instead of re-validating and copying 3M points.
         strands = Strands(pts, counts.astype(np.int32), radius, color, alpha, guides[0].astype(np.int32))
         self._cache = {"pts": pts, "counts": counts, "radius": radius, "color": color, "alpha": alpha}
-        self._result = GroomResult(strands, s.points, self.root_uv, guides.T.astype(np.int32),
-                                   weights.T.astype(np.float32), s.ids, s.tri, s.bary)
+        self._result = GroomResult(strands, s.points, self.root_uv, np.ascontiguousarray(guides.T, dtype=np.int32),
+                                   np.ascontiguousarray(weights.T, dtype=np.float32), s.ids, s.tri, s.bary)
         self._guides, self._weights = guides, weights
         return self._result
 
