@@ -75,8 +75,8 @@ uint hash32(uint x) {
 // surface it enters through (0 side, 1 plane 1, 2 plane 2), and the alpha scale of the
 // minimum pixel width. An entry through a plane shared with the neighbouring cylinder is no
 // surface: the ray was inside the strand already.
-float hit_cylinder(int id, vec3 o, vec3 d, float widen_per_t, float widen_const,
-                   out int surf, out float ascale, out float alpha) {
+float hit_cylinder_ab(int id, vec4 A4, vec4 B4, vec3 o, vec3 d, float widen_per_t, float widen_const,
+                      out int surf, out float ascale, out float alpha) {
     // No cheaper pre-test (bounding sphere, distance to the axis line) pays off: cells are
     // shorter than the cylinders, so nearly every candidate passes such a test, and the
     // extra fetch costs more than the quadratic below, which rejects misses at disc < 0
@@ -84,8 +84,6 @@ float hit_cylinder(int id, vec3 o, vec3 d, float widen_per_t, float widen_const,
     // Nor does an early return: llvmpipe runs a branch as masked straight-line code for
     // all 8 lanes (only loops jump, and a loop body runs at least once), so every test
     // pays for all of this function; what saves time is fewer tests or fewer fetches.
-    vec4 A4 = cyl(id, TOP);
-    vec4 B4 = cyl(id, TIP);
     alpha = B4.w;
     vec3 A = A4.xyz, ax = B4.xyz - A4.xyz;
     // Move the origin to the point of the ray nearest the cylinder's middle: the quadratic
@@ -134,6 +132,11 @@ float hit_cylinder(int id, vec3 o, vec3 d, float widen_per_t, float widen_const,
     if (surf == 1 && (flags & 1) == 0) return -1.0;
     if (surf == 2 && (flags & 2) == 0) return -1.0;
     return tc + tin;
+}
+
+float hit_cylinder(int id, vec3 o, vec3 d, float widen_per_t, float widen_const,
+                   out int surf, out float ascale, out float alpha) {
+    return hit_cylinder_ab(id, cyl(id, TOP), cyl(id, TIP), o, d, widen_per_t, widen_const, surf, ascale, alpha);
 }
 
 // Most cells a ray crosses are empty (hair is a thin shell with air inside and around).
@@ -216,35 +219,50 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint
     float tcur = t0;
     float trans = 1.0;
     int guard = dims.x + dims.y + dims.z + 3;
+    ivec2 sc = cell_entry(cell);
+    // The walk of trace: the next cell's entry and the next candidate read one step ahead.
     for (int it = 0; it < guard; ++it) {
-        ivec2 sc = cell_entry(cell);
-        if (sc.x < 0) {
-            if (!skip_empty_block(cell, tnext, tcur, tdelta, stp, t1)) break;
-            continue;
-        }
+        bool empty = sc.x < 0;
         float texit = min(min(tnext.x, tnext.y), min(tnext.z, t1));
+        bool last = texit >= t1;
+        ivec3 ncell = cell;
+        vec3 ntnext = tnext;
+        float ntcur = texit;
+        bool inside;
+        if (empty) {
+            inside = skip_empty_block(ncell, ntnext, ntcur, tdelta, stp, t1);
+        } else {
+            if (tnext.x <= tnext.y && tnext.x <= tnext.z) { ncell.x += stp.x; ntnext.x += tdelta.x; }
+            else if (tnext.y <= tnext.z) { ncell.y += stp.y; ntnext.y += tdelta.y; }
+            else { ncell.z += stp.z; ntnext.z += tdelta.z; }
+            inside = !last && all(greaterThanEqual(ncell, ivec3(0))) && all(lessThan(ncell, dims));
+        }
+        ivec2 nsc = cell_entry(clamp(ncell, ivec3(0), dims - 1));
+        int count = empty ? 0 : sc.y;
 #if COUNT
-        counter.z += 1.0; counter.w += float(sc.y);
+        if (!empty) { counter.z += 1.0; counter.w += float(count); }
 #endif
-        for (int k = 0; k < sc.y; ++k) {
-            int id = list_entry(sc.x + k);
+        int idn = list_entry(sc.x);
+        vec4 An = cyl(idn, TOP), Bn = cyl(idn, TIP);
+        for (int k = 0; k < count; ++k) {
+            int id = idn;
+            vec4 A4 = An, B4 = Bn;
+            idn = list_entry(sc.x + k + 1);
+            An = cyl(idn, TOP); Bn = cyl(idn, TIP);
             if (id == own) continue;
             int surf; float asc, alpha;
-            float t = hit_cylinder(id, p, d, 0.0, 0.0, surf, asc, alpha);
+            float t = hit_cylinder_ab(id, A4, B4, p, d, 0.0, 0.0, surf, asc, alpha);
 #if SHADOWS == 1
             if (t > tmin && t < tmax) { hint = id; return 0.0; }
 #else
-            if (t > tmin && t >= tcur && (t < texit || texit >= t1) && t < tmax) {
+            if (t > tmin && t >= tcur && (t < texit || last) && t < tmax) {
                 trans *= 1.0 - alpha;
                 if (trans < t_eps) return 0.0;
             }
 #endif
         }
-        if (texit >= t1) break;
-        tcur = texit;
-        if (tnext.x <= tnext.y && tnext.x <= tnext.z) { cell.x += stp.x; tnext.x += tdelta.x; if (cell.x < 0 || cell.x >= dims.x) break; }
-        else if (tnext.y <= tnext.z) { cell.y += stp.y; tnext.y += tdelta.y; if (cell.y < 0 || cell.y >= dims.y) break; }
-        else { cell.z += stp.z; tnext.z += tdelta.z; if (cell.z < 0 || cell.z >= dims.z) break; }
+        if (!inside) break;
+        cell = ncell; tnext = ntnext; tcur = ntcur; sc = nsc;
     }
     return trans;
 }
@@ -334,24 +352,41 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
         vec3 tnext = (grid_lo + (vec3(cell) + step(0.0, d)) * cell_size - o) * inv;
         float tcur = t0;
         int guard = dims.x + dims.y + dims.z + 3;
+        ivec2 sc = cell_entry(cell);
         for (int it = 0; it < guard; ++it) {
-            ivec2 sc = cell_entry(cell);
-            if (sc.x < 0) {
-#if COUNT
-                counter.z += 1.0;
-#endif
-                if (!skip_empty_block(cell, tnext, tcur, tdelta, stp, t1)) break;
-                continue;
-            }
+            bool empty = sc.x < 0;
             float texit = min(min(tnext.x, tnext.y), min(tnext.z, t1));
             bool last = texit >= t1;
+            // Where the ray goes after this cell (or after its empty block), and that
+            // cell's entry, found before this cell's tests so the read overlaps them.
+            ivec3 ncell = cell;
+            vec3 ntnext = tnext;
+            float ntcur = texit;
+            bool inside;
+            if (empty) {
+                inside = skip_empty_block(ncell, ntnext, ntcur, tdelta, stp, t1);
+            } else {
+                if (tnext.x <= tnext.y && tnext.x <= tnext.z) { ncell.x += stp.x; ntnext.x += tdelta.x; }
+                else if (tnext.y <= tnext.z) { ncell.y += stp.y; ntnext.y += tdelta.y; }
+                else { ncell.z += stp.z; ntnext.z += tdelta.z; }
+                inside = !last && all(greaterThanEqual(ncell, ivec3(0))) && all(lessThan(ncell, dims));
+            }
+            ivec2 nsc = cell_entry(clamp(ncell, ivec3(0), dims - 1));
+            int count = empty ? 0 : sc.y;
 #if COUNT
-            counter.z += 1.0; counter.w += float(sc.y);
+            counter.z += 1.0; counter.w += float(count);
 #endif
-            for (int k = 0; k < sc.y; ++k) {
-                int id = list_entry(sc.x + k);
+            // The next candidate's id and texels are read one pass ahead, so their cache
+            // misses overlap this pass's test.
+            int idn = list_entry(sc.x);
+            vec4 An = cyl(idn, TOP), Bn = cyl(idn, TIP);
+            for (int k = 0; k < count; ++k) {
+                int id = idn;
+                vec4 A4 = An, B4 = Bn;
+                idn = list_entry(sc.x + k + 1);
+                An = cyl(idn, TOP); Bn = cyl(idn, TIP);
                 int surf; float asc, alpha;
-                float t = hit_cylinder(id, o, d, widen_per_t, widen_const, surf, asc, alpha);
+                float t = hit_cylinder_ab(id, A4, B4, o, d, widen_per_t, widen_const, surf, asc, alpha);
                 // A hit outside this cell's [tcur, texit) belongs to another cell the
                 // cylinder is also listed in (half-open, so a hit on a face counts once).
                 // Equal distances are ordered by id, so the result does not depend on the
@@ -366,17 +401,16 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
                     ct = sw ? ft : ct; ca = sw ? fa : ca; cid = sw ? fi : cid; cs = sw ? fs : cs;
                 }
             }
-            if (ht[LAYERS - 1] < BIG) break;
+            if (!empty) {
+                if (ht[LAYERS - 1] < BIG) break;
 #if LAYERS > 1
-            float Tl = 1.0;
-            for (int i = 0; i < LAYERS; ++i) Tl *= 1.0 - ha[i];
-            if (Tl < t_eps) break;
+                float Tl = 1.0;
+                for (int i = 0; i < LAYERS; ++i) Tl *= 1.0 - ha[i];
+                if (Tl < t_eps) break;
 #endif
-            if (last) break;
-            tcur = texit;
-            if (tnext.x <= tnext.y && tnext.x <= tnext.z) { cell.x += stp.x; tnext.x += tdelta.x; if (cell.x < 0 || cell.x >= dims.x) break; }
-            else if (tnext.y <= tnext.z) { cell.y += stp.y; tnext.y += tdelta.y; if (cell.y < 0 || cell.y >= dims.y) break; }
-            else { cell.z += stp.z; tnext.z += tdelta.z; if (cell.z < 0 || cell.z >= dims.z) break; }
+            }
+            if (!inside) break;
+            cell = ncell; tnext = ntnext; tcur = ntcur; sc = nsc;
         }
     }
     int n = 0;
