@@ -220,6 +220,8 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint
     float trans = 1.0;
     int guard = dims.x + dims.y + dims.z + 3;
     ivec2 sc = cell_entry(cell);
+    int idn = list_entry(sc.x), idnn = list_entry(sc.x + 1);
+    vec4 An = cyl(idn, TOP), Bn = cyl(idn, TIP);
     // The walk of trace: the next cell's entry and the next candidate read one step ahead.
     for (int it = 0; it < guard; ++it) {
         bool empty = sc.x < 0;
@@ -238,17 +240,18 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint
             inside = !last && all(greaterThanEqual(ncell, ivec3(0))) && all(lessThan(ncell, dims));
         }
         ivec2 nsc = cell_entry(clamp(ncell, ivec3(0), dims - 1));
+        int nid = list_entry(nsc.x), nidn = list_entry(nsc.x + 1);
+        vec4 nA = cyl(nid, TOP), nB = cyl(nid, TIP);
         int count = empty ? 0 : sc.y;
 #if COUNT
         if (!empty) { counter.z += 1.0; counter.w += float(count); }
 #endif
-        int idn = list_entry(sc.x);
-        vec4 An = cyl(idn, TOP), Bn = cyl(idn, TIP);
         for (int k = 0; k < count; ++k) {
             int id = idn;
             vec4 A4 = An, B4 = Bn;
-            idn = list_entry(sc.x + k + 1);
+            idn = idnn;
             An = cyl(idn, TOP); Bn = cyl(idn, TIP);
+            idnn = list_entry(sc.x + k + 2);
             if (id == own) continue;
             int surf; float asc, alpha;
             float t = hit_cylinder_ab(id, A4, B4, p, d, 0.0, 0.0, surf, asc, alpha);
@@ -263,6 +266,7 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint
         }
         if (!inside) break;
         cell = ncell; tnext = ntnext; tcur = ntcur; sc = nsc;
+        idn = nid; An = nA; Bn = nB; idnn = nidn;
     }
     return trans;
 }
@@ -353,6 +357,8 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
         float tcur = t0;
         int guard = dims.x + dims.y + dims.z + 3;
         ivec2 sc = cell_entry(cell);
+        int idn = list_entry(sc.x), idnn = list_entry(sc.x + 1);
+        vec4 An = cyl(idn, TOP), Bn = cyl(idn, TIP);
         for (int it = 0; it < guard; ++it) {
             bool empty = sc.x < 0;
             float texit = min(min(tnext.x, tnext.y), min(tnext.z, t1));
@@ -372,19 +378,18 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
                 inside = !last && all(greaterThanEqual(ncell, ivec3(0))) && all(lessThan(ncell, dims));
             }
             ivec2 nsc = cell_entry(clamp(ncell, ivec3(0), dims - 1));
+            int nid = list_entry(nsc.x), nidn = list_entry(nsc.x + 1);
+            vec4 nA = cyl(nid, TOP), nB = cyl(nid, TIP);
             int count = empty ? 0 : sc.y;
 #if COUNT
             counter.z += 1.0; counter.w += float(count);
 #endif
-            // The next candidate's id and texels are read one pass ahead, so their cache
-            // misses overlap this pass's test.
-            int idn = list_entry(sc.x);
-            vec4 An = cyl(idn, TOP), Bn = cyl(idn, TIP);
             for (int k = 0; k < count; ++k) {
                 int id = idn;
                 vec4 A4 = An, B4 = Bn;
-                idn = list_entry(sc.x + k + 1);
+                idn = idnn;
                 An = cyl(idn, TOP); Bn = cyl(idn, TIP);
+                idnn = list_entry(sc.x + k + 2);
                 int surf; float asc, alpha;
                 float t = hit_cylinder_ab(id, A4, B4, o, d, widen_per_t, widen_const, surf, asc, alpha);
                 // A hit outside this cell's [tcur, texit) belongs to another cell the
@@ -411,6 +416,7 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
             }
             if (!inside) break;
             cell = ncell; tnext = ntnext; tcur = ntcur; sc = nsc;
+            idn = nid; An = nA; Bn = nB; idnn = nidn;
         }
     }
     int n = 0;
