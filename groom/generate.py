@@ -4,7 +4,9 @@
 `generate` is the one-shot form; `Generator` keeps what does not depend on the keys
 (roots, frames, random numbers) and, when keys change, recomputes only the strands whose
 wisp or neighbours use a changed key. Its result is bit-identical to a full regeneration
-because every per-strand computation is element-wise (see interpolate.py).
+because every per-strand computation is element-wise (see interpolate.py). For the same
+reason the work over strands can run in ranges on a pool of threads (parallel.py) without
+changing a number.
 """
 from dataclasses import dataclass
 from functools import partial
