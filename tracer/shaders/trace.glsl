@@ -363,8 +363,12 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
             bool empty = sc.x < 0;
             float texit = min(min(tnext.x, tnext.y), min(tnext.z, t1));
             bool last = texit >= t1;
-            // Where the ray goes after this cell (or after its empty block), and that
-            // cell's entry, found before this cell's tests so the read overlaps them.
+            // Where the ray goes after this cell (or after its empty block), that cell's
+            // entry and its first candidate, read before this cell's tests so that their
+            // cache misses overlap the tests: the render is memory-bound on a CPU. Inside
+            // a cell the next candidate's texels and the list entry after it are read a
+            // pass ahead for the same reason (together 15-20 % less time; reading two
+            // candidates ahead lost 2-5 % to the extra reads at each cell's end).
             ivec3 ncell = cell;
             vec3 ntnext = tnext;
             float ntcur = texit;
