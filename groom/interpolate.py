@@ -108,13 +108,12 @@ def strand_transforms(axes, angles, intelligence):
     of every strand's matrix, the layout the blend reads. axes: frames.frame_axes of the
     roots; angles (3, S) from tidiness_angles. Computed in float64, stored in the float32
     the blend works in."""
-    t, b, n = axes
-    # frame[i, j] = axis j, component i
+    # frame[3i + j] = entry (i, j) = component i of axis j
     frame = [axes[j][i] for i in range(3) for j in range(3)]
     if not np.any(angles):  # tidiness 1: no rotation at all
         if intelligence:
             return np.array(frame, np.float32)
-        return np.eye(3, dtype=np.float32).reshape(9, 1).repeat(t.shape[1], axis=1)
+        return np.eye(3, dtype=np.float32).reshape(9, 1).repeat(axes[0].shape[1], axis=1)
     out = _matmul3(frame, rotation_entries(angles))
     if not intelligence:
         out = _matmul3(out, [frame[3 * j + i] for i in range(3) for j in range(3)])  # · F^T
