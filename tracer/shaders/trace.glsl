@@ -194,7 +194,7 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint
 #if COUNT
     counter.x += 1.0;
 #endif
-#if SHADOWS == 1
+#if SHADOWS == 1 && LAYERS > 1
     // The cylinder that shadowed this pixel's previous (nearer) layer often shadows this
     // one too: one test that can end the walk before it starts (5 % off the 4-layer
     // real-hair scene). Any hit in (tmin, tmax) darkens, so which one is found first
