@@ -6,6 +6,8 @@ Two kinds: `bezier`, one curve of any degree (n+1 control points, the thesis), a
 (3k+1 rows, what Blender artists draw). Evaluation is de Casteljau in float64 on control
 points taken relative to the root, so a head placed 1e4 units from the origin loses nothing.
 """
+import functools
+
 import numpy as np
 
 from hairio import InputError, check_finite
@@ -95,23 +97,40 @@ class KeyStrand:
         return self.arc_length_table(2)[1]
 
 
-def _cubic_offsets(key, t):
+def _cubic_offsets(key, t, basis=None):
     """Points relative to the root of a cubic key at parameters t (clipped to [0, 1]).
     Cubic Bernstein form, all segments at once, one coordinate at a time (rows of three
-    would make every operation loop over three numbers)."""
+    would make every operation loop over three numbers). basis: _cubic_basis(t, segments)
+    when the caller has it."""
     rel = key.points - key.points[0]
-    k = key.num_segments
-    seg = np.minimum((t * k).astype(np.int64), k - 1)
-    u = t * k - seg
-    v = 1.0 - u
-    w0, w1, w2, w3 = v * v * v, 3.0 * v * v * u, 3.0 * v * u * u, u * u * u
-    first = 3 * seg
-    rows = (first, first + 1, first + 2, first + 3)
+    weights, rows = basis or _cubic_basis(t, key.num_segments)
+    w0, w1, w2, w3 = weights
     out = np.empty((len(t), 3))
     for d, column in enumerate(rel.T):
         c0, c1, c2, c3 = (column.take(r) for r in rows)
         out[:, d] = w0 * c0 + w1 * c1 + w2 * c2 + w3 * c3
     return out
+
+
+def _cubic_basis(t, k):
+    """Bernstein weights (4 arrays) and control-point rows (4 arrays) of parameters t on a
+    spline of k cubic segments."""
+    seg = np.minimum((t * k).astype(np.int64), k - 1)
+    u = t * k - seg
+    v = 1.0 - u
+    first = 3 * seg
+    return (v * v * v, 3.0 * v * v * u, 3.0 * v * u * u, u * u * u), (first, first + 1, first + 2, first + 3)
+
+
+@functools.lru_cache(maxsize=16)
+def _dense_grid(n, segments):
+    """The dense parameter grid of arc_length_tables and, for cubic keys, its Bernstein
+    basis: constants of (n, segments), made once rather than for every key and call."""
+    t = np.linspace(0.0, 1.0, n)
+    basis = _cubic_basis(t, segments) if segments else None
+    for a in (t,) + (sum(basis, ()) if basis else ()):
+        a.flags.writeable = False
+    return t, basis
 
 
 def arc_length_tables(keys, samples, dense=None):
@@ -120,8 +139,9 @@ def arc_length_tables(keys, samples, dense=None):
     fresh pages on every call, which cost more than the calls it saved."""
     out = []
     for k in keys:
-        t = np.linspace(0.0, 1.0, dense or max(2048, 128 * k.num_segments, 4 * samples))
-        pts = k.evaluate_offsets(t)
+        t, basis = _dense_grid(dense or max(2048, 128 * k.num_segments, 4 * samples),
+                               k.num_segments if k.kind == "cubic" else 0)
+        pts = _cubic_offsets(k, t, basis) if basis else k.evaluate_offsets(t)
         step = np.diff(pts, axis=0)
         step = np.sqrt(np.einsum("nd,nd->n", step, step))
         cum = np.concatenate([[0.0], np.cumsum(step)])
