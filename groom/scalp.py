@@ -167,9 +167,9 @@ class Scalp:
         qi, ti = [], []
         step = max(1, (1 << 14) // max(len(a), len(corners)))
         for lo in range(0, len(q), step):  # a few queries at a time: small (queries x triangles) arrays
-            p = q[lo:lo + step, None, :]
-            near = np.sqrt(_dot(p - corners, p - corners).min(axis=1))
-            reach = np.sqrt(_dot(p - centre, p - centre)) - radius
+            p = q[lo:lo + step, :, None]
+            near = np.sqrt(_distance2(p, corners).min(axis=1))
+            reach = np.sqrt(_distance2(p, centre)) - radius
             # The margin covers rounding of these bounds; excluded triangles are truly farther.
             i, j = np.nonzero(reach <= near[:, None] * (1.0 + 1e-9) + 1e-12 * size)
             qi.append(i + lo)
@@ -196,8 +196,15 @@ class Scalp:
             radius = np.sqrt(np.maximum(np.maximum(_dot(a - centre, a - centre), _dot(b - centre, b - centre)),
                                         _dot(c - centre, c - centre)))
             corners = self.vertices[np.unique(self.triangles)]
-            self._search = (a, b, c, centre, radius, corners, float(np.abs(self.vertices).max()))
+            # Centres and corners one coordinate row each, for the queries x points distances.
+            self._search = (a, b, c, np.ascontiguousarray(centre.T), radius, np.ascontiguousarray(corners.T),
+                            float(np.abs(self.vertices).max()))
         return self._search
+
+
+def _distance2(p, points):
+    """Squared distances (Q, N) of queries p (Q, 3, 1) to points given as coordinate rows (3, N)."""
+    return (p[:, 0] - points[0]) ** 2 + (p[:, 1] - points[1]) ** 2 + (p[:, 2] - points[2]) ** 2
 
 
 def _dot(u, v):
