@@ -53,7 +53,7 @@ uniform int cyl_shift;
 const int TOP = 0, TIP = 1, N2 = 2, COL = 3;
 // Every read goes through textureLod at the texel's centre, which on NEAREST textures
 // returns the texel itself: llvmpipe's texelFetch looks the level's size and row pitch up
-// lane by lane (scalar loads for each of the 8 lanes) and measured 11 % slower on the
+// lane by lane (scalar loads for each of the 8 lanes) and measured 4-11 % slower on the
 // 10k-strand scenes. Centres are exact in float32 for any size the driver allows.
 uniform vec2 cyl_inv;     // 1 / size of tex_cyl, tex_idx and tex_cell, in texels
 uniform vec2 idx_inv;
