@@ -171,3 +171,28 @@ def test_build_choice_is_checked(monkeypatch):
     with pytest.raises(InputError, match="compute shaders"):
         Renderer(build="gpu")
     assert Renderer(build="auto").build == "numpy"
+
+
+def test_update_with_repeated_points_elsewhere_equals_a_fresh_upload(gpu):
+    # Strand 0 repeats a point, so the plan holds compacted copies of the arrays; moving
+    # other strands writes into those copies, and a move that makes a new repeat starts over.
+    lines = [np.array([[0, 0, 0], [0, 0, 0.1], [0, 0, 0.1], [0.02, 0, 0.2]])]
+    lines += [np.array([[0.05 * k, 0.1, 0], [0.05 * k, 0.12, 0.1], [0.05 * k + 0.01, 0.1, 0.2]]) for k in range(1, 9)]
+    s = make_strands(lines, radius=0.004)
+    gpu.set_strands(s)
+    cam = _scene_camera(s)
+    for moved, shift in (([3, 4], (0.0, 0.01, 0.0)), ([5], None)):
+        pts = s.points.copy()
+        for i in moved:
+            a = s.offsets[i]
+            if shift is None:       # the strand's second point onto its first: a new repeat
+                pts[a + 1] = pts[a]
+            else:
+                pts[a:a + s.counts[i]] += np.asarray(shift, np.float32)
+        s = type(s).from_arrays(pts, s.counts, radius=s.radius, color=s.color, alpha=s.alpha)
+        gpu.update_strands(moved, s)
+        fresh = Renderer(build="gpu")
+        fresh.set_strands(s)
+        assert gpu.num_cylinders == fresh.num_cylinders == len(strands_to_cylinders(s))
+        np.testing.assert_array_equal(_gpu_cylinder_texels(gpu), _gpu_cylinder_texels(fresh))
+        np.testing.assert_array_equal(gpu.render(cam), fresh.render(cam))
