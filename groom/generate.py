@@ -24,7 +24,7 @@ from .keys import KeyStrand
 from .params import GroomParams
 from .sampling import sample_roots
 from .scalp import Scalp
-from .parallel import ranges, run_jobs
+from .parallel import MIN_SPLIT, ranges, run_jobs
 from .wisps import check_groups, guide_weights_by_guide, root_groups_for
 
 
@@ -74,6 +74,13 @@ def _check_float32(reach, rows, radii):
         raise InputError(f"radius: {float(radii.max()):.3g} exceeds float32 (SPEC §0); give a smaller radius")
 
 
+def _threads_for(n_strands):
+    """Worker threads for work over n strands: below parallel.MIN_SPLIT strands handing the
+    work to other threads costs more than it saves (measured: 1,000 strands take longer on
+    two threads than on one)."""
+    return 1 if n_strands < MIN_SPLIT else None
+
+
 class Generator:
     """Incremental generator. `generate()` gives the full result; `update_keys({i: KeyStrand})`
     replaces keys and returns the new result, recomputing only affected strands.
@@ -99,11 +106,13 @@ class Generator:
         self.frac = np.empty(n)
         self.transforms = np.empty((9, n), np.float32)
         # The per-root work and the guides of the first generate() (they need only the key
-        # roots) run on the workers while this thread resamples the keys.
+        # roots), on the workers. The keys are resampled here afterwards, not meanwhile: a
+        # thread busy with many small numpy calls slowed the workers more than it saved.
         assign_jobs, self._first_assignment = self._assign_jobs([k.root for k in self.keys],
                                                                 [k.group for k in self.keys])
         per_root = [partial(self._per_root, lo, hi) for lo, hi in ranges(n)]
-        self._key_data = run_jobs(per_root + assign_jobs, here=partial(self._prepare_keys, self.keys))[-1]
+        run_jobs(per_root + assign_jobs, _threads_for(n))
+        self._key_data = self._prepare_keys(self.keys)
         self._result = None
         self._cache = None
         self.last_recomputed = 0  # strands recomputed by the last update_keys
@@ -149,7 +158,7 @@ class Generator:
         """Guides (3, S) int64 and weights (3, S) float64 of every root, in ranges of roots on
         the workers."""
         jobs, assignment = self._assign_jobs([d["root"] for d in self._key_data], [d["group"] for d in self._key_data])
-        run_jobs(jobs)
+        run_jobs(jobs, _threads_for(len(self.frac)))
         return assignment
 
     def _assign_jobs(self, key_roots, key_groups):
@@ -177,7 +186,8 @@ class Generator:
         rows = np.stack([d["rows"] for d in self._key_data])
         sigma, counts = uniform_sigma(self.frac[sel], np.asarray(cylinders, np.int64))
         pts, _ = evaluate_strands(self._roots[:, sel], self.transforms[:, sel], self._guides[:, sel],
-                                  self._weights[:, sel].astype(np.float32), counts, rows, sigma=sigma)
+                                  self._weights[:, sel].astype(np.float32), counts, rows, sigma=sigma,
+                                  threads=_threads_for(len(sel)))
         return pts, counts
 
     def _strands(self, sel, guides, weights):
@@ -202,14 +212,14 @@ class Generator:
             counts = np.full(len(frac), max_cyl + 1, np.int64)
             along = np.arange(max_cyl + 1) / max_cyl
             jobs, attrs = self._attribute_jobs(ids, counts, along, g, w, base_radius)
-            pts, done = evaluate_strands(*args, counts, rows, frac=frac, also=jobs)
+            pts, done = evaluate_strands(*args, counts, rows, frac=frac, also=jobs, threads=_threads_for(len(frac)))
             attrs = attrs or done[0]
         else:
             tol = p.tolerance * (base_radius if p.tolerance_units == "radius" else np.ones(len(frac)))
             tol = np.maximum(tol, 1e-300)
             bins = np.stack([d["bound"] for d in kd])
             sigma, counts = adaptive_sigma(frac, g.T, w.T, bins, tol, max_cyl)
-            pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma)
+            pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma, threads=_threads_for(len(frac)))
             attrs = self._attributes(ids, counts, sigma / np.repeat(frac, counts), g, w, base_radius)
         return (pts, counts) + tuple(attrs)
 
