@@ -85,6 +85,7 @@ def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=
             active[idx] = end < fe
         grid = np.stack(rows, axis=1)
         capped = active | hopeless
+        _merge_sliver_tips(grid, ~capped & (f > 0), suffix, nb, last_bin, budget)
         if capped.any():
             k = np.arange(max_cylinders + 1)
             if grid.shape[1] < max_cylinders + 1:
@@ -175,6 +176,34 @@ def fill_strand_rows(radius, color, alpha, base_radius, strand_color, radius_pro
     for c in range(3):
         per_point[:, :, c] = clamped[:, c, None]
     alpha.reshape(rows)[...] = 1.0 if alpha_prof is None else alpha_prof
+
+
+SLIVER = 1e-3   # of a bin: a last segment shorter than this is merged when the bound allows
+
+
+def _merge_sliver_tips(grid, rows, suffix, nb, last_bin, budget):
+    """In place: where a strand's trim fraction falls just past a bin edge, the greedy search
+    stops at the edge and leaves a sliver of a last segment, whose end repeats its start to
+    within float32 (renderers then drop or special-case it). The last two segments [a, b],
+    [b, c] become one when the bound holds over [a, c] (the largest curvature bound from a's
+    bin to the tip, `suffix`, times (c - a)² within `budget`); otherwise b moves to the middle
+    of [a, c]: [a, b'] is a part of the accepted [a, b], and [b', c] has a quarter of
+    (c - a)², which fits whenever [a, c] misses by less than 4x (the greedy segment before a
+    sliver nearly always reaches the bound exactly, so it misses by a hair)."""
+    count = (~np.isnan(grid)).sum(axis=1)
+    r = np.flatnonzero(rows & (count >= 3))
+    if not r.size:
+        return
+    k = count[r] - 1
+    last, prev, prev2 = grid[r, k], grid[r, k - 1], grid[r, k - 2]
+    sliver = (last - prev) < SLIVER / nb
+    b0 = np.minimum(np.floor(prev2 * nb).astype(np.int64), last_bin[r])
+    miss = suffix[r * nb + b0] * (last - prev2) ** 2 / budget[r]
+    merge = sliver & (miss <= 1.0)
+    grid[r[merge], k[merge] - 1] = last[merge]
+    grid[r[merge], k[merge]] = np.nan
+    split = sliver & (miss > 1.0) & (miss <= 4.0)
+    grid[r[split], k[split] - 1] = 0.5 * (prev2[split] + last[split])
 
 
 def _segment_distances(points, a, b):

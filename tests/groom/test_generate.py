@@ -327,3 +327,18 @@ def test_interpolate_mode_has_the_smallest_seam(scalp, keys_around):
     r = seam_jumps_by_mode(scalp, keys, GroomParams(points_per_strand=16), pairs=3000)
     assert r["interpolate"]["pairs_across"] > 0
     assert r["interpolate"]["across_max"] < 0.5 * min(r["root"]["across_max"], r["key"]["across_max"])
+
+
+def test_adaptive_strands_end_without_a_sliver_segment(scalp):
+    # Trim fractions fall anywhere, often just past a curvature bin's edge, where the greedy
+    # search used to leave a last segment of a few nanometres: a point repeating its
+    # predecessor, which renderers must drop. The last segment is now merged or balanced.
+    from groom import load_preset
+    preset = load_preset("wavy")
+    s = generate(scalp, preset.keys_on(scalp), preset.params.replace(count=20000, seed=3)).strands
+    assert s.counts.max() > 2
+    seg = np.diff(s.points.astype(np.float64), axis=0)
+    inside = np.ones(len(seg), bool)
+    inside[np.cumsum(s.counts)[:-1] - 1] = False          # steps from one strand to the next
+    length = np.sqrt((seg[inside] ** 2).sum(axis=1))
+    assert length.min() > 1e-6
