@@ -278,15 +278,19 @@ class Renderer:
         # Whole rows in one write, the partial rows at either end in one each: no copies.
         w = 1 << self._shift["tex_pts"]
         pieces = []
-        r0, r1 = -(-a // w), b // w
-        if r1 > r0:
-            pieces.append((r0 * w, r1 * w, (0, r0, w, r1 - r0)))
-            if a < r0 * w:
-                pieces.append((a, r0 * w, (a % w, a // w, r0 * w - a, 1)))
-            if b > r1 * w:
-                pieces.append((r1 * w, b, (0, r1, b - r1 * w, 1)))
-        else:   # within one row
-            pieces.append((a, b, (a % w, a // w, b - a, 1)))
+        first_row, last_row = a // w, (b - 1) // w
+        if first_row == last_row:
+            pieces.append((a, b, (a % w, first_row, b - a, 1)))
+        else:
+            full0 = first_row
+            if a % w:
+                full0 = first_row + 1
+                pieces.append((a, full0 * w, (a % w, first_row, full0 * w - a, 1)))
+            full1 = b // w          # rows full0 .. full1 - 1 are whole
+            if full1 > full0:
+                pieces.append((full0 * w, full1 * w, (0, full0, w, full1 - full0)))
+            if b % w:
+                pieces.append((full1 * w, b, (0, full1, b - full1 * w, 1)))
         for name, field, _ in self._POINT_TEXTURES:
             data = getattr(plan, field)
             for p0, p1, viewport in pieces:
