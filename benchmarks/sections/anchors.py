@@ -47,6 +47,7 @@ class _Scene:
         self.moved = tracer_camera(orbit(self.matrix, np.radians(12), 0.5 * (lo + hi)), size)
         self.renderer = tracer.Renderer()
         self.cold = None
+        self.parts = None       # the stages of the last first render (renderer stats)
         self.ours, self.cycles, self.images, self.error = {}, {}, {}, None
 
 
@@ -103,6 +104,10 @@ def _tracer_job(sec, cfg, tracer, sc, spp):
                            budget=left(sec))
         if sc.cold is None:
             sc.cold = first.warmups[0]
+        if spp == min(cfg.anc_spp):
+            st = r.stats
+            sc.parts = (st.get("cylinders_s", 0.0), st.get("upload_s", 0.0), st.get("grid_s", 0.0),
+                        st.get("render_s", 0.0), st.get("grid_build", "numpy"))
         flip = {"on": False}
 
         def rerender():
@@ -173,7 +178,10 @@ def _report(sec, cfg, scenes, size):
             sec.text(f"**{sc.name}: first render {ratio(f1, c1):.2f}× Cycles {min(cfg.anc_spp)} spp (target ≤ 0.5: "
                      f"{'met' if ratio(f1, c1) <= 0.5 else 'NOT met'}); re-render after a camera move "
                      f"{ratio(a1, c1):.2f}× (target ≤ 0.25: {'met' if ratio(a1, c1) <= 0.25 else 'NOT met'}).** "
-                     + (f"Cold first render (shader compile included): {fmt_time(sc.cold)}." if sc.cold else ""))
+                     + (f"Cold first render (shader compile included): {fmt_time(sc.cold)}." if sc.cold else "")
+                     + (" The last first render's stages: cylinders {}, upload {}, grid ({} build) {}, "
+                        "render {}.".format(fmt_time(sc.parts[0]), fmt_time(sc.parts[1]), sc.parts[4],
+                                            fmt_time(sc.parts[2]), fmt_time(sc.parts[3])) if sc.parts else ""))
             sec.summary.append(f"{sc.name}: first {fmt_time(f1)} = {ratio(f1, c1):.2f}× Cycles 1 spp ({fmt_time(c1)}); "
                                f"re-render {fmt_time(a1)} = {ratio(a1, c1):.2f}×")
         both = [s for s in cfg.anc_spp if ("ours", s) in sc.images and ("cycles", s) in sc.images]
