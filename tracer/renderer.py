@@ -200,8 +200,7 @@ class Renderer:
             self.set_strands(strands)    # a zero-length segment appeared or vanished
             return
         # Positions of the changed cylinders in the full arrays.
-        dest = np.repeat(first_old[ids], per_new) + (np.arange(len(new)) - np.repeat(
-            np.cumsum(per_new) - per_new, per_new))
+        dest = np.repeat(first_old[ids], per_new) + _ranks(per_new)
         for f in ("top", "tip", "n2", "radius", "color", "alpha", "flags", "extension"):
             getattr(old, f)[dest] = getattr(new, f)
         self.strands = strands
@@ -227,8 +226,7 @@ class Renderer:
             self._plan = CylinderPlan(strands.points, strands.radius, strands.color, strands.alpha,
                                       None, old.counts, old.top_point)
         else:       # the plan holds its own copies: write the changed strands into them
-            dest = np.repeat(first_point[ids], sub.counts) + (
-                np.arange(len(sub.points)) - np.repeat(np.cumsum(sub.counts) - sub.counts, sub.counts))
+            dest = np.repeat(first_point[ids], sub.counts) + _ranks(sub.counts)
             for f in ("points", "radius", "color", "alpha"):
                 getattr(old, f)[dest] = getattr(sub, f)
         self.strands = strands
@@ -237,18 +235,24 @@ class Renderer:
         counts = self._plan.counts.astype(np.int64)
         per_strand = np.maximum(counts - 1, 0)
         t1 = time.perf_counter()
+        # The texture rows that hold the changed strands' points, consecutive rows in one
+        # write per texture (thousands of scattered strands would otherwise mean thousands of
+        # small writes, which cost more than the data).
+        w = 1 << self._shift["tex_pts"]
         point_first = first_point[ids]
         ends = point_first + counts[ids]
-        # Runs of consecutive changed strands are one write per texture and one dispatch each.
-        breaks = np.flatnonzero(np.diff(ids) > 1)
-        runs = list(zip(np.concatenate([[0], breaks + 1]), np.concatenate([breaks, [len(ids) - 1]])))
-        for a, b in runs:
-            self._upload_points(self._plan, int(point_first[a]), int(ends[b]))
+        r0, r1 = point_first // w, (ends - 1) // w
+        rows = np.repeat(r0, r1 - r0 + 1) + _ranks(r1 - r0 + 1)
+        n_points = len(self._plan.points)
+        for a, b in _row_runs(rows):
+            self._upload_points(self._plan, a * w, min(n_points, b * w))
         t2 = time.perf_counter()
+        # One dispatch from the first changed cylinder to the last: the unchanged ones between
+        # are made again from unchanged points (same texels), which costs the GPU less than a
+        # dispatch per run of changed strands.
         cyl_first = np.concatenate([[0], np.cumsum(per_strand)])
-        for a, b in runs:
-            first, last = int(cyl_first[ids[a]]), int(cyl_first[ids[b] + 1])
-            self._make_cylinders_gpu(0.0, first, last - first)
+        first, last = int(cyl_first[ids[0]]), int(cyl_first[ids[-1] + 1])
+        self._make_cylinders_gpu(0.0, first, last - first)
         t3 = time.perf_counter()
         self._build_and_upload_grid()
         self.stats["cylinders_s"] = (t1 - t0) + (t3 - t2)
@@ -619,6 +623,12 @@ def _nearest(tex):
     tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
 
 
+def _ranks(lengths):
+    """0, 1, .., n-1 for every n in `lengths`, concatenated."""
+    lengths = np.asarray(lengths, np.int64)
+    return np.arange(int(lengths.sum())) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+
+
 def _row_runs(rows):
     """[first, end) pairs of the runs of consecutive texture rows among `rows` (any order)."""
     rows = np.unique(rows)
@@ -637,6 +647,6 @@ def _select_strands(strands, ids):
     """The sub-set of strands `ids` (sorted), as a Strands (already validated data)."""
     offsets = strands.offsets
     counts = strands.counts[ids].astype(np.int64)
-    pts = np.repeat(offsets[ids], counts) + (np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts))
+    pts = np.repeat(offsets[ids], counts) + _ranks(counts)
     return Strands(strands.points[pts], strands.counts[ids], strands.radius[pts], strands.color[pts],
                    strands.alpha[pts], strands.wisp[ids])
