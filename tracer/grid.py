@@ -18,6 +18,7 @@ MAX_CELLS = 1 << 23
 MAX_REFS_PER_CYLINDER = 8.0
 MAX_CELLS_PER_CYLINDER = 4.0
 MAX_REFS = 32_000_000   # references in all (128 MB of lists), see choose_resolution
+MIN_REFS_PER_CYLINDER = 5.0     # ... but never fewer than this per cylinder
 CHUNK = 1 << 16         # cylinders per build job (see build_grid)
 
 
@@ -78,13 +79,16 @@ def choose_resolution(box_size, extent, max_refs=None, count=None):
     CPU time, same image). Past MAX_REFS references in all, fewer per cylinder are aimed at:
     building them costs the same per reference, while a ray gains less from smaller cells
     that are already full (5.7 M cylinders, 100,000 wavy strands: 8 per cylinder cost 8.2 s
-    of CPU time for build + render, 6 per cylinder 5.7 s). `box_size` (N,3): sizes of the
+    of CPU time for build + render, 6 per cylinder 5.7 s), but not below
+    MIN_REFS_PER_CYLINDER: under ~5 the cells fill so fast that the trace pays more than the
+    build saves (200,000 strands, 11.4 M cylinders at 2.8 per cylinder: 626 cylinders per
+    full cell, render 3.7x slower). `box_size` (N,3): sizes of the
     cylinders' padded boxes, or of a sample of them; `count`: how many cylinders there are
     (default: len(box_size))."""
     n = len(box_size)
     count = n if count is None else count
     if max_refs is None:
-        max_refs = min(MAX_REFS_PER_CYLINDER, MAX_REFS / max(1, count))
+        max_refs = float(np.clip(MAX_REFS / max(1, count), MIN_REFS_PER_CYLINDER, MAX_REFS_PER_CYLINDER))
     sample = box_size if n <= 20_000 else box_size[:: n // 20_000 + 1]
     cells = min(MAX_CELLS, MAX_CELLS_PER_CYLINDER * count)
     floor_h = max(float(extent.max()) / MAX_DIM, float(np.prod(extent) / max(cells, 1)) ** (1 / 3))
