@@ -210,7 +210,11 @@ def strands_to_cylinders(strands):
     Whole-array float32 work: the GPU consumes float32, and the reference promotes exactly
     these values, so both trace the same cylinders. InputError where float32 cannot resolve
     the strands (check_float32_precision)."""
-    plan = plan_cylinders(strands)
+    return cylinders_from_plan(plan_cylinders(strands))
+
+
+def cylinders_from_plan(plan):
+    """Cylinders of a CylinderPlan made with drop_repeats (its `strand` is needed)."""
     if not len(plan):
         return _empty()
     i = plan.top_point

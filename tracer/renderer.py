@@ -11,7 +11,8 @@ import time
 import numpy as np
 
 from hairio import InputError, Strands
-from .cylinders import SHARP_BEND_DEG, CylinderPlan, column_bounds, plan_cylinders, repeat_distance, strands_to_cylinders
+from .cylinders import (SHARP_BEND_DEG, CylinderPlan, column_bounds, cylinders_from_plan, plan_cylinders,
+                        repeat_distance, strands_to_cylinders)
 from .grid import Grid, build_grid, grid_frame
 from .gpu_build import GpuBuilder, compute_available
 from .settings import GRID_WIDEN_CAP, RenderSettings
@@ -162,7 +163,8 @@ class Renderer:
             self.stats["cylinders_s"] = (t1 - t0) + (t3 - t2)
             self.stats["upload_s"] = (t2 - t1) + self.stats.pop("_grid_upload_s")
         else:
-            self._cylinders = strands_to_cylinders(strands)
+            self._cylinders = cylinders_from_plan(plan)
+            self._set_all_opaque(plan)
             t1 = time.perf_counter()
             self._upload_cylinders(0, len(self._cylinders), full=True)
             t2 = time.perf_counter()
@@ -204,6 +206,7 @@ class Renderer:
         for f in ("top", "tip", "n2", "radius", "color", "alpha", "flags", "extension"):
             getattr(old, f)[dest] = getattr(new, f)
         self.strands = strands
+        self.all_opaque = bool(len(old) == 0 or old.alpha.min() >= 1.0)
         t1 = time.perf_counter()
         per = self._cyl_per_row
         for a, b in _row_runs(dest // per):
@@ -360,7 +363,6 @@ class Renderer:
     def _upload_cylinders(self, a, b, full=False):
         n = len(self.cylinders)
         self.stats["uploads"] += 1
-        self.all_opaque = bool(n == 0 or self.cylinders.alpha.min() >= 1.0)
         if full:
             shift, rows = texture_layout("tex_cyl", n * TEXELS_PER_CYL, self.max_texture_size, self.base_width)
             self._shift["tex_cyl"] = shift
@@ -379,8 +381,9 @@ class Renderer:
     def _build_and_upload_grid(self):
         t0 = time.perf_counter()
         self.grid = None
+        upload_s = 0.0      # the GPU build uploads only counters (bytes counted in it)
         if self.build == "gpu" and self.num_cylinders:
-            self.grid, upload_s = self._build_grid_gpu()
+            self.grid = self._build_grid_gpu()
         self.stats["grid_build"] = "gpu" if self.grid is not None else "numpy"
         if self.grid is None:      # the numpy build, or a scene the GPU passes cannot list
             self.grid = build_grid(self.cylinders, pad_factor=self._grid_pad)
@@ -415,8 +418,8 @@ class Renderer:
         return int(self.grid.cell_count.sum(dtype=np.int64))
 
     def _build_grid_gpu(self):
-        """(Grid with indices None, seconds spent uploading), or (None, 0) when a cylinder
-        spans more cells than one invocation may list (the caller builds in numpy)."""
+        """Grid with indices None, or None when a cylinder spans more cells than one
+        invocation may list (the caller builds in numpy)."""
         plan = self._plan
         pad = self._grid_pad
         pts = plan.points
@@ -437,7 +440,7 @@ class Renderer:
         n, tex_cyl, cyl_shift = self.num_cylinders, self._tex["tex_cyl"], self._shift["tex_cyl"] - 2
         counted = builder.count(n, tex_cyl, cyl_shift, lo, cs, dims, pad)
         if counted is None:
-            return None, 0.0
+            return None
         counts, cells = counted
         start = np.cumsum(counts) - counts
         total = int(start[-1] + counts[-1])
@@ -448,7 +451,7 @@ class Renderer:
         builder.fill(n, tex_cyl, cyl_shift, lo, cs, dims, pad, cells, start, tex_idx, shift)
         # Counted as uploads: the zeroed counters and the cursors the two passes start from.
         self.stats["bytes_uploaded"] += 2 * counts.size * 4
-        return Grid(lo, cs, dims, start.astype(np.int32), counts.astype(np.int32), None), 0.0
+        return Grid(lo, cs, dims, start.astype(np.int32), counts.astype(np.int32), None)
 
     def grid_indices(self):
         """The grid's cell lists as int32 (read back from the GPU when built there)."""
