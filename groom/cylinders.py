@@ -17,7 +17,7 @@ def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=
 
     The bound: over a parameter step h, a curve with |C''| <= A stays within A·h²/8 of its
     chord, and |C_j''(σ)| <= Σ_g w_g |D_g''(σ)| (B_j is a rotation), bounded per bin of σ by
-    `bins` (K, NB) from interpolate.key_table. Points are placed greedily from the root:
+    `bins` (K, NB) from interpolate.curvature_bound. Points are placed greedily from the root:
     each segment is the longest whose h² times the largest bound over the bins it touches
     stays <= 8·tol. Greedy covering is optimal for such a monotone constraint, so straight
     stretches get one long cylinder and bends get short ones. Each segment scans the bins it

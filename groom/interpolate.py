@@ -38,17 +38,11 @@ CURVATURE_BINS = 128
 _CURVATURE_SAFETY = 1.05
 
 
-def key_table(key, frame, intelligence, samples=KEY_SAMPLES, bins=CURVATURE_BINS):
-    """(table (samples,3) float64, bound (bins,) float64): offsets of the key from its root
-    at equal arc-length steps (in the key's root frame when `intelligence`, else world axes),
-    and the curvature bound of `curvature_bound`."""
-    (table, length), = key_offsets([key], [frame], intelligence, samples)
-    return table, curvature_bound(table, length, bins)
-
-
 def key_offsets(keys, frames, intelligence, samples=KEY_SAMPLES):
-    """[(table (samples,3) float64, length)] per key: the first half of `key_table`, all that
-    fixed resolution needs; the keys are resampled in one batch."""
+    """[(table (samples,3) float64, length)] per key: offsets of the key from its root at
+    equal arc-length steps (in the key's root frame when `intelligence`, else world axes),
+    all that fixed resolution needs (adaptive resolution adds `curvature_bound`); the keys
+    are resampled in one batch."""
     out = []
     for (table, length), frame in zip(arc_length_tables(keys, samples), frames):
         out.append((table @ frame if intelligence else table, length))  # rows: F_x^T D
