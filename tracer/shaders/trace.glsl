@@ -184,6 +184,26 @@ bool next_cell(bool empty, bool last, ivec3 cell, vec3 tnext, float texit, vec3 
     return !last && all(greaterThanEqual(ncell, ivec3(0))) && all(lessThan(ncell, dims));
 }
 
+// The DDA state where a walk from o along d enters the grid at t0.
+void begin_walk(vec3 o, vec3 d, vec3 inv, float t0, out ivec3 cell, out ivec3 stp, out vec3 tdelta,
+                out vec3 tnext) {
+    vec3 pe = (o + t0 * d - grid_lo) / cell_size;
+    cell = clamp(ivec3(floor(pe)), ivec3(0), dims - 1);
+    stp = ivec3(sign(d));
+    tdelta = abs(cell_size * inv);
+    tnext = (grid_lo + (vec3(cell) + step(0.0, d)) * cell_size - o) * inv;
+}
+
+// A cell's entry, its first two list entries and the first candidate's texels, read before
+// they are needed (see trace: the walks read one cell and one candidate ahead).
+void read_cell(ivec3 c, out ivec2 sc, out int id, out int id2, out vec4 A, out vec4 B) {
+    sc = cell_entry(clamp(c, ivec3(0), dims - 1));
+    id = list_entry(sc.x);
+    id2 = list_entry(sc.x + 1);
+    A = cyl(id, TOP);
+    B = cyl(id, TIP);
+}
+
 // Slab test against the grid box; false when the ray misses it within [tmin, tmax].
 bool enter_grid(vec3 o, vec3 inv, inout float t0, inout float t1) {
     vec3 hi = grid_lo + cell_size * vec3(dims);
@@ -225,17 +245,13 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint
     vec3 inv = safe_inverse(d);
     float t0 = 0.0, t1 = tmax;
     if (!enter_grid(p, inv, t0, t1)) return 1.0;
-    vec3 pe = (p + t0 * d - grid_lo) / cell_size;
-    ivec3 cell = clamp(ivec3(floor(pe)), ivec3(0), dims - 1);
-    ivec3 stp = ivec3(sign(d));
-    vec3 tdelta = abs(cell_size * inv);
-    vec3 tnext = (grid_lo + (vec3(cell) + step(0.0, d)) * cell_size - p) * inv;
+    ivec3 cell, stp; vec3 tdelta, tnext;
+    begin_walk(p, d, inv, t0, cell, stp, tdelta, tnext);
     float tcur = t0;
     float trans = 1.0;
     int guard = dims.x + dims.y + dims.z + 3;
-    ivec2 sc = cell_entry(cell);
-    int idn = list_entry(sc.x), idnn = list_entry(sc.x + 1);
-    vec4 An = cyl(idn, TOP), Bn = cyl(idn, TIP);
+    ivec2 sc; int idn, idnn; vec4 An, Bn;
+    read_cell(cell, sc, idn, idnn, An, Bn);
     // The walk of trace: the next cell's entry and the next candidate read one step ahead.
     for (int it = 0; it < guard; ++it) {
         bool empty = sc.x < 0;
@@ -243,9 +259,8 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint
         bool last = texit >= t1;
         ivec3 ncell; vec3 ntnext; float ntcur;
         bool inside = next_cell(empty, last, cell, tnext, texit, tdelta, stp, t1, ncell, ntnext, ntcur);
-        ivec2 nsc = cell_entry(clamp(ncell, ivec3(0), dims - 1));
-        int nid = list_entry(nsc.x), nidn = list_entry(nsc.x + 1);
-        vec4 nA = cyl(nid, TOP), nB = cyl(nid, TIP);
+        ivec2 nsc; int nid, nidn; vec4 nA, nB;
+        read_cell(ncell, nsc, nid, nidn, nA, nB);
         int count = empty ? 0 : sc.y;
 #if COUNT
         if (!empty) { counter.z += 1.0; counter.w += float(count); }
@@ -353,16 +368,12 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
     float ht[LAYERS]; float ha[LAYERS]; int hid[LAYERS]; int hs[LAYERS];
     for (int i = 0; i < LAYERS; ++i) { ht[i] = BIG; ha[i] = 0.0; hid[i] = NO_ID; hs[i] = 0; }
     if (enter_grid(o, inv, t0, t1)) {
-        vec3 pe = (o + t0 * d - grid_lo) / cell_size;
-        ivec3 cell = clamp(ivec3(floor(pe)), ivec3(0), dims - 1);
-        ivec3 stp = ivec3(sign(d));
-        vec3 tdelta = abs(cell_size * inv);
-        vec3 tnext = (grid_lo + (vec3(cell) + step(0.0, d)) * cell_size - o) * inv;
+        ivec3 cell, stp; vec3 tdelta, tnext;
+        begin_walk(o, d, inv, t0, cell, stp, tdelta, tnext);
         float tcur = t0;
         int guard = dims.x + dims.y + dims.z + 3;
-        ivec2 sc = cell_entry(cell);
-        int idn = list_entry(sc.x), idnn = list_entry(sc.x + 1);
-        vec4 An = cyl(idn, TOP), Bn = cyl(idn, TIP);
+        ivec2 sc; int idn, idnn; vec4 An, Bn;
+        read_cell(cell, sc, idn, idnn, An, Bn);
         for (int it = 0; it < guard; ++it) {
             bool empty = sc.x < 0;
             float texit = min(min(tnext.x, tnext.y), min(tnext.z, t1));
@@ -375,9 +386,8 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
             // candidates ahead lost 2-5 % to the extra reads at each cell's end).
             ivec3 ncell; vec3 ntnext; float ntcur;
             bool inside = next_cell(empty, last, cell, tnext, texit, tdelta, stp, t1, ncell, ntnext, ntcur);
-            ivec2 nsc = cell_entry(clamp(ncell, ivec3(0), dims - 1));
-            int nid = list_entry(nsc.x), nidn = list_entry(nsc.x + 1);
-            vec4 nA = cyl(nid, TOP), nB = cyl(nid, TIP);
+            ivec2 nsc; int nid, nidn; vec4 nA, nB;
+            read_cell(ncell, nsc, nid, nidn, nA, nB);
             int count = empty ? 0 : sc.y;
 #if COUNT
             counter.z += 1.0; counter.w += float(count);
