@@ -34,9 +34,11 @@ def _groups(n):
     return -(-g // gy), gy
 
 
-def _set(prog, **values):
+def set_uniforms(prog, **values):
+    """Sets the uniforms of `prog` that it has: the GLSL compiler drops those a variant or
+    pass does not use (the renderer's trace shader uses this too)."""
     for name, value in values.items():
-        if name in prog:        # the compiler drops what a pass does not use
+        if name in prog:
             prog[name].value = value
 
 
@@ -63,8 +65,8 @@ class GpuBuilder:
         prog = self._cyl
         for unit, name in enumerate(("tex_pos", "tex_rad", "tex_col", "tex_alpha", "tex_cp")):
             tex[name].use(location=unit)
-            _set(prog, **{name: unit})
-        _set(prog, n_items=int(count), first_item=int(first), n_cyl=int(n_cyl), pts_shift=int(pts_shift),
+            set_uniforms(prog, **{name: unit})
+        set_uniforms(prog, n_items=int(count), first_item=int(first), n_cyl=int(n_cyl), pts_shift=int(pts_shift),
              cp_shift=int(cp_shift), cyl_shift=int(cyl_shift), cos_sharp=float(_COS_SHARP),
              repeat2=float(repeat_distance) ** 2 if repeat_distance > 0 else -1.0)
         repeats = self.ctx.texture((MAX_REPEATS + 1, 1), 1, np.zeros(MAX_REPEATS + 1, np.int32), dtype="i4")
@@ -78,7 +80,7 @@ class GpuBuilder:
 
     def _bind_grid(self, prog, n, tex_cyl, cyl_shift, lo, cs, dims, pad_factor, idx_shift=0):
         tex_cyl.use(location=0)
-        _set(prog, tex_cyl=0, n_items=int(n), cyl_shift=int(cyl_shift), idx_shift=int(idx_shift),
+        set_uniforms(prog, tex_cyl=0, n_items=int(n), cyl_shift=int(cyl_shift), idx_shift=int(idx_shift),
              grid_lo=tuple(float(x) for x in lo), inv_cell=tuple(float(1.0 / x) for x in cs),
              dims=tuple(int(x) for x in dims), pad_factor=float(pad_factor))
 

@@ -14,7 +14,7 @@ from hairio import InputError, Strands
 from .cylinders import (SHARP_BEND_DEG, CylinderPlan, column_bounds, cylinders_from_plan, plan_cylinders,
                         repeat_distance, strands_to_cylinders)
 from .grid import Grid, build_grid, grid_frame
-from .gpu_build import GpuBuilder, compute_available
+from .gpu_build import GpuBuilder, compute_available, set_uniforms
 from .settings import GRID_WIDEN_CAP, RenderSettings
 
 BLOCK = 4          # cells per side of the empty-space-skipping blocks (the shader's BLOCK)
@@ -560,7 +560,7 @@ class Renderer:
                     # One sample per draw (the shader's main says why): the first replaces the
                     # cleared background, the others add to it (colour and counters alike).
                     for s in range(settings.spp):
-                        _set(prog, "sample_index", s)
+                        set_uniforms(prog, sample_index=s)
                         if s == 1:
                             self.ctx.enable(moderngl.BLEND)
                         vao.render(vertices=3)
@@ -587,29 +587,27 @@ class Renderer:
         for i, (name, inv) in enumerate((("tex_cyl", "cyl_inv"), ("tex_idx", "idx_inv"), ("tex_cell", "cell_inv"))):
             tex = self._tex[name]
             tex.use(location=i)
-            _set(prog, name, i)
             # The shader reads texels at their centres with textureLod (cheaper than
             # texelFetch on llvmpipe), which needs the reciprocal sizes.
-            _set(prog, inv, tuple(1.0 / float(x) for x in tex.size))
-        _set(prog, "cyl_shift", self._shift["tex_cyl"] - 2)     # log2 cylinders per row
-        _set(prog, "idx_shift", self._shift["tex_idx"])
-        _set(prog, "grid_lo", tuple(float(x) for x in g.lo))
-        _set(prog, "cell_size", tuple(float(x) for x in g.cell_size))
-        _set(prog, "dims", tuple(int(x) for x in g.dims))
-        _set(prog, "cam_pos", tuple(float(x) for x in camera.position))
-        _set(prog, "cam_rot", tuple(float(x) for x in camera.rotation.T.ravel()))
-        _set(prog, "pixel_size", float(camera.pixel_size))
-        _set(prog, "shift_px", tuple(float(x) for x in camera.shift_px))
-        _set(prog, "image_size", (float(camera.size[0]), float(camera.size[1])))
+            set_uniforms(prog, **{name: i, inv: tuple(1.0 / float(x) for x in tex.size)})
+        set_uniforms(prog, cyl_shift=self._shift["tex_cyl"] - 2,      # log2 cylinders per row
+                     idx_shift=self._shift["tex_idx"],
+                     grid_lo=tuple(float(x) for x in g.lo),
+                     cell_size=tuple(float(x) for x in g.cell_size),
+                     dims=tuple(int(x) for x in g.dims),
+                     cam_pos=tuple(float(x) for x in camera.position),
+                     cam_rot=tuple(float(x) for x in camera.rotation.T.ravel()),
+                     pixel_size=float(camera.pixel_size),
+                     shift_px=tuple(float(x) for x in camera.shift_px),
+                     image_size=(float(camera.size[0]), float(camera.size[1])))
         packed = [light.packed() for light in settings.lights]
         if "light_vec" in prog:
             prog["light_vec"].write(np.array([p[0] for p in packed], np.float32).tobytes())
         if "light_col" in prog:
             prog["light_col"].write(np.array([p[1] for p in packed], np.float32).tobytes())
-        _set(prog, "background", settings.premultiplied_background())
-        _set(prog, "material", (settings.ambient, settings.diffuse, settings.specular, settings.shininess))
-        _set(prog, "mpw_cap", float(settings.min_pixel_width_cap))
-        _set(prog, "t_eps", float(settings.transmittance_eps))
+        set_uniforms(prog, background=settings.premultiplied_background(),
+                     material=(settings.ambient, settings.diffuse, settings.specular, settings.shininess),
+                     mpw_cap=float(settings.min_pixel_width_cap), t_eps=float(settings.transmittance_eps))
 
 
 def block_occupancy(grid):
@@ -638,12 +636,6 @@ def _row_runs(rows):
     breaks = np.flatnonzero(np.diff(rows) > 1)
     return [(int(rows[a]), int(rows[b]) + 1)
             for a, b in zip(np.concatenate([[0], breaks + 1]), np.concatenate([breaks, [len(rows) - 1]]))]
-
-
-def _set(prog, name, value):
-    # The GLSL compiler drops uniforms a variant does not use.
-    if name in prog:
-        prog[name].value = value
 
 
 def _select_strands(strands, ids):
