@@ -39,13 +39,33 @@ int item_index() {
     return int(gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * 64 + int(gl_LocalInvocationID.x);
 }
 
-void visit(ivec3 c, int id) {
+void visit(int cell, int id) {
 #if PASS == 0
-    atomicAdd(cells[c.x + dims.x * (c.y + dims.y * c.z)], 1);
+    atomicAdd(cells[cell], 1);
 #else
-    int slot = atomicAdd(cells[c.x + dims.x * (c.y + dims.y * c.z)], 1);
+    int slot = atomicAdd(cells[cell], 1);
     imageStore(idx_img, slot_texel(slot), ivec4(id));
 #endif
+}
+
+// Cells of slab `slab` (along the dominant axis) that the padded segment may touch: rows
+// ja0..ja1 and columns jb0..jb1 of the other two axes. G, DG, P are the segment's start,
+// direction and pad in cell units, ordered (dominant, a, b); D the grid's cells likewise.
+void ranges(int slab, bool no_dir, float inv, vec3 G, vec3 DG, vec3 P, ivec3 D,
+            out int ja0, out int ja1, out int jb0, out int jb1) {
+    // Part of the segment (s in [0, 1]) whose dominant coordinate lies within pad of this
+    // slab; a segment too short to have a dominant direction is taken whole.
+    float s0 = 0.0, s1 = 1.0;
+    if (!no_dir) {
+        float sa = (float(slab) - P.x - G.x) * inv;
+        float sb = (float(slab + 1) + P.x - G.x) * inv;
+        s0 = clamp(min(sa, sb), 0.0, 1.0);
+        s1 = clamp(max(sa, sb), 0.0, 1.0);
+    }
+    vec2 e0 = G.yz + s0 * DG.yz, e1 = G.yz + s1 * DG.yz;
+    ivec2 j0 = clamp(ivec2(floor(min(e0, e1) - P.yz)), ivec2(0), D.yz - 1);
+    ivec2 j1 = clamp(ivec2(floor(max(e0, e1) + P.yz)), ivec2(0), D.yz - 1);
+    ja0 = j0.x; jb0 = j0.y; ja1 = j1.x; jb1 = j1.y;
 }
 
 void main() {
@@ -63,42 +83,41 @@ void main() {
     vec3 dg = (far - grid_lo) * inv_cell - g0;
     // A thousandth of a cell more than the radius covers float32 rounding, as in numpy.
     vec3 pad = vec3(top.w * pad_factor) * inv_cell + 1e-3;
+    // Everything below in the order (dominant axis, a, b), once: constant components in
+    // the loop (llvmpipe turns a computed component index into selects at every use).
     vec3 adg = abs(dg);
-    int k = adg.x >= adg.y && adg.x >= adg.z ? 0 : (adg.y >= adg.z ? 1 : 2);
-    int a = (k + 1) % 3, b = (k + 2) % 3;
-    int i0 = clamp(int(floor(min(g0[k], g0[k] + dg[k]) - pad[k])), 0, dims[k] - 1);
-    int i1 = clamp(int(floor(max(g0[k], g0[k] + dg[k]) + pad[k])), 0, dims[k] - 1);
-    bool no_dir = abs(dg[k]) < 1e-12;
-    float inv = no_dir ? 1.0 : 1.0 / dg[k];
+    ivec3 stride = ivec3(1, dims.x, dims.x * dims.y);
+    vec3 G = g0, DG = dg, P = pad;
+    ivec3 D = dims, S = stride;
+    if (adg.y > adg.x && adg.y >= adg.z) { G = g0.yzx; DG = dg.yzx; P = pad.yzx; D = dims.yzx; S = stride.yzx; }
+    else if (adg.z > adg.x && adg.z > adg.y) { G = g0.zxy; DG = dg.zxy; P = pad.zxy; D = dims.zxy; S = stride.zxy; }
+    int i0 = clamp(int(floor(min(G.x, G.x + DG.x) - P.x)), 0, D.x - 1);
+    int i1 = clamp(int(floor(max(G.x, G.x + DG.x) + P.x)), 0, D.x - 1);
+    bool no_dir = abs(DG.x) < 1e-12;
+    float inv = no_dir ? 1.0 : 1.0 / DG.x;
     // Upper bound of the steps below: slabs times the cells of the whole box's other sides.
-    float ba = abs(dg[a]) + 2.0 * pad[a] + 2.0, bb = abs(dg[b]) + 2.0 * pad[b] + 2.0;
-    if (float(i1 - i0 + 1) * min(ba, float(dims[a])) * min(bb, float(dims[b])) > float(MAX_VISITS)) {
+    vec2 bound = min(abs(DG.yz) + 2.0 * P.yz + 2.0, vec2(D.yz));
+    if (float(i1 - i0 + 1) * bound.x * bound.y > float(MAX_VISITS)) {
 #if PASS == 0
         imageAtomicAdd(overflow_img, ivec3(0), 1);
 #endif
         return;
     }
-    for (int slab = i0; slab <= i1; ++slab) {
-        // Part of the segment (s in [0, 1]) whose dominant coordinate lies within pad of
-        // this slab; a segment too short to have a dominant direction is taken whole.
-        float s0 = 0.0, s1 = 1.0;
-        if (!no_dir) {
-            float sa = (float(slab) - pad[k] - g0[k]) * inv;
-            float sb = (float(slab + 1) + pad[k] - g0[k]) * inv;
-            s0 = clamp(min(sa, sb), 0.0, 1.0);
-            s1 = clamp(max(sa, sb), 0.0, 1.0);
+    // One loop over every listed cell, slab by slab, row by row (nested loops made every
+    // lane wait for the longest inner loop of its neighbours: 25-30 % slower on llvmpipe).
+    int slab = i0;
+    int ja0, ja1, jb0, jb1;
+    ranges(slab, no_dir, inv, G, DG, P, D, ja0, ja1, jb0, jb1);
+    int ja = ja0, jb = jb0;
+    for (;;) {
+        visit(slab * S.x + ja * S.y + jb * S.z, id);
+        ja++;
+        if (ja > ja1) { ja = ja0; jb++; }
+        if (jb > jb1) {
+            slab++;
+            if (slab > i1) break;
+            ranges(slab, no_dir, inv, G, DG, P, D, ja0, ja1, jb0, jb1);
+            ja = ja0; jb = jb0;
         }
-        float ea0 = g0[a] + s0 * dg[a], ea1 = g0[a] + s1 * dg[a];
-        float eb0 = g0[b] + s0 * dg[b], eb1 = g0[b] + s1 * dg[b];
-        int ja0 = clamp(int(floor(min(ea0, ea1) - pad[a])), 0, dims[a] - 1);
-        int ja1 = clamp(int(floor(max(ea0, ea1) + pad[a])), 0, dims[a] - 1);
-        int jb0 = clamp(int(floor(min(eb0, eb1) - pad[b])), 0, dims[b] - 1);
-        int jb1 = clamp(int(floor(max(eb0, eb1) + pad[b])), 0, dims[b] - 1);
-        for (int jb = jb0; jb <= jb1; ++jb)
-            for (int ja = ja0; ja <= ja1; ++ja) {
-                ivec3 cell;
-                cell[k] = slab; cell[a] = ja; cell[b] = jb;
-                visit(cell, id);
-            }
     }
 }
