@@ -2,8 +2,8 @@
 """Cylinders and grid built on the GPU with compute shaders (GL 4.3+).
 
 The host uploads the strand points once (32 bytes a point, half of the 64 a cylinder takes)
-and a cylinder -> point index; one compute pass writes the cylinder texture the trace shader
-reads, two more count and fill the grid's cell lists straight into the index texture. No
+and a cylinder -> point index; one compute pass writes the cylinder buffer the trace shader
+reads, two more count and fill the grid's cell lists straight into the index buffer. No
 cylinder or list goes through Python.
 
 Both builds follow the numpy ones rule for rule (tracer/cylinders.py, tracer/grid.py), so the
@@ -16,8 +16,6 @@ import numpy as np
 
 from .cylinders import _COS_SHARP
 
-GL_R32I = 0x8235
-GL_RGBA32F = 0x8814
 GROUP = 64                  # the shaders' local_size_x
 MAX_GROUPS = 65535          # per dispatch dimension, the minimum GL guarantees
 MAX_VISITS = 60000          # loop steps one invocation may take (llvmpipe stops at 65,535)
@@ -53,38 +51,42 @@ class GpuBuilder:
         self._grid = [ctx.compute_shader(f"{head}#define PASS {p}\n#define MAX_VISITS {MAX_VISITS}\n{grid}")
                       for p in (0, 1)]
 
-    def make_cylinders(self, tex, pts_shift, cp_shift, n_cyl, cyl_shift, repeat_distance=0.0, first=0, count=None):
-        """Writes cylinders first..first+count (all by default) into tex["tex_cyl"] from the
-        point textures tex["tex_pos"], "tex_rad", "tex_col", "tex_alpha" and the cylinder ->
-        top point index tex["tex_cp"]. Returns the top points of the cylinders whose points
-        lie within `repeat_distance` (not checked when 0), or None when there are more than
-        MAX_REPEATS of them."""
+    def make_cylinders(self, store, n_cyl, repeat_distance=0.0, first=0, count=None):
+        """Writes cylinders first..first+count (all by default) into store["tex_cyl"] from the
+        point buffers store["tex_pos"], "tex_rad", "tex_col", "tex_alpha" and the cylinder ->
+        top point index store["tex_cp"] (tracer.gl_buffers.BufferTexture each). Returns the
+        top points of the cylinders whose points lie within `repeat_distance` (not checked
+        when 0), or None when there are more than MAX_REPEATS of them."""
         count = n_cyl - first if count is None else count
         if count <= 0:
             return np.zeros(0, np.int64)
         prog = self._cyl
         for unit, name in enumerate(("tex_pos", "tex_rad", "tex_col", "tex_alpha", "tex_cp")):
-            tex[name].use(location=unit)
-            set_uniforms(prog, **{name: unit})
-        set_uniforms(prog, n_items=int(count), first_item=int(first), n_cyl=int(n_cyl), pts_shift=int(pts_shift),
-             cp_shift=int(cp_shift), cyl_shift=int(cyl_shift), cos_sharp=float(_COS_SHARP),
-             repeat2=float(repeat_distance) ** 2 if repeat_distance > 0 else -1.0)
-        repeats = self.ctx.texture((MAX_REPEATS + 1, 1), 1, np.zeros(MAX_REPEATS + 1, np.int32), dtype="i4")
-        tex["tex_cyl"].bind_to_image(0, read=False, write=True, format=GL_RGBA32F)
-        repeats.bind_to_image(1, read=True, write=True, format=GL_R32I)
+            store[name].use(unit)       # the shader's layout(binding = unit)
+        set_uniforms(prog, n_items=int(count), first_item=int(first), n_cyl=int(n_cyl),
+                     cos_sharp=float(_COS_SHARP), repeat2=float(repeat_distance) ** 2 if repeat_distance > 0 else -1.0)
+        repeats = self.ctx.buffer(reserve=4 * (MAX_REPEATS + 1))
+        repeats.clear()
+        store["tex_cyl"].bind_to_image(0, write=True)
+        repeats.bind_to_storage_buffer(1)
         prog.run(*_groups(count))
         self.ctx.memory_barrier()
-        found = np.frombuffer(repeats.read(), np.int32)
+        n_found = int(np.frombuffer(repeats.read(size=4), np.int32)[0])
+        found = None
+        if n_found == 0:
+            found = np.zeros(0, np.int64)
+        elif n_found <= MAX_REPEATS:
+            found = np.sort(np.frombuffer(repeats.read(size=4 * n_found, offset=4), np.int32)).astype(np.int64)
         repeats.release()
-        return None if found[0] > MAX_REPEATS else np.sort(found[1:1 + found[0]]).astype(np.int64)
+        return found
 
-    def _bind_grid(self, prog, n, tex_cyl, cyl_shift, lo, cs, dims, pad_factor, idx_shift=0):
-        tex_cyl.use(location=0)
-        set_uniforms(prog, tex_cyl=0, n_items=int(n), cyl_shift=int(cyl_shift), idx_shift=int(idx_shift),
-             grid_lo=tuple(float(x) for x in lo), inv_cell=tuple(float(1.0 / x) for x in cs),
-             dims=tuple(int(x) for x in dims), pad_factor=float(pad_factor))
+    def _bind_grid(self, prog, n, tex_cyl, lo, cs, dims, pad_factor):
+        tex_cyl.use(0)
+        set_uniforms(prog, n_items=int(n), grid_lo=tuple(float(x) for x in lo),
+                     inv_cell=tuple(float(1.0 / x) for x in cs), dims=tuple(int(x) for x in dims),
+                     pad_factor=float(pad_factor))
 
-    def count(self, n, tex_cyl, cyl_shift, lo, cs, dims, pad_factor):
+    def count(self, n, tex_cyl, lo, cs, dims, pad_factor):
         """(references per cell, flat int64 in cell-id order; the storage buffer holding
         them, for fill), or None when some cylinder spans too many cells for one invocation
         (the caller then builds in numpy)."""
@@ -92,11 +94,12 @@ class GpuBuilder:
         ncell = int(np.prod(dims))
         cells = ctx.buffer(reserve=4 * ncell)
         cells.clear()
-        overflow = ctx.texture3d((1, 1, 1), 1, np.zeros(1, np.int32), dtype="i4")
+        overflow = ctx.buffer(reserve=4)
+        overflow.clear()
         prog = self._grid[0]
-        self._bind_grid(prog, n, tex_cyl, cyl_shift, lo, cs, dims, pad_factor)
+        self._bind_grid(prog, n, tex_cyl, lo, cs, dims, pad_factor)
         cells.bind_to_storage_buffer(0)
-        overflow.bind_to_image(2, read=True, write=True, format=GL_R32I)
+        overflow.bind_to_storage_buffer(1)
         prog.run(*_groups(n))
         ctx.memory_barrier()
         over = int(np.frombuffer(overflow.read(), np.int32)[0])
@@ -106,14 +109,14 @@ class GpuBuilder:
             return None
         return np.frombuffer(cells.read(), np.int32).astype(np.int64), cells
 
-    def fill(self, n, tex_cyl, cyl_shift, lo, cs, dims, pad_factor, cells, start, tex_idx, idx_shift):
-        """Writes every cell's list into `tex_idx` (r32i, rows of 2^idx_shift texels) from
-        the cell's `start` on; `cells` (from count) becomes the cursors and is released."""
+    def fill(self, n, tex_cyl, lo, cs, dims, pad_factor, cells, start, tex_idx):
+        """Writes every cell's list into `tex_idx` (an int32 BufferTexture) from the cell's
+        `start` on; `cells` (from count) becomes the cursors and is released."""
         cells.write(np.ascontiguousarray(start, np.int32))
         prog = self._grid[1]
-        self._bind_grid(prog, n, tex_cyl, cyl_shift, lo, cs, dims, pad_factor, idx_shift)
+        self._bind_grid(prog, n, tex_cyl, lo, cs, dims, pad_factor)
         cells.bind_to_storage_buffer(0)
-        tex_idx.bind_to_image(1, read=False, write=True, format=GL_R32I)
+        tex_idx.bind_to_image(1, write=True)
         prog.run(*_groups(n))
         self.ctx.memory_barrier()
         cells.release()

@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The GPU tracer: one headless (EGL) OpenGL 3.3 core context per process, scene data in
-float textures, one fragment shader that traces every pixel.
+buffer textures (tracer/gl_buffers.py), one fragment shader that traces every pixel.
 
 Only `set_strands`/`update_strands` upload; a render with a new camera, light or setting
 sends uniforms and nothing else (`stats["bytes_uploaded"]` proves it).
@@ -14,16 +14,22 @@ from hairio import InputError, Strands
 from .cylinders import (SHARP_BEND_DEG, CylinderPlan, column_bounds, cylinders_from_plan, plan_cylinders,
                         repeat_distance, strands_to_cylinders)
 from .grid import Grid, build_grid, grid_frame
+from .gl_buffers import BufferTexture, set_samplers
 from .gpu_build import GpuBuilder, compute_available, set_uniforms
 from .settings import GRID_WIDEN_CAP, RenderSettings
 
 BLOCK = 4          # cells per side of the empty-space-skipping blocks (the shader's BLOCK)
-TEX_W = 4096       # texels per row of the textures of lists unless more rows than the driver
-                   # allows would be needed; see texture_layout
-# Per cylinder, four consecutive RGBA32F texels of one texture (top+radius, tip+alpha,
+# Per cylinder, four consecutive RGBA32F texels of one buffer (top+radius, tip+alpha,
 # n2+flags, colour): 64 bytes, one cache line, so a cylinder test on a CPU driver touches
 # one line where four textures took up to four. The shader's cyl() agrees.
 TEXELS_PER_CYL = 4
+# Partial uploads send the changed strands' data in whole chunks of this many cylinders or
+# points, neighbouring chunks in one write: thousands of scattered strands would otherwise
+# mean thousands of small writes, which cost more than the data.
+UPLOAD_CHUNK = 1024
+# The trace shader reads up to two list entries past a cell's list (it reads ahead); the
+# index buffer carries this many zeros after the last list.
+IDX_SLACK = 2
 SHADER_DIR = pathlib.Path(__file__).resolve().parent / "shaders"
 
 _VERTEX = """#version 330 core
@@ -63,23 +69,6 @@ def gpu_builder():
     return _BUILDER
 
 
-def texture_layout(name, n_texels, max_size, base_width=TEX_W):
-    """(log2 of the row width, rows) of a 2D texture holding `n_texels` in row-major order:
-    rows of `base_width` texels while the rows fit the driver's `max_size` per side, wider
-    power-of-two rows (up to `max_size`) when they do not. The shader finds texel i at
-    (i & (width - 1), i >> log2 width). InputError when even the widest rows do not fit."""
-    top = 1 << (int(max_size).bit_length() - 1)        # widest power of two the driver allows
-    width = max(TEXELS_PER_CYL, min(int(base_width), top))
-    while width < top and -(-n_texels // width) > max_size:
-        width *= 2
-    rows = max(1, -(-n_texels // width))
-    if rows > max_size:
-        raise InputError(f"scene too large for this GPU: {name} needs {n_texels} texels but the driver "
-                         f"allows {max_size} per side ({top * max_size} in all); render fewer strands "
-                         "or fewer points per strand")
-    return width.bit_length() - 1, rows
-
-
 class Renderer:
     """GPU tracer of one scene at a time.
 
@@ -90,24 +79,23 @@ class Renderer:
     projected bounds that were traced), and with RenderSettings(count=True) also
     shadow_rays, layers_traced, cells_visited, cylinder_tests (summed over samples)."""
 
-    def __init__(self, max_texture_size=None, base_width=TEX_W, build="auto"):
-        """`max_texture_size` (default: the driver's GL_MAX_TEXTURE_SIZE) and `base_width`
-        shape the 2D textures (texture_layout); smaller values exercise big-scene layouts.
+    def __init__(self, max_buffer_texels=None, build="auto"):
+        """`max_buffer_texels`: the most texels one buffer texture may hold (default: the
+        driver's GL_MAX_TEXTURE_BUFFER_SIZE, 2^27 on llvmpipe and current desktop GPUs, i.e.
+        33 M cylinders or 134 M grid references); scenes past it get an InputError.
         `build`: where cylinders and grid are made — "gpu" (compute shaders, GL 4.3+),
         "numpy", or "auto" (the GPU where the driver has compute shaders)."""
         self.ctx = shared_context()
-        self.max_texture_size = int(max_texture_size or self.ctx.info["GL_MAX_TEXTURE_SIZE"])
-        self.base_width = int(base_width)
+        self.max_buffer_texels = int(max_buffer_texels or self.ctx.info["GL_MAX_TEXTURE_BUFFER_SIZE"])
         if build not in BUILDS:
             raise InputError(f"build: expected one of {', '.join(BUILDS)}, got {build!r}")
         if build == "gpu" and not compute_available(self.ctx):
             raise InputError(f"build: 'gpu' needs compute shaders (OpenGL 4.3); this driver offers "
                              f"{self.ctx.info['GL_VERSION']}; use 'numpy' or 'auto'")
         self.build = "numpy" if build == "numpy" or not compute_available(self.ctx) else "gpu"
-        self._shift = {}     # log2 row width of tex_cyl, tex_idx (and tex_pts, tex_cp)
         self._programs = {}
         self._fbos = {}
-        self._tex = {}
+        self._tex = {}       # name -> BufferTexture: tex_cyl, tex_idx, tex_cell (+ points for the GPU build)
         self._cylinders = None
         self._plan = None
         self.num_cylinders = None     # None until set_strands
@@ -130,10 +118,22 @@ class Renderer:
         return self._cylinders
 
     def set_strands(self, strands):
-        """Upload `strands` (hairio.Strands) and build the grid."""
+        """Upload `strands` (hairio.Strands) and build the grid. When that fails (a scene too
+        large for the driver's buffers), the renderer holds no scene afterwards: a render
+        says so instead of tracing half of one."""
         if not isinstance(strands, Strands):
             raise InputError(f"strands: expected hairio.Strands, got {type(strands).__name__}; "
                              "build one with Strands.from_arrays")
+        try:
+            self._set_strands(strands)
+        except Exception:
+            self._forget_scene()
+            raise
+
+    def _forget_scene(self):
+        self.strands = self.grid = self._plan = self._cylinders = self.num_cylinders = None
+
+    def _set_strands(self, strands):
         t0 = time.perf_counter()
         # The GPU build checks for repeated points itself while it makes the cylinders.
         plan = plan_cylinders(strands, drop_repeats=self.build != "gpu")
@@ -166,6 +166,7 @@ class Renderer:
             self._cylinders = cylinders_from_plan(plan)
             self._set_all_opaque(plan)
             t1 = time.perf_counter()
+            self.stats["uploads"] += 1
             self._upload_cylinders(0, len(self._cylinders), full=True)
             t2 = time.perf_counter()
             self._build_and_upload_grid()
@@ -175,9 +176,10 @@ class Renderer:
 
     def update_strands(self, strand_ids, strands):
         """`strands` is the whole new set; only strands `strand_ids` changed. When their point
-        counts are unchanged, only their data is re-uploaded (their cylinders' texture rows
-        with the numpy build, their points' rows with the GPU build, which then remakes just
-        their cylinders) and the grid is rebuilt; otherwise everything is uploaded again."""
+        counts are unchanged, only their data is re-uploaded (their cylinders with the numpy
+        build, their points with the GPU build, which then remakes just their cylinders; in
+        chunks of UPLOAD_CHUNK) and the grid is rebuilt; otherwise everything is uploaded
+        again. A failure leaves no scene, as in set_strands."""
         if self.strands is None or not isinstance(strands, Strands) \
                 or not np.array_equal(strands.counts, self.strands.counts):
             self.set_strands(strands)
@@ -188,9 +190,16 @@ class Renderer:
         if not ids.size:
             self.strands = strands
             return
-        if self.build == "gpu" and self.num_cylinders:
-            self._update_strands_gpu(ids, strands)
-            return
+        try:
+            if self.build == "gpu" and self.num_cylinders:
+                self._update_strands_gpu(ids, strands)
+            else:
+                self._update_strands_numpy(ids, strands)
+        except Exception:
+            self._forget_scene()
+            raise
+
+    def _update_strands_numpy(self, ids, strands):
         t0 = time.perf_counter()
         sub = _select_strands(strands, ids)
         new = strands_to_cylinders(sub)
@@ -208,8 +217,9 @@ class Renderer:
         self.strands = strands
         self.all_opaque = bool(len(old) == 0 or old.alpha.min() >= 1.0)
         t1 = time.perf_counter()
-        per = self._cyl_per_row
-        for a, b in _row_runs(dest // per):
+        self.stats["uploads"] += 1
+        per = UPLOAD_CHUNK
+        for a, b in _runs(dest // per):
             self._upload_cylinders(a * per, min(len(old), b * per))
         t2 = time.perf_counter()
         self._build_and_upload_grid()
@@ -238,16 +248,15 @@ class Renderer:
         counts = self._plan.counts.astype(np.int64)
         per_strand = np.maximum(counts - 1, 0)
         t1 = time.perf_counter()
-        # The texture rows that hold the changed strands' points, consecutive rows in one
-        # write per texture (thousands of scattered strands would otherwise mean thousands of
-        # small writes, which cost more than the data).
-        w = 1 << self._shift["tex_pts"]
+        # The chunks of points that hold the changed strands' points (see UPLOAD_CHUNK).
+        w = UPLOAD_CHUNK
         point_first = first_point[ids]
         ends = point_first + counts[ids]
         r0, r1 = point_first // w, (ends - 1) // w
-        rows = np.repeat(r0, r1 - r0 + 1) + _ranks(r1 - r0 + 1)
+        chunks = np.repeat(r0, r1 - r0 + 1) + _ranks(r1 - r0 + 1)
         n_points = len(self._plan.points)
-        for a, b in _row_runs(rows):
+        self.stats["uploads"] += 1
+        for a, b in _runs(chunks):
             self._upload_points(self._plan, a * w, min(n_points, b * w))
         t2 = time.perf_counter()
         # One dispatch from the first changed cylinder to the last: the unchanged ones between
@@ -268,115 +277,76 @@ class Renderer:
                        ("tex_alpha", "alpha", 1))
 
     def _upload_points(self, plan, a=None, b=None):
-        """Points a..b (all by default): the plan's arrays as they are, one texture each, in
-        rows of 2^shift points; the full upload also sends the cylinder -> top point index."""
+        """Points a..b (all by default): the plan's arrays as they are, one buffer each; the
+        full upload also sends the cylinder -> top point index."""
         if a is None:
-            n = len(plan.points)
-            shift, rows = texture_layout("tex_pos", n, self.max_texture_size, self.base_width)
-            self._shift["tex_pts"] = shift
+            a, b = 0, len(plan.points)
             for name, field, comps in self._POINT_TEXTURES:
-                self._gpu_texture(name, (1 << shift, rows), comps, "f4")
-            a, b = 0, n
-            shift, rows = texture_layout("tex_cp", len(plan), self.max_texture_size, self.base_width)
-            self._shift["tex_cp"] = shift
-            cp = np.zeros(rows << shift, np.int32)
-            cp[:len(plan)] = plan.top_point
-            self._texture("tex_cp", (1 << shift, rows), 1, "i4", cp)
-        # Whole rows in one write, the partial rows at either end in one each: no copies.
-        w = 1 << self._shift["tex_pts"]
-        pieces = []
-        first_row, last_row = a // w, (b - 1) // w
-        if first_row == last_row:
-            pieces.append((a, b, (a % w, first_row, b - a, 1)))
-        else:
-            full0 = first_row
-            if a % w:
-                full0 = first_row + 1
-                pieces.append((a, full0 * w, (a % w, first_row, full0 * w - a, 1)))
-            full1 = b // w          # rows full0 .. full1 - 1 are whole
-            if full1 > full0:
-                pieces.append((full0 * w, full1 * w, (0, full0, w, full1 - full0)))
-            if b % w:
-                pieces.append((full1 * w, b, (0, full1, b - full1 * w, 1)))
+                self._store(name, b, comps, "f4")
+            self._upload("tex_cp", plan.top_point.astype(np.int32), 1, "i4")
         for name, field, _ in self._POINT_TEXTURES:
-            data = getattr(plan, field)
-            for p0, p1, viewport in pieces:
-                chunk = np.ascontiguousarray(data[p0:p1], np.float32)
-                self._tex[name].write(chunk, viewport=viewport)
-                self.stats["bytes_uploaded"] += chunk.nbytes
+            chunk = np.ascontiguousarray(getattr(plan, field)[a:b], np.float32)
+            self._tex[name].write(chunk, first=a)
+            self.stats["bytes_uploaded"] += chunk.nbytes
 
     def _make_cylinders_gpu(self, repeat_dist, first=0, count=None):
-        """Makes cylinders first..first+count (all, into a new texture, by default); returns
+        """Makes cylinders first..first+count (all, into a fresh buffer, by default); returns
         the top points of those that may join repeated points (checked when repeat_dist > 0;
         None: too many to list)."""
         n = self.num_cylinders
         if count is None:
-            shift, rows = texture_layout("tex_cyl", n * TEXELS_PER_CYL, self.max_texture_size, self.base_width)
-            self._shift["tex_cyl"] = shift
-            self._gpu_texture("tex_cyl", (1 << shift, rows), 4, "f4")
-        return gpu_builder().make_cylinders(self._tex, self._shift["tex_pts"], self._shift["tex_cp"], n,
-                                            self._shift["tex_cyl"] - 2, repeat_dist, first, count)
+            self._store("tex_cyl", n * TEXELS_PER_CYL, 4, "f4")
+        return gpu_builder().make_cylinders(self._tex, n, repeat_dist, first, count)
 
-    def _gpu_texture(self, name, size, components, dtype):
-        """A texture the GPU passes fill: the one already there when its shape and format
-        fit (allocating hundreds of MB costs as much as filling them on a CPU driver), else a
-        new one."""
-        tex = self._tex.get(name)
-        if tex is not None and tex.size == tuple(size) and tex.components == components and tex.dtype == dtype:
-            return tex
-        if tex is not None:
-            tex.release()
-        tex = self.ctx.texture(size, components, dtype=dtype)
-        _nearest(tex)
-        self._tex[name] = tex
-        return tex
-
-    def _texture(self, name, size, components, dtype, data):
-        limit = self.ctx.info["GL_MAX_3D_TEXTURE_SIZE"] if len(size) == 3 else self.max_texture_size
-        if max(size) > limit:
-            raise InputError(f"scene too large for this GPU: {name} needs {size} texels but the driver "
-                             f"allows {limit} per side; render fewer strands or fewer points per strand")
+    def _store(self, name, texels, components, dtype):
+        """The buffer texture `name` with room for `texels`: the one already there when it
+        fits and is not much bigger (allocating hundreds of MB costs as much as filling them
+        on a CPU driver), else a new one with a little room to spare, so that a rebuild with
+        a few more grid references reuses it. InputError past the driver's limit."""
+        if texels > self.max_buffer_texels:
+            raise InputError(f"scene too large for this GPU: {name} needs {texels:,} texels but the driver's "
+                             f"buffer textures hold {self.max_buffer_texels:,}; render fewer strands or fewer "
+                             "points per strand")
         old = self._tex.get(name)
+        if old is not None and old.fits(texels, components, dtype) and old.capacity <= 2 * texels + (1 << 16):
+            return old
         if old is not None:
             old.release()
-        if len(size) == 3:
-            tex = self.ctx.texture3d(size, components, data, dtype=dtype)
-        else:
-            tex = self.ctx.texture(size, components, data, dtype=dtype)
-        _nearest(tex)
-        self._tex[name] = tex
-        self.stats["bytes_uploaded"] += data.nbytes
-        return tex
+        capacity = min(self.max_buffer_texels, texels + texels // 64 + 64)
+        store = BufferTexture(self.ctx, capacity, components, dtype)
+        self._tex[name] = store
+        return store
 
-    def _cylinder_block(self, a, b, rows):
+    def _upload(self, name, data, components, dtype, slack=0):
+        """`data` (texels x components) into buffer `name`, followed by `slack` zero texels."""
+        data = np.ascontiguousarray(data, np.float32 if dtype == "f4" else np.int32)
+        texels = len(data)
+        store = self._store(name, texels + slack, components, dtype)
+        store.write(data)
+        if slack:
+            store.write(np.zeros(slack * components, data.dtype), first=texels)
+        self.stats["bytes_uploaded"] += data.nbytes
+        return store
+
+    def _cylinder_texels(self, a, b):
         """Cylinders a..b as RGBA float32 texels, TEXELS_PER_CYL per cylinder one after the
-        other, zero-padded to `rows` texture rows."""
+        other."""
         c = self.cylinders
-        out = np.zeros((rows * self._cyl_per_row, TEXELS_PER_CYL, 4), np.float32)
         m = b - a
-        out[:m, 0, :3], out[:m, 0, 3] = c.top[a:b], c.radius[a:b]
-        out[:m, 1, :3], out[:m, 1, 3] = c.tip[a:b], c.alpha[a:b]
-        out[:m, 2, :3], out[:m, 2, 3] = c.n2[a:b], c.flags[a:b]
-        out[:m, 3, :3] = c.color[a:b]
+        out = np.zeros((m, TEXELS_PER_CYL, 4), np.float32)
+        out[:, 0, :3], out[:, 0, 3] = c.top[a:b], c.radius[a:b]
+        out[:, 1, :3], out[:, 1, 3] = c.tip[a:b], c.alpha[a:b]
+        out[:, 2, :3], out[:, 2, 3] = c.n2[a:b], c.flags[a:b]
+        out[:, 3, :3] = c.color[a:b]
         return out.reshape(-1, 4)
 
     def _upload_cylinders(self, a, b, full=False):
-        n = len(self.cylinders)
-        self.stats["uploads"] += 1
         if full:
-            shift, rows = texture_layout("tex_cyl", n * TEXELS_PER_CYL, self.max_texture_size, self.base_width)
-            self._shift["tex_cyl"] = shift
-            self._texture("tex_cyl", (1 << shift, rows), 4, "f4", self._cylinder_block(0, n, rows))
+            self._upload("tex_cyl", self._cylinder_texels(0, len(self.cylinders)), 4, "f4")
         else:
-            per = self._cyl_per_row
-            r0, r1 = a // per, max(1, -(-b // per))
-            data = self._cylinder_block(r0 * per, min(n, r1 * per), r1 - r0)
-            self._tex["tex_cyl"].write(data, viewport=(0, r0, 1 << self._shift["tex_cyl"], r1 - r0))
+            data = self._cylinder_texels(a, b)
+            self._tex["tex_cyl"].write(data, first=a * TEXELS_PER_CYL)
             self.stats["bytes_uploaded"] += data.nbytes
-
-    @property
-    def _cyl_per_row(self):
-        return (1 << self._shift["tex_cyl"]) // TEXELS_PER_CYL
 
     def _build_and_upload_grid(self):
         t0 = time.perf_counter()
@@ -388,12 +358,7 @@ class Renderer:
         if self.grid is None:      # the numpy build, or a scene the GPU passes cannot list
             self.grid = build_grid(self.cylinders, pad_factor=self._grid_pad)
             t1 = time.perf_counter()
-            g = self.grid
-            shift, rows = texture_layout("tex_idx", len(g.indices), self.max_texture_size, self.base_width)
-            self._shift["tex_idx"] = shift
-            idx = np.zeros(rows << shift, np.int32)
-            idx[:len(g.indices)] = g.indices
-            self._texture("tex_idx", (1 << shift, rows), 1, "i4", idx)
+            self._upload("tex_idx", self.grid.indices, 1, "i4", slack=IDX_SLACK)
             upload_s = time.perf_counter() - t1
         g = self.grid
         t2 = time.perf_counter()
@@ -405,7 +370,7 @@ class Renderer:
         in_full_block = occupied[np.arange(nz)[:, None, None] // BLOCK, np.arange(ny)[None, :, None] // BLOCK,
                                  np.arange(nx)[None, None, :] // BLOCK].ravel()
         cells[~in_full_block, 0] = -1
-        self._texture("tex_cell", tuple(int(x) for x in g.dims), 2, "i4", cells)
+        self._upload("tex_cell", cells, 2, "i4")
         t3 = time.perf_counter()
         self.stats["grid_s"] = (t3 - t0) - upload_s - (t3 - t2)
         self.stats["_grid_upload_s"] = upload_s + (t3 - t2)
@@ -437,28 +402,30 @@ class Renderer:
         size = np.abs(b - a) + 2 * pad * plan.radius[top][:, None]
         lo, cs, dims = grid_frame(lo, hi, size, count=len(plan))
         builder = gpu_builder()
-        n, tex_cyl, cyl_shift = self.num_cylinders, self._tex["tex_cyl"], self._shift["tex_cyl"] - 2
-        counted = builder.count(n, tex_cyl, cyl_shift, lo, cs, dims, pad)
+        n, tex_cyl = self.num_cylinders, self._tex["tex_cyl"]
+        counted = builder.count(n, tex_cyl, lo, cs, dims, pad)
         if counted is None:
             return None
         counts, cells = counted
         start = np.cumsum(counts) - counts
         total = int(start[-1] + counts[-1])
-        shift, rows = texture_layout("tex_idx", total, self.max_texture_size, self.base_width)
-        self._shift["tex_idx"] = shift
-        # Rows rounded up, so a rebuild with a few more references reuses the texture.
-        tex_idx = self._gpu_texture("tex_idx", (1 << shift, min(self.max_texture_size, -(-rows // 64) * 64)), 1, "i4")
-        builder.fill(n, tex_cyl, cyl_shift, lo, cs, dims, pad, cells, start, tex_idx, shift)
-        # Counted as uploads: the zeroed counters and the cursors the two passes start from.
-        self.stats["bytes_uploaded"] += 2 * counts.size * 4
+        try:
+            tex_idx = self._store("tex_idx", total + IDX_SLACK, 1, "i4")
+        except InputError:
+            cells.release()
+            raise
+        builder.fill(n, tex_cyl, lo, cs, dims, pad, cells, start, tex_idx)
+        tex_idx.write(np.zeros(IDX_SLACK, np.int32), first=total)
+        # Counted as uploads: the zeroed counters, the cursors the two passes start from and
+        # the slack after the lists.
+        self.stats["bytes_uploaded"] += 2 * counts.size * 4 + IDX_SLACK * 4
         return Grid(lo, cs, dims, start.astype(np.int32), counts.astype(np.int32), None)
 
     def grid_indices(self):
         """The grid's cell lists as int32 (read back from the GPU when built there)."""
         if self.grid.indices is not None:
             return self.grid.indices
-        raw = self._tex["tex_idx"].read()
-        return np.frombuffer(raw, np.int32)[:self._grid_refs].copy()
+        return np.frombuffer(self._tex["tex_idx"].read(self._grid_refs), np.int32).copy()
 
     # --- rendering ----------------------------------------------------------------------
     def _program(self, settings, camera, layers):
@@ -480,6 +447,7 @@ class Renderer:
             }
             head = "#version 330 core\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items())
             prog = self.ctx.program(vertex_shader=_VERTEX, fragment_shader=head + load_shader("trace.glsl"))
+            set_samplers(prog, **{name: unit for unit, name in enumerate(self._TRACE_BUFFERS)})
             vao = self.ctx.vertex_array(prog, [])
             prog = (prog, vao)
             self._programs[key] = prog
@@ -582,17 +550,13 @@ class Renderer:
                               cells_visited=int(counts[2]), cylinder_tests=int(counts[3]))
         return img
 
+    _TRACE_BUFFERS = ("tex_cyl", "tex_idx", "tex_cell")     # on texture units 0, 1, 2
+
     def _set_uniforms(self, prog, camera, settings):
         g = self.grid
-        for i, (name, inv) in enumerate((("tex_cyl", "cyl_inv"), ("tex_idx", "idx_inv"), ("tex_cell", "cell_inv"))):
-            tex = self._tex[name]
-            tex.use(location=i)
-            # The shader reads texels at their centres with textureLod (cheaper than
-            # texelFetch on llvmpipe), which needs the reciprocal sizes.
-            set_uniforms(prog, **{name: i, inv: tuple(1.0 / float(x) for x in tex.size)})
-        set_uniforms(prog, cyl_shift=self._shift["tex_cyl"] - 2,      # log2 cylinders per row
-                     idx_shift=self._shift["tex_idx"],
-                     grid_lo=tuple(float(x) for x in g.lo),
+        for unit, name in enumerate(self._TRACE_BUFFERS):
+            self._tex[name].use(unit)
+        set_uniforms(prog, grid_lo=tuple(float(x) for x in g.lo),
                      cell_size=tuple(float(x) for x in g.cell_size),
                      dims=tuple(int(x) for x in g.dims),
                      cam_pos=tuple(float(x) for x in camera.position),
@@ -619,20 +583,15 @@ def block_occupancy(grid):
     return full.reshape(bz, BLOCK, by, BLOCK, bx, BLOCK).any(axis=(1, 3, 5)).astype(np.uint8)
 
 
-def _nearest(tex):
-    import moderngl
-    tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-
-
 def _ranks(lengths):
     """0, 1, .., n-1 for every n in `lengths`, concatenated."""
     lengths = np.asarray(lengths, np.int64)
     return np.arange(int(lengths.sum())) - np.repeat(np.cumsum(lengths) - lengths, lengths)
 
 
-def _row_runs(rows):
-    """[first, end) pairs of the runs of consecutive texture rows among `rows` (any order)."""
-    rows = np.unique(rows)
+def _runs(chunks):
+    """[first, end) pairs of the runs of consecutive chunk numbers among `chunks` (any order)."""
+    rows = np.unique(chunks)
     breaks = np.flatnonzero(np.diff(rows) > 1)
     return [(int(rows[a]), int(rows[b]) + 1)
             for a, b in zip(np.concatenate([[0], breaks + 1]), np.concatenate([breaks, [len(rows) - 1]]))]

@@ -1,34 +1,13 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""The render loop's shortcuts change no pixel: texels read at their centres (textureLod)
-are the texels themselves in any texture layout, the sorted hit list kept by
+"""The render loop's shortcuts change no pixel: the sorted hit list kept by
 compare-and-swap keeps the nearest layers, and a shadow ray that tries the previous
 layer's occluder first darkens exactly where the full walk would."""
 import numpy as np
 
-from tracer import Camera, Light, Renderer, RenderSettings
+from tracer import Camera, Light, RenderSettings
 
 from test_tracer_vs_reference import assert_matches_reference
-from tracer_scenes import curls, make_strands
-
-
-def test_texel_reads_are_exact_in_any_texture_layout():
-    # Narrow rows give textures whose heights are not powers of two, where a texel centre
-    # rounded to the wrong side would read a neighbouring cylinder or list entry.
-    s = curls(30, 12, seed=3, alpha=0.6)
-    cam = Camera.frame_bounds(*s.bounds(), (40, 40))
-    settings = RenderSettings(layers=4, shadows=True, count=True)
-    wide = Renderer()
-    wide.set_strands(s)
-    a = wide.render(cam, settings)
-    counts = {k: wide.stats[k] for k in ("cells_visited", "cylinder_tests", "shadow_rays", "layers_traced")}
-    narrow = Renderer(max_texture_size=64, base_width=4)
-    narrow.set_strands(s)
-    cyl_rows, idx_rows = (narrow._tex[name].size[1] for name in ("tex_cyl", "tex_idx"))
-    assert cyl_rows & (cyl_rows - 1) and idx_rows > 1, (cyl_rows, idx_rows)   # not a power of two
-    b = narrow.render(cam, settings)
-    assert a[..., 3].max() > 0
-    np.testing.assert_array_equal(a, b)
-    assert {k: narrow.stats[k] for k in counts} == counts
+from tracer_scenes import make_strands
 
 
 def _sheets():

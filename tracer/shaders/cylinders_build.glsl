@@ -12,29 +12,25 @@ layout(local_size_x = 64) in;
 uniform int n_items;        // cylinders to make in this dispatch
 uniform int first_item;     // index of the first of them
 uniform int n_cyl;          // cylinders in the scene
-uniform int pts_shift;      // log2 points per row of the point textures
-uniform int cp_shift;       // log2 texels per row of tex_cp
-uniform int cyl_shift;      // log2 cylinders per row of the cylinder image
 uniform float cos_sharp;    // cos(SHARP_BEND_DEG)
 uniform float repeat2;      // squared distance below which a point repeats its predecessor
                             // (0: the host dropped repeats already)
 
-// Per point, the arrays of SPEC §0 as they are (no packing on the host).
-uniform sampler2D tex_pos;      // xyz
-uniform sampler2D tex_rad;      // radius
-uniform sampler2D tex_col;      // rgb
-uniform sampler2D tex_alpha;    // alpha
-uniform isampler2D tex_cp;      // per cylinder: index of its top point
-layout(rgba32f, binding = 0) uniform writeonly image2D cyl_img;
+// Per point, the arrays of SPEC §0 as they are (no packing on the host), in buffer textures.
+layout(binding = 0) uniform samplerBuffer tex_pos;      // xyz
+layout(binding = 1) uniform samplerBuffer tex_rad;      // radius
+layout(binding = 2) uniform samplerBuffer tex_col;      // rgb
+layout(binding = 3) uniform samplerBuffer tex_alpha;    // alpha
+layout(binding = 4) uniform isamplerBuffer tex_cp;      // per cylinder: index of its top point
+layout(rgba32f, binding = 0) uniform writeonly imageBuffer cyl_img;   // 4 texels per cylinder
 // Segments no longer than the repeat distance (the host passes twice the numpy build's, so
-// float32 rounding cannot hide one): texel 0 counts them, texels 1.. list the first
+// float32 rounding cannot hide one): repeats[0] counts them, repeats[1..] list the first
 // MAX_REPEATS of their top points. The host checks each by the numpy rule, drops the repeated
 // points (tracer/cylinders.py) and makes the cylinders again: one rule for both builds.
-layout(r32i, binding = 1) uniform iimage2D repeat_img;
+layout(std430, binding = 1) buffer Repeats { int repeats[]; };
 
-ivec2 pt(int p) { return ivec2(p & ((1 << pts_shift) - 1), p >> pts_shift); }
-vec3 pos(int p) { return texelFetch(tex_pos, pt(p), 0).xyz; }
-int top_point(int k) { return texelFetch(tex_cp, ivec2(k & ((1 << cp_shift) - 1), k >> cp_shift), 0).x; }
+vec3 pos(int p) { return texelFetch(tex_pos, p).xyz; }
+int top_point(int k) { return texelFetch(tex_cp, k).x; }
 // As numpy: the axis divided by its float32 length.
 vec3 unit(vec3 v) { return v / sqrt(v.x * v.x + v.y * v.y + v.z * v.z); }
 
@@ -49,8 +45,8 @@ void main() {
     vec3 A = pos(p), B = pos(p + 1);
     vec3 ax = B - A;
     if (ax.x * ax.x + ax.y * ax.y + ax.z * ax.z <= repeat2) {
-        int i = imageAtomicAdd(repeat_img, ivec2(0, 0), 1);
-        if (i < MAX_REPEATS) imageStore(repeat_img, ivec2(i + 1, 0), ivec4(p));
+        int i = atomicAdd(repeats[0], 1);
+        if (i < MAX_REPEATS) repeats[i + 1] = p;
     }
     vec3 u1 = unit(ax);
     vec3 u2 = u1;
@@ -66,9 +62,8 @@ void main() {
         cap1 = u0.x * u1.x + u0.y * u1.y + u0.z * u1.z < cos_sharp;
     }
     int flags = (cap1 ? 1 : 0) | (!has_next || sharp ? 2 : 0);
-    int row = k >> cyl_shift, col = (k & ((1 << cyl_shift) - 1)) << 2;
-    imageStore(cyl_img, ivec2(col, row), vec4(A, texelFetch(tex_rad, pt(p), 0).x));
-    imageStore(cyl_img, ivec2(col + 1, row), vec4(B, texelFetch(tex_alpha, pt(p), 0).x));
-    imageStore(cyl_img, ivec2(col + 2, row), vec4(u2, float(flags)));
-    imageStore(cyl_img, ivec2(col + 3, row), vec4(texelFetch(tex_col, pt(p), 0).rgb, 0.0));
+    imageStore(cyl_img, 4 * k, vec4(A, texelFetch(tex_rad, p).x));
+    imageStore(cyl_img, 4 * k + 1, vec4(B, texelFetch(tex_alpha, p).x));
+    imageStore(cyl_img, 4 * k + 2, vec4(u2, float(flags)));
+    imageStore(cyl_img, 4 * k + 3, vec4(texelFetch(tex_col, p).rgb, 0.0));
 }

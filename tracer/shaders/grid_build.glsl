@@ -6,34 +6,31 @@
 //   PASS 1  fill:  slot = cells[cell]++ (cells holds each cell's first slot on entry),
 //                  idx_img[slot] = cylinder id
 // The counters are a storage buffer, not an image: llvmpipe's buffer atomics take ~60 % of
-// the time of its image atomics (measured on 43 M references). The lists themselves go
-// straight into the index texture: writing them to a buffer and copying measured the same.
+// the time of its image atomics (measured on 43 M references). The lists go straight into
+// the index buffer texture the trace shader reads.
 // The order of a cell's list depends on the order the atomics of PASS 1 ran in; the trace
 // shader breaks ties between equal distances by id, so images do not depend on it.
 // A cylinder whose listing would take more than MAX_VISITS loop steps is not listed at all
-// but counted in overflow_img: llvmpipe silently cuts any invocation off after 65,535 loop
+// but counted in `overflow`: llvmpipe silently cuts any invocation off after 65,535 loop
 // steps, so the host builds such a grid in numpy instead of trusting a truncated one.
 layout(local_size_x = 64) in;
 
 uniform int n_items;          // cylinders
-uniform int cyl_shift;        // log2 cylinders per row of tex_cyl
-uniform int idx_shift;        // log2 texels per row of the index image
 uniform vec3 grid_lo;
 uniform vec3 inv_cell;        // 1 / cell size per axis
 uniform ivec3 dims;
 uniform float pad_factor;
 
-uniform sampler2D tex_cyl;
+layout(binding = 0) uniform samplerBuffer tex_cyl;   // 4 texels per cylinder
 layout(std430, binding = 0) buffer Cells { int cells[]; };
 #if PASS == 0
-layout(r32i, binding = 2) uniform iimage3D overflow_img;
+layout(std430, binding = 1) buffer Overflow { int overflow; };
 #endif
 #if PASS == 1
-layout(r32i, binding = 1) uniform writeonly iimage2D idx_img;
+layout(r32i, binding = 1) uniform writeonly iimageBuffer idx_img;
 #endif
 
-ivec2 slot_texel(int i) { return ivec2(i & ((1 << idx_shift) - 1), i >> idx_shift); }
-vec4 cyl(int id, int j) { return texelFetch(tex_cyl, ivec2(((id & ((1 << cyl_shift) - 1)) << 2) | j, id >> cyl_shift), 0); }
+vec4 cyl(int id, int j) { return texelFetch(tex_cyl, 4 * id + j); }
 
 int item_index() {
     return int(gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * 64 + int(gl_LocalInvocationID.x);
@@ -44,7 +41,7 @@ void visit(int cell, int id) {
     atomicAdd(cells[cell], 1);
 #else
     int slot = atomicAdd(cells[cell], 1);
-    imageStore(idx_img, slot_texel(slot), ivec4(id));
+    imageStore(idx_img, slot, ivec4(id));
 #endif
 }
 
@@ -99,7 +96,7 @@ void main() {
     vec2 bound = min(abs(DG.yz) + 2.0 * P.yz + 2.0, vec2(D.yz));
     if (float(i1 - i0 + 1) * bound.x * bound.y > float(MAX_VISITS)) {
 #if PASS == 0
-        imageAtomicAdd(overflow_img, ivec3(0), 1);
+        atomicAdd(overflow, 1);
 #endif
         return;
     }

@@ -15,10 +15,11 @@
 // Per cylinder, 4 consecutive texels (one 64-byte cache line on a CPU driver):
 //   TOP: xyz top, w radius   TIP: xyz tip, w alpha   N2: xyz unit normal of plane 2, w cap
 //   flags   COL: rgb colour
-uniform sampler2D tex_cyl;
-uniform isampler2D tex_idx;   // cell lists (CSR), cylinder ids
-uniform isampler3D tex_cell;  // per cell: x = first slot (-1: the whole BLOCK^3 block of
-                              // this cell is empty), y = count
+// Buffer textures (tracer/gl_buffers.py): texel i of each is found by its index alone.
+uniform samplerBuffer tex_cyl;    // TEXELS_PER_CYL texels per cylinder
+uniform isamplerBuffer tex_idx;   // cell lists (CSR), cylinder ids
+uniform isamplerBuffer tex_cell;  // per cell (id x + nx*(y + ny*z)): x = first slot (-1: the
+                                  // whole BLOCK^3 block of this cell is empty), y = count
 
 uniform vec3 grid_lo;
 uniform vec3 cell_size;
@@ -46,22 +47,11 @@ vec4 counter = vec4(0.0);
 const float BIG = 1e30;
 const int NO_ID = 0x7fffffff;
 
-// Row widths are powers of two chosen by the host to fit the driver's texture size
-// (renderer.texture_layout): 2^idx_shift texels of tex_idx, 2^cyl_shift cylinders of tex_cyl.
-uniform int idx_shift;
-uniform int cyl_shift;
 const int TOP = 0, TIP = 1, N2 = 2, COL = 3;
-// Every read goes through textureLod at the texel's centre, which on NEAREST textures
-// returns the texel itself: llvmpipe's texelFetch looks the level's size and row pitch up
-// lane by lane (scalar loads for each of the 8 lanes) and measured 4-11 % slower on the
-// 10k-strand scenes. Centres are exact in float32 for any size the driver allows.
-uniform vec2 cyl_inv;     // 1 / size of tex_cyl, tex_idx and tex_cell, in texels
-uniform vec2 idx_inv;
-uniform vec3 cell_inv;
 // Texel `j` of cylinder `id`.
-vec4 cyl(int id, int j) { return textureLod(tex_cyl, (vec2(((id & ((1 << cyl_shift) - 1)) << 2) | j, id >> cyl_shift) + 0.5) * cyl_inv, 0.0); }
-int list_entry(int i) { return textureLod(tex_idx, (vec2(i & ((1 << idx_shift) - 1), i >> idx_shift) + 0.5) * idx_inv, 0.0).x; }
-ivec2 cell_entry(ivec3 c) { return textureLod(tex_cell, (vec3(c) + 0.5) * cell_inv, 0.0).xy; }
+vec4 cyl(int id, int j) { return texelFetch(tex_cyl, (id << 2) | j); }
+int list_entry(int i) { return texelFetch(tex_idx, i).x; }
+ivec2 cell_entry(ivec3 c) { return texelFetch(tex_cell, c.x + dims.x * (c.y + dims.y * c.z)).xy; }
 
 // Fixed per-sample hash (lowbias32); the reference tracer computes the same integers.
 uint hash32(uint x) {
@@ -195,11 +185,14 @@ void begin_walk(vec3 o, vec3 d, vec3 inv, float t0, out ivec3 cell, out ivec3 st
 }
 
 // A cell's entry, its first two list entries and the first candidate's texels, read before
-// they are needed (see trace: the walks read one cell and one candidate ahead).
+// they are needed (see trace: the walks read one cell and one candidate ahead). The reads
+// ahead stay inside tex_idx: an empty block's cell (start -1) reads from 0, and the host
+// gives the lists two texels of zeros past their end.
 void read_cell(ivec3 c, out ivec2 sc, out int id, out int id2, out vec4 A, out vec4 B) {
     sc = cell_entry(clamp(c, ivec3(0), dims - 1));
-    id = list_entry(sc.x);
-    id2 = list_entry(sc.x + 1);
+    int first = max(sc.x, 0);
+    id = list_entry(first);
+    id2 = list_entry(first + 1);
     A = cyl(id, TOP);
     B = cyl(id, TIP);
 }
