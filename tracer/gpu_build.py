@@ -87,7 +87,7 @@ class GpuBuilder:
                      pad_factor=float(pad_factor))
 
     def count(self, n, tex_cyl, lo, cs, dims, pad_factor):
-        """(references per cell, flat int64 in cell-id order; the storage buffer holding
+        """(references per cell, flat int32 in cell-id order; the storage buffer holding
         them, for fill), or None when some cylinder spans too many cells for one invocation
         (the caller then builds in numpy)."""
         ctx = self.ctx
@@ -107,7 +107,7 @@ class GpuBuilder:
         if over:
             cells.release()
             return None
-        return np.frombuffer(cells.read(), np.int32).astype(np.int64), cells
+        return np.frombuffer(cells.read(), np.int32).copy(), cells
 
     def fill(self, n, tex_cyl, lo, cs, dims, pad_factor, cells, start, tex_idx):
         """Writes every cell's list into `tex_idx` (an int32 BufferTexture) from the cell's

@@ -42,9 +42,8 @@ class Grid:
 
     def occupancy(self):
         """Mean cylinders per non-empty cell and the fraction of cells that are non-empty."""
-        full = self.cell_count > 0
-        n_full = int(full.sum())
-        return (float(self.cell_count[full].mean()) if n_full else 0.0,
+        n_full = int(np.count_nonzero(self.cell_count))
+        return (float(self.cell_count.sum(dtype=np.int64)) / n_full if n_full else 0.0,
                 n_full / max(1, self.num_cells))
 
 
