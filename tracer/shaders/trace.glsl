@@ -160,41 +160,74 @@ bool skip_empty_block(inout ivec3 cell, inout vec3 tnext, inout float tcur, vec3
     return all(greaterThanEqual(cell, ivec3(0))) && all(lessThan(cell, dims));
 }
 
-// Where the walk goes after `cell` (after its empty block when `empty`): the next cell, its
-// tnext and its entry distance. False when the ray ends or leaves the grid there.
-bool next_cell(bool empty, bool last, ivec3 cell, vec3 tnext, float texit, vec3 tdelta, ivec3 stp,
-               float t1, out ivec3 ncell, out vec3 ntnext, out float ntcur) {
-    ncell = cell;
-    ntnext = tnext;
-    ntcur = texit;
-    if (empty) return skip_empty_block(ncell, ntnext, ntcur, tdelta, stp, t1);
-    if (tnext.x <= tnext.y && tnext.x <= tnext.z) { ncell.x += stp.x; ntnext.x += tdelta.x; }
-    else if (tnext.y <= tnext.z) { ncell.y += stp.y; ntnext.y += tdelta.y; }
-    else { ncell.z += stp.z; ntnext.z += tdelta.z; }
-    return !last && all(greaterThanEqual(ncell, ivec3(0))) && all(lessThan(ncell, dims));
+// A grid walk (primary and shadow rays alike): the current cell, where the ray leaves it
+// along each axis (tnext), where it entered it (tcur), and what is read ahead: the cell's
+// entry, its next candidate's id and TOP/TIP texels, and the list entry after that one.
+struct Walk {
+    ivec3 cell;
+    vec3 tnext;
+    float tcur;
+    ivec2 sc;       // the cell's first slot (-1: empty block) and count
+    int id, id2;
+    vec4 A, B;
+};
+
+// The cell's entry, its first two list entries and the first candidate's texels, read before
+// they are needed (the walks read one cell and one candidate ahead, so that their cache
+// misses overlap the tests of the cell before). The reads ahead stay inside tex_idx: an
+// empty block's cell (start -1) reads from 0, and the host gives the lists two texels of
+// zeros past their end.
+void read_cell(inout Walk w) {
+    w.sc = cell_entry(clamp(w.cell, ivec3(0), dims - 1));
+    int first = max(w.sc.x, 0);
+    w.id = list_entry(first);
+    w.id2 = list_entry(first + 1);
+    w.A = cyl(w.id, TOP);
+    w.B = cyl(w.id, TIP);
 }
 
-// The DDA state where a walk from o along d enters the grid at t0.
-void begin_walk(vec3 o, vec3 d, vec3 inv, float t0, out ivec3 cell, out ivec3 stp, out vec3 tdelta,
-                out vec3 tnext) {
+// The walk from o along d where it enters the grid at t0; stp and tdelta stay fixed.
+Walk begin_walk(vec3 o, vec3 d, vec3 inv, float t0, out ivec3 stp, out vec3 tdelta) {
+    Walk w;
     vec3 pe = (o + t0 * d - grid_lo) / cell_size;
-    cell = clamp(ivec3(floor(pe)), ivec3(0), dims - 1);
+    w.cell = clamp(ivec3(floor(pe)), ivec3(0), dims - 1);
     stp = ivec3(sign(d));
     tdelta = abs(cell_size * inv);
-    tnext = (grid_lo + (vec3(cell) + step(0.0, d)) * cell_size - o) * inv;
+    w.tnext = (grid_lo + (vec3(w.cell) + step(0.0, d)) * cell_size - o) * inv;
+    w.tcur = t0;
+    read_cell(w);
+    return w;
 }
 
-// A cell's entry, its first two list entries and the first candidate's texels, read before
-// they are needed (see trace: the walks read one cell and one candidate ahead). The reads
-// ahead stay inside tex_idx: an empty block's cell (start -1) reads from 0, and the host
-// gives the lists two texels of zeros past their end.
-void read_cell(ivec3 c, out ivec2 sc, out int id, out int id2, out vec4 A, out vec4 B) {
-    sc = cell_entry(clamp(c, ivec3(0), dims - 1));
-    int first = max(sc.x, 0);
-    id = list_entry(first);
-    id2 = list_entry(first + 1);
-    A = cyl(id, TOP);
-    B = cyl(id, TIP);
+// Where the walk goes after w's cell (after its empty block when `empty`), with that cell
+// read ahead, in `next`. False when the ray ends or leaves the grid there.
+bool next_cell(Walk w, bool empty, bool last, float texit, vec3 tdelta, ivec3 stp, float t1,
+               out Walk next) {
+    next = w;
+    next.tcur = texit;
+    bool inside;
+    if (empty) {
+        inside = skip_empty_block(next.cell, next.tnext, next.tcur, tdelta, stp, t1);
+    } else {
+        if (w.tnext.x <= w.tnext.y && w.tnext.x <= w.tnext.z) { next.cell.x += stp.x; next.tnext.x += tdelta.x; }
+        else if (w.tnext.y <= w.tnext.z) { next.cell.y += stp.y; next.tnext.y += tdelta.y; }
+        else { next.cell.z += stp.z; next.tnext.z += tdelta.z; }
+        inside = !last && all(greaterThanEqual(next.cell, ivec3(0))) && all(lessThan(next.cell, dims));
+    }
+    read_cell(next);
+    return inside;
+}
+
+// Candidate k of w's cell (read a pass ahead): its id and texels; reads the one after it.
+int take_candidate(inout Walk w, int k, out vec4 A, out vec4 B) {
+    int id = w.id;
+    A = w.A;
+    B = w.B;
+    w.id = w.id2;
+    w.A = cyl(w.id, TOP);
+    w.B = cyl(w.id, TIP);
+    w.id2 = list_entry(w.sc.x + k + 2);
+    return id;
 }
 
 // Slab test against the grid box; false when the ray misses it within [tmin, tmax].
@@ -238,47 +271,38 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint
     vec3 inv = safe_inverse(d);
     float t0 = 0.0, t1 = tmax;
     if (!enter_grid(p, inv, t0, t1)) return 1.0;
-    ivec3 cell, stp; vec3 tdelta, tnext;
-    begin_walk(p, d, inv, t0, cell, stp, tdelta, tnext);
-    float tcur = t0;
+    ivec3 stp; vec3 tdelta;
+    Walk w = begin_walk(p, d, inv, t0, stp, tdelta);
     float trans = 1.0;
     int guard = dims.x + dims.y + dims.z + 3;
-    ivec2 sc; int idn, idnn; vec4 An, Bn;
-    read_cell(cell, sc, idn, idnn, An, Bn);
-    // The walk of trace: the next cell's entry and the next candidate read one step ahead.
+    // The walk of trace: the next cell and the next candidate read one step ahead.
     for (int it = 0; it < guard; ++it) {
-        bool empty = sc.x < 0;
-        float texit = min(min(tnext.x, tnext.y), min(tnext.z, t1));
+        bool empty = w.sc.x < 0;
+        float texit = min(min(w.tnext.x, w.tnext.y), min(w.tnext.z, t1));
         bool last = texit >= t1;
-        ivec3 ncell; vec3 ntnext; float ntcur;
-        bool inside = next_cell(empty, last, cell, tnext, texit, tdelta, stp, t1, ncell, ntnext, ntcur);
-        ivec2 nsc; int nid, nidn; vec4 nA, nB;
-        read_cell(ncell, nsc, nid, nidn, nA, nB);
-        int count = empty ? 0 : sc.y;
+        Walk next;
+        bool inside = next_cell(w, empty, last, texit, tdelta, stp, t1, next);
+        int count = empty ? 0 : w.sc.y;
 #if COUNT
         if (!empty) { counter.z += 1.0; counter.w += float(count); }
 #endif
         for (int k = 0; k < count; ++k) {
-            int id = idn;
-            vec4 A4 = An, B4 = Bn;
-            idn = idnn;
-            An = cyl(idn, TOP); Bn = cyl(idn, TIP);
-            idnn = list_entry(sc.x + k + 2);
+            vec4 A4, B4;
+            int id = take_candidate(w, k, A4, B4);
             if (id == own) continue;
             int surf; float asc, alpha;
             float t = hit_cylinder_ab(id, A4, B4, p, d, 0.0, 0.0, surf, asc, alpha);
 #if SHADOWS == 1
             if (t > tmin && t < tmax) { hint = id; return 0.0; }
 #else
-            if (t > tmin && t >= tcur && (t < texit || last) && t < tmax) {
+            if (t > tmin && t >= w.tcur && (t < texit || last) && t < tmax) {
                 trans *= 1.0 - alpha;
                 if (trans < t_eps) return 0.0;
             }
 #endif
         }
         if (!inside) break;
-        cell = ncell; tnext = ntnext; tcur = ntcur; sc = nsc;
-        idn = nid; An = nA; Bn = nB; idnn = nidn;
+        w = next;
     }
     return trans;
 }
@@ -361,15 +385,12 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
     float ht[LAYERS]; float ha[LAYERS]; int hid[LAYERS]; int hs[LAYERS];
     for (int i = 0; i < LAYERS; ++i) { ht[i] = BIG; ha[i] = 0.0; hid[i] = NO_ID; hs[i] = 0; }
     if (enter_grid(o, inv, t0, t1)) {
-        ivec3 cell, stp; vec3 tdelta, tnext;
-        begin_walk(o, d, inv, t0, cell, stp, tdelta, tnext);
-        float tcur = t0;
+        ivec3 stp; vec3 tdelta;
+        Walk w = begin_walk(o, d, inv, t0, stp, tdelta);
         int guard = dims.x + dims.y + dims.z + 3;
-        ivec2 sc; int idn, idnn; vec4 An, Bn;
-        read_cell(cell, sc, idn, idnn, An, Bn);
         for (int it = 0; it < guard; ++it) {
-            bool empty = sc.x < 0;
-            float texit = min(min(tnext.x, tnext.y), min(tnext.z, t1));
+            bool empty = w.sc.x < 0;
+            float texit = min(min(w.tnext.x, w.tnext.y), min(w.tnext.z, t1));
             bool last = texit >= t1;
             // Where the ray goes after this cell (or after its empty block), that cell's
             // entry and its first candidate, read before this cell's tests so that their
@@ -377,27 +398,22 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
             // a cell the next candidate's texels and the list entry after it are read a
             // pass ahead for the same reason (together 15-20 % less time; reading two
             // candidates ahead lost 2-5 % to the extra reads at each cell's end).
-            ivec3 ncell; vec3 ntnext; float ntcur;
-            bool inside = next_cell(empty, last, cell, tnext, texit, tdelta, stp, t1, ncell, ntnext, ntcur);
-            ivec2 nsc; int nid, nidn; vec4 nA, nB;
-            read_cell(ncell, nsc, nid, nidn, nA, nB);
-            int count = empty ? 0 : sc.y;
+            Walk next;
+            bool inside = next_cell(w, empty, last, texit, tdelta, stp, t1, next);
+            int count = empty ? 0 : w.sc.y;
 #if COUNT
             counter.z += 1.0; counter.w += float(count);
 #endif
             for (int k = 0; k < count; ++k) {
-                int id = idn;
-                vec4 A4 = An, B4 = Bn;
-                idn = idnn;
-                An = cyl(idn, TOP); Bn = cyl(idn, TIP);
-                idnn = list_entry(sc.x + k + 2);
+                vec4 A4, B4;
+                int id = take_candidate(w, k, A4, B4);
                 int surf; float asc, alpha;
                 float t = hit_cylinder_ab(id, A4, B4, o, d, widen_per_t, widen_const, surf, asc, alpha);
                 // A hit outside this cell's [tcur, texit) belongs to another cell the
                 // cylinder is also listed in (half-open, so a hit on a face counts once).
                 // Equal distances are ordered by id, so the result does not depend on the
                 // order of the cell's list (the GPU grid build fills lists with atomics).
-                bool ok = t > 0.0 && t >= tcur && (t < texit || last);
+                bool ok = t > 0.0 && t >= w.tcur && (t < texit || last);
                 float ct = ok ? t : BIG, ca = alpha * asc;
                 int cid = ok ? id : NO_ID, cs = surf;
                 for (int i = 0; i < LAYERS; ++i) {
@@ -416,8 +432,7 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
 #endif
             }
             if (!inside) break;
-            cell = ncell; tnext = ntnext; tcur = ntcur; sc = nsc;
-            idn = nid; An = nA; Bn = nB; idnn = nidn;
+            w = next;
         }
     }
     int n = 0;
