@@ -84,12 +84,13 @@ def column_bounds(points):
     return lo, hi
 
 
-def repeat_distance(points):
+def repeat_distance(points, bounds=None):
     """Points closer than this to their predecessor repeat it (MERGE_EPS times the scene
-    size, which is at least a thousandth of the farthest coordinate)."""
+    size, which is at least a thousandth of the farthest coordinate). `bounds`: the points'
+    column_bounds when the caller has them already."""
     if len(points) < 2:
         return 0.0
-    lo, hi = column_bounds(points)
+    lo, hi = column_bounds(points) if bounds is None else bounds
     scale = max(float(np.max(hi - lo)), float(np.max(np.abs(np.concatenate([lo, hi])))) * 1e-3, 1e-30)
     return MERGE_EPS * scale
 

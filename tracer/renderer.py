@@ -148,11 +148,13 @@ class Renderer:
             t2 = time.perf_counter()
             # Twice the numpy build's distance: float32 rounding on the GPU cannot hide a
             # repeat, and plan_cylinders checks the candidates by the numpy rule.
-            repeats = self._make_cylinders_gpu(2.0 * repeat_distance(plan.points))
+            bounds = column_bounds(plan.points)     # the grid box needs them too
+            repeats = self._make_cylinders_gpu(2.0 * repeat_distance(plan.points, bounds))
             if repeats is None or len(repeats):
                 # Some points may repeat their predecessor: drop them as the numpy build does.
                 self._plan = plan = plan_cylinders(strands, candidates=repeats)
                 self.num_cylinders = len(plan)
+                bounds = None       # fewer points: the grid takes their bounds again
                 t1b = time.perf_counter()
                 self._upload_points(plan)
                 t2 += time.perf_counter() - t1b
@@ -160,7 +162,7 @@ class Renderer:
             self.stats["uploads"] += 1
             self._set_all_opaque(plan)
             t3 = time.perf_counter()
-            self._build_and_upload_grid()
+            self._build_and_upload_grid(bounds)
             self.stats["cylinders_s"] = (t1 - t0) + (t3 - t2)
             self.stats["upload_s"] = (t2 - t1) + self.stats.pop("_grid_upload_s")
         else:
@@ -349,12 +351,13 @@ class Renderer:
             self._tex["tex_cyl"].write(data, first=a * TEXELS_PER_CYL)
             self.stats["bytes_uploaded"] += data.nbytes
 
-    def _build_and_upload_grid(self):
+    def _build_and_upload_grid(self, bounds=None):
+        """`bounds`: column_bounds of the plan's points when the caller has them already."""
         t0 = time.perf_counter()
         self.grid = None
         upload_s = 0.0      # the GPU build uploads only counters (bytes counted in it)
         if self.build == "gpu" and self.num_cylinders:
-            self.grid = self._build_grid_gpu()
+            self.grid = self._build_grid_gpu(bounds)
         self.stats["grid_build"] = "gpu" if self.grid is not None else "numpy"
         if self.grid is None:      # the numpy build, or a scene the GPU passes cannot list
             self.grid = build_grid(self.cylinders, pad_factor=self._grid_pad)
@@ -383,9 +386,9 @@ class Renderer:
     def _grid_refs(self):
         return int(self.grid.cell_count.sum(dtype=np.int64))
 
-    def _build_grid_gpu(self):
+    def _build_grid_gpu(self, bounds=None):
         """Grid with indices None, or None when a cylinder spans more cells than one
-        invocation may list (the caller builds in numpy)."""
+        invocation may list (the caller builds in numpy). `bounds`: as _build_and_upload_grid."""
         plan = self._plan
         pad = self._grid_pad
         pts = plan.points
@@ -394,7 +397,7 @@ class Renderer:
         # tracer/cylinders.py): the scene box without per-cylinder work.
         rmax = float(plan.radius.max())
         reach = rmax * (pad + np.tan(np.radians(SHARP_BEND_DEG))) * (1 + 1e-6)
-        lo, hi = column_bounds(pts)
+        lo, hi = column_bounds(pts) if bounds is None else bounds
         lo, hi = lo - reach, hi + reach
         # The resolution from a sample of the cylinders' padded boxes, as the numpy build does.
         step = max(1, len(plan) // 20_000 + 1)
