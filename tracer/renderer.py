@@ -119,14 +119,18 @@ class Renderer:
         return self._cylinders
 
     def set_strands(self, strands):
-        """Upload `strands` (hairio.Strands) and build the grid. When that fails (a scene too
-        large for the driver's buffers), the renderer holds no scene afterwards: a render
-        says so instead of tracing half of one."""
+        """Upload `strands` (hairio.Strands) and build the grid. Strands the tracer cannot
+        resolve are refused before anything changes; when the upload itself fails (a scene
+        too large for the driver's buffers), the renderer holds no scene afterwards: a
+        render says so instead of tracing half of one."""
         if not isinstance(strands, Strands):
             raise InputError(f"strands: expected hairio.Strands, got {type(strands).__name__}; "
                              "build one with Strands.from_arrays")
+        t0 = time.perf_counter()
+        # The GPU build checks for repeated points itself while it makes the cylinders.
+        plan = plan_cylinders(strands, drop_repeats=self.build != "gpu")
         try:
-            self._set_strands(strands)
+            self._set_strands(strands, plan, t0)
         except Exception:
             self._forget_scene()
             raise
@@ -134,10 +138,7 @@ class Renderer:
     def _forget_scene(self):
         self.strands = self.grid = self._plan = self._cylinders = self.num_cylinders = None
 
-    def _set_strands(self, strands):
-        t0 = time.perf_counter()
-        # The GPU build checks for repeated points itself while it makes the cylinders.
-        plan = plan_cylinders(strands, drop_repeats=self.build != "gpu")
+    def _set_strands(self, strands, plan, t0):
         self.strands = strands
         self._cylinders = None
         self._plan = plan
@@ -182,7 +183,8 @@ class Renderer:
         counts are unchanged, only their data is re-uploaded (their cylinders with the numpy
         build, their points with the GPU build, which then remakes just their cylinders; in
         chunks of UPLOAD_CHUNK) and the grid is rebuilt; otherwise everything is uploaded
-        again. A failure leaves no scene, as in set_strands."""
+        again. As in set_strands, changed strands the tracer cannot resolve are refused
+        before anything changes, and a failed upload leaves no scene."""
         if self.strands is None or not isinstance(strands, Strands) \
                 or not np.array_equal(strands.counts, self.strands.counts):
             self.set_strands(strands)
@@ -193,26 +195,27 @@ class Renderer:
         if not ids.size:
             self.strands = strands
             return
+        t0 = time.perf_counter()
+        sub = plan_cylinders(_select_strands(strands, ids))
+        if not np.array_equal(sub.counts, self._plan.counts[ids]):
+            self.set_strands(strands)    # a repeated point appeared or vanished
+            return
+        # The same points per strand are left: point and cylinder numbering are unchanged.
         try:
             if self.build == "gpu" and self.num_cylinders:
-                self._update_strands_gpu(ids, strands)
+                self._update_strands_gpu(ids, strands, sub, t0)
             else:
-                self._update_strands_numpy(ids, strands)
+                self._update_strands_numpy(ids, strands, sub, t0)
         except Exception:
             self._forget_scene()
             raise
 
-    def _update_strands_numpy(self, ids, strands):
-        t0 = time.perf_counter()
-        sub = _select_strands(strands, ids)
-        new = strands_to_cylinders(sub)
+    def _update_strands_numpy(self, ids, strands, sub, t0):
+        new = cylinders_from_plan(sub)
         old = self.cylinders
         per_strand_old = np.bincount(old.strand, minlength=strands.num_strands)
         first_old = np.concatenate([[0], np.cumsum(per_strand_old)])
         per_new = np.bincount(new.strand, minlength=len(ids))
-        if not np.array_equal(per_new, per_strand_old[ids]):
-            self.set_strands(strands)    # a zero-length segment appeared or vanished
-            return
         # Positions of the changed cylinders in the full arrays.
         dest = np.repeat(first_old[ids], per_new) + _ranks(per_new)
         for f in ("top", "tip", "n2", "radius", "color", "alpha", "flags", "extension"):
@@ -229,14 +232,8 @@ class Renderer:
         self.stats["cylinders_s"] = t1 - t0
         self.stats["upload_s"] = t2 - t1 + self.stats.pop("_grid_upload_s")
 
-    def _update_strands_gpu(self, ids, strands):
-        t0 = time.perf_counter()
+    def _update_strands_gpu(self, ids, strands, sub, t0):
         old = self._plan
-        sub = plan_cylinders(_select_strands(strands, ids))
-        if not np.array_equal(sub.counts, old.counts[ids]):
-            self.set_strands(strands)    # a repeated point appeared or vanished
-            return
-        # The same points per strand are left: point and cylinder numbering are unchanged.
         first_point = np.concatenate([[0], np.cumsum(old.counts)])
         if len(old.points) == strands.num_points:      # nothing dropped: the arrays as they are
             self._plan = CylinderPlan(strands.points, strands.radius, strands.color, strands.alpha,

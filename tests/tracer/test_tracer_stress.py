@@ -89,6 +89,29 @@ def test_radius_below_float32_spacing_raises_naming_points(renderer, offset):
     assert _finite(renderer.render(Camera.frame_bounds(*near.bounds(), (16, 16)), SETTINGS))[..., 3].max() > 0
 
 
+def test_refused_strands_leave_the_scene_as_it_was(renderer):
+    # Strands the tracer cannot resolve (as above) are refused before anything changes,
+    # whether they come as a whole new scene or as a changed strand of the current one.
+    head = curls(8, 8, radius=1e-6)
+    near = Strands.from_arrays(head.points * 2e-4, head.counts, radius=head.radius, color=head.color)
+    cam = Camera.frame_bounds(*near.bounds(), (16, 16))
+    renderer.set_strands(near)
+    before = renderer.render(cam, SETTINGS)
+    assert before[..., 3].max() > 0
+    far = Strands.from_arrays(near.points + 1e4, near.counts, radius=near.radius, color=near.color)
+    with pytest.raises(InputError, match=r"points:.*float32"):
+        renderer.set_strands(far)
+    np.testing.assert_array_equal(renderer.render(cam, SETTINGS), before)
+    moved = near.points.copy()
+    a, n = near.offsets[3], near.counts[3]
+    moved[a:a + n] += 1e4
+    one_far = Strands.from_arrays(moved, near.counts, radius=near.radius, color=near.color)
+    with pytest.raises(InputError, match=r"points:.*float32"):
+        renderer.update_strands([3], one_far)
+    assert renderer.strands is near
+    np.testing.assert_array_equal(renderer.render(cam, SETTINGS), before)
+
+
 def test_nan_and_inf_input_rejected_naming_the_array():
     with pytest.raises(InputError, match="radius"):
         Strands.from_arrays(np.zeros((2, 3)) + [[0, 0, 0], [0, 0, 1]], [2], radius=[0.1, np.inf])
