@@ -5,10 +5,14 @@ PY     := $(VENV)/bin/python
 OUT    ?= out
 PRESET ?= wavy
 
-.PHONY: setup demo test test-fast extension bench bench-quick clean
+.PHONY: setup setup-blender demo test test-fast extension bench bench-quick clean
 
 setup:
 	@bash scripts/setup.sh
+
+# The Blender test matrix beside .venv (Blender 5.0.1): 4.2 LTS (Python 3.11), 5.3 (Python 3.13).
+setup-blender: setup
+	@bash scripts/setup_blender.sh
 
 # Generate a preset hairstyle on the bundled scalp, render it with the tracer, export it.
 demo: setup
@@ -19,9 +23,15 @@ demo: setup
 	$(PY) -m groom export $(OUT)/$(PRESET).npz --format hair --out $(OUT)/$(PRESET).hair
 	@echo "demo: wrote $(OUT)/$(PRESET).npz, .png, .tfx, .hair"
 
-# The whole suite: groom, hairio, tracer (headless EGL), and the extension under bpy.
-test: setup
+# The whole suite: groom, hairio, tracer (headless EGL) and the extension under Blender 5.0;
+# the tracer again through GLX on a virtual X server (the tests start Xvfb); the extension's
+# tests under Blender 4.2 LTS and 5.3, each installing the real zip with Blender's installer.
+BLENDER_TESTS := tests/blender tests/hairio/test_io_blender_export.py
+test: setup-blender
 	$(PY) -m pytest -q tests
+	KEYSTRAND_GL_BACKEND=glx $(PY) -m pytest -q tests/tracer
+	.venv-bpy42/bin/python -m pytest -q $(BLENDER_TESTS)
+	.venv-bpy53/bin/python -m pytest -q $(BLENDER_TESTS)
 
 extension: setup
 	$(PY) scripts/build_extension.py --out dist

@@ -14,7 +14,7 @@ declare -A LIBS=(
   [libEGL.so.1]=libegl1 [libGL.so.1]=libgl1 [libX11.so.6]=libx11-6 [libXrender.so.1]=libxrender1
   [libXi.so.6]=libxi6 [libxkbcommon.so.0]=libxkbcommon0 [libSM.so.6]=libsm6
   [libXfixes.so.3]=libxfixes3 [libXext.so.6]=libxext6 [libXxf86vm.so.1]=libxxf86vm1
-  [libvulkan.so.1]=libvulkan1
+  [libvulkan.so.1]=libvulkan1 [libGLX_mesa.so.0]=libglx-mesa0
 )
 missing=()
 for lib in "${!LIBS[@]}"; do
@@ -23,6 +23,8 @@ done
 # Mesa's software drivers (llvmpipe) behind EGL.
 compgen -G "/usr/lib/*/dri/swrast_dri.so" >/dev/null || compgen -G "/usr/lib/*/libgallium*.so" >/dev/null \
   || missing+=(libgl1-mesa-dri libegl-mesa0)
+# A virtual X server, so the tracer's tests also run through GLX (the desktop Linux path).
+command -v Xvfb >/dev/null 2>&1 || missing+=(xvfb)
 if [ ${#missing[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
     echo "setup: installing system libraries: ${missing[*]}"
