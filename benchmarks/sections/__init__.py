@@ -16,6 +16,7 @@ SECTIONS = [
     ("stress", "Stress: SPEC §9 cases and randomised scenes"),
     ("gpu", "GPU"),
     ("integration", "Extension and export figures (issues 4 and 5)"),
+    ("versions", "Blender versions: Generate and Render Preview in each Blender of the matrix"),
 ]
 
 

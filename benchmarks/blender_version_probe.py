@@ -1,0 +1,111 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Generate and Render Preview timed in whichever Blender this interpreter's `bpy` is, with
+the extension installed from its zip by Blender's own installer, as a user gets it (groom,
+tracer and moderngl come from the zip's wheels, not from a checkout).
+
+    PYTHON probe.py --zip dist/keystrand_hair-0.1.0.zip --count 100000 --runs 5 --out result.json
+
+Writes JSON: Blender and Python versions, the timings of the extension's bench hooks, and the
+error figures beside them: the largest difference between the Curves object Generate wrote
+and groom's own strands, and the preview image (saved as .npy beside the JSON) against the
+tracer alone on the same camera.
+"""
+import argparse
+import importlib
+import json
+import os
+import pathlib
+import platform
+import shutil
+import sys
+import tempfile
+import time
+
+REPO_MODULE, EXT_ID = "keystrand_bench", "keystrand_hair"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--zip", required=True)
+    ap.add_argument("--count", type=int, default=100_000)
+    ap.add_argument("--runs", type=int, default=5)
+    ap.add_argument("--out", required=True)
+    args = ap.parse_args(argv)
+    user = tempfile.mkdtemp(prefix="keystrand-bench-user-")
+    os.environ["BLENDER_USER_RESOURCES"] = user
+    os.environ.setdefault("KEYSTRAND_PREVIEW_IN_PROCESS", "1")
+    try:
+        result = _measure(args, user)
+    finally:
+        shutil.rmtree(user, ignore_errors=True)
+    pathlib.Path(args.out).write_text(json.dumps(result, indent=1))
+    return 0
+
+
+def _measure(args, user):
+    import numpy as np
+    import bpy
+    t0 = time.perf_counter()
+    repos = bpy.context.preferences.extensions.repos
+    repos.new(name="bench", module=REPO_MODULE, custom_directory=str(pathlib.Path(user) / "repo"), source='USER')
+    done = bpy.ops.extensions.package_install_files(filepath=str(args.zip), repo=REPO_MODULE,
+                                                    enable_on_install=True)
+    if done != {'FINISHED'}:
+        raise RuntimeError(f"Blender's installer refused the zip: {done}")
+    install_s = time.perf_counter() - t0
+    package = f"bl_ext.{REPO_MODULE}.{EXT_ID}"
+    hooks = importlib.import_module(f"{package}.addon.bench_hooks")
+    curves_mod = importlib.import_module(f"{package}.addon.blender_curves")
+    hair_mod = importlib.import_module(f"{package}.addon.hair")
+    props = importlib.import_module(f"{package}.addon.properties")
+    from groom import Generator
+
+    scalp = hooks.demo_scene("wavy", args.count)
+    gen = hooks.generate_timings(scalp, count=args.count, runs=args.runs)
+    # Error beside the time: what Generate wrote against groom run directly on the same input.
+    settings = scalp.keystrand_hair
+    settings.count = args.count
+    bpy.context.view_layer.objects.active = scalp
+    bpy.ops.hair.generate()
+    hair_obj = hair_mod.existing_hair(scalp)
+    written = curves_mod.curves_to_strands(hair_obj)
+    scalp_data, keys = hair_mod.read_inputs(scalp, bpy.context.evaluated_depsgraph_get())
+    direct = Generator(scalp_data, keys, props.groom_params(settings)).generate().strands
+    same_layout = np.array_equal(written.counts, direct.counts)
+    gen["max_point_difference"] = (float(np.abs(written.points - direct.points.astype(np.float32)).max())
+                                   if same_layout else None)
+    pre = hooks.preview_timings(scalp, runs=args.runs)
+    image = bpy.data.images.get("Hair Preview")
+    w, h = image.size
+    shown = np.empty(w * h * 4, np.float32)
+    image.pixels.foreach_get(shown)
+    shown = shown.reshape(h, w, 4)
+    preview = importlib.import_module(f"{package}.addon.preview")
+    scene = bpy.context.scene
+    renderer = preview.current_renderer()
+    camera = preview.camera_for(scene, scene.camera, preview.preview_size(scene, settings))
+    alone = np.asarray(renderer.render(camera, preview.render_settings(scene, settings)), np.float32)
+    if alone.shape != shown.shape:
+        pre["image_rmse_vs_tracer"] = None
+    else:
+        # Blender images are stored bottom row first; compare either orientation's best.
+        pre["image_rmse_vs_tracer"] = float(min(np.sqrt(np.mean((shown - alone) ** 2)),
+                                                np.sqrt(np.mean((shown[::-1] - alone) ** 2))))
+    pre["covered_pixels"] = int((alone[..., 3] > 0).sum())
+    npy = pathlib.Path(args.out).with_suffix(".npy")
+    np.save(npy, alone)
+    import hashlib
+    import moderngl
+    scalp_mesh = scalp.data
+    facts = {"scalp_vertices": len(scalp_mesh.vertices), "strands": int(written.num_strands),
+             "points": int(written.num_points),
+             "strands_sha1": hashlib.sha1(np.ascontiguousarray(written.points).tobytes()).hexdigest()[:12],
+             "preview_size": [w, h]}
+    return {"scene": facts, "blender": bpy.app.version_string, "python": platform.python_version(),
+            "numpy": np.__version__, "moderngl": moderngl.__version__,
+            "moderngl_from": str(pathlib.Path(moderngl.__file__).parent.parent),
+            "install_s": install_s, "generate": gen, "preview": pre, "image": str(npy)}
+
+
+if __name__ == "__main__":
+    sys.exit(main())
