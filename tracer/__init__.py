@@ -1,9 +1,10 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""GPU ray tracer of continual cylinders (SPEC §6–7), headless through EGL, with a float64
+"""GPU ray tracer of continual cylinders (SPEC §6–7) in a standalone OpenGL context (EGL or
+GLX on Linux, WGL on Windows, CGL on macOS; KEYSTRAND_GL_BACKEND picks one), with a float64
 reference tracer of the same model. numpy + moderngl + hairio only.
 
     from tracer import Camera, Light, RenderSettings, Renderer, reference_render
-    r = Renderer()                          # one EGL context per process, reused
+    r = Renderer()                          # one GL context per process, reused
     r.set_strands(strands)                  # hairio.Strands -> cylinders, textures, grid
     cam = Camera.frame_bounds(*strands.bounds(), size=(512, 512))
     img = r.render(cam, RenderSettings(spp=4, shadows=True))   # (H, W, 4) float32
@@ -12,6 +13,7 @@ reference tracer of the same model. numpy + moderngl + hairio only.
 Images are linear, premultiplied RGBA with row 0 at the top. Modules: cylinders (strands
 to cut cylinders), grid (uniform grid, CSR lists), camera (Blender-exact projection),
 settings (lights, render settings), renderer + shaders/trace.glsl (the GPU side),
+gl_context (which backend makes the context, where raw GL entry points come from),
 reference (float64 CPU tracer), png, worker (out-of-process renderer), scenes (synthetic
 strands for tests and benchmarks), __main__ (python -m tracer render).
 """

@@ -7,12 +7,14 @@ alone (no row/column split, no rows padded to a power of two), partial updates a
 ranges, and on llvmpipe a texelFetch from a buffer costs less than a 2-D texture read
 (100,000 strands, 512x512: the whole render 14 % faster, same image).
 
-The few GL entry points moderngl lacks are called through ctypes, from the EGL library the
-headless context was made with (glcontext finds it the same way).
+The few GL entry points moderngl lacks are called through ctypes, loaded through the
+context's own glcontext loader (tracer/gl_context.py), so they come from the library that
+made the context: libEGL, libGL (GLX), opengl32.dll (WGL) or the OpenGL framework (CGL).
 """
 import ctypes
-import ctypes.util
-import os
+import weakref
+
+from .gl_context import current_system, function_type, proc_loader
 
 GL_TEXTURE_BUFFER = 0x8C2A
 GL_TEXTURE0 = 0x84C0
@@ -21,23 +23,23 @@ GL_READ_ONLY, GL_WRITE_ONLY, GL_READ_WRITE = 0x88B8, 0x88B9, 0x88BA
 # compute passes (GL 4.3) use them.
 FORMATS = {("f4", 1): 0x822E, ("f4", 3): 0x8815, ("f4", 4): 0x8814, ("i4", 1): 0x8235, ("i4", 2): 0x823B}
 
-_GL = None
+# One set of entry points per context: on Windows a pointer is only valid for contexts like
+# the one it was looked up in, so none outlives its context.
+_ENTRIES = weakref.WeakKeyDictionary()
 
 
-class _Entry:
-    """The GL functions used here, looked up once through eglGetProcAddress."""
+class Entries:
+    """The GL functions used here, looked up once per context through `load` (name ->
+    address)."""
 
-    def __init__(self):
-        name = os.environ.get("GLCONTEXT_LINUX_LIBEGL") or ctypes.util.find_library("EGL") or "libEGL.so.1"
-        egl = ctypes.CDLL(name)
-        egl.eglGetProcAddress.restype = ctypes.c_void_p
-        egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
+    def __init__(self, load, version_code, system=None):
+        prototype = getattr(ctypes, function_type(system or current_system()))
 
         def fn(fname, restype, *args):
-            ptr = egl.eglGetProcAddress(fname.encode())
-            if not ptr:
+            address = load(fname)
+            if not address:
                 raise RuntimeError(f"tracer: the OpenGL driver has no {fname}")
-            return ctypes.CFUNCTYPE(restype, *args)(ptr)
+            return prototype(restype, *args)(address)
 
         u, i = ctypes.c_uint, ctypes.c_int
         self.gen_textures = fn("glGenTextures", None, i, ctypes.POINTER(u))
@@ -47,18 +49,19 @@ class _Entry:
         self.tex_buffer = fn("glTexBuffer", None, u, u, u)
         self.use_program = fn("glUseProgram", None, u)
         self.uniform1i = fn("glUniform1i", None, i, i)
+        # GL 4.2, for the compute passes only; macOS (4.1) has none. Asked by version, not by
+        # a null pointer: Linux's dispatch libraries hand out a stub for any name.
         self.bind_image_texture = None
-        try:        # GL 4.2: only the compute passes need it
+        if version_code >= 420:
             self.bind_image_texture = fn("glBindImageTexture", None, u, u, i, ctypes.c_ubyte, i, u, u)
-        except RuntimeError:
-            pass
 
 
-def gl():
-    global _GL
-    if _GL is None:
-        _GL = _Entry()
-    return _GL
+def gl(ctx):
+    """The entry points of `ctx` (looked up on first use)."""
+    entries = _ENTRIES.get(ctx)
+    if entries is None:
+        entries = _ENTRIES[ctx] = Entries(proc_loader(ctx), ctx.version_code)
+    return entries
 
 
 class BufferTexture:
@@ -69,8 +72,9 @@ class BufferTexture:
         self.format = FORMATS[(dtype, components)]
         self.components, self.dtype, self.capacity = components, dtype, int(capacity)
         self.texel_bytes = 4 * components
+        self.ctx = ctx
         self.buffer = ctx.buffer(reserve=max(1, self.capacity) * self.texel_bytes)
-        g = gl()
+        g = gl(ctx)
         name = ctypes.c_uint(0)
         g.gen_textures(1, ctypes.byref(name))
         self.glo = name.value
@@ -81,14 +85,19 @@ class BufferTexture:
         return (components, dtype) == (self.components, self.dtype) and texels <= self.capacity
 
     def use(self, unit):
-        g = gl()
+        g = gl(self.ctx)
         g.active_texture(GL_TEXTURE0 + unit)
         g.bind_texture(GL_TEXTURE_BUFFER, self.glo)
         g.active_texture(GL_TEXTURE0)
 
     def bind_to_image(self, unit, read=False, write=True):
         access = GL_READ_WRITE if read and write else (GL_WRITE_ONLY if write else GL_READ_ONLY)
-        gl().bind_image_texture(unit, self.glo, 0, 0, 0, access, self.format)
+        bind = gl(self.ctx).bind_image_texture
+        if bind is None:
+            v = self.ctx.version_code
+            raise RuntimeError(f"tracer: image buffers need OpenGL 4.2; this context has "
+                               f"{v // 100}.{v // 10 % 10}; build with 'numpy'")
+        bind(unit, self.glo, 0, 0, 0, access, self.format)
 
     def write(self, data, first=0):
         """Writes `data` (bytes-like) from texel `first` on."""
@@ -102,7 +111,7 @@ class BufferTexture:
     def release(self):
         if self.glo:
             name = ctypes.c_uint(self.glo)
-            gl().delete_textures(1, ctypes.byref(name))
+            gl(self.ctx).delete_textures(1, ctypes.byref(name))
             self.glo = 0
             self.buffer.release()
 
@@ -110,7 +119,7 @@ class BufferTexture:
 def set_samplers(prog, **units):
     """Points the sampler uniforms of `prog` at texture units (moderngl ignores uniforms of
     buffer sampler types). Names the compiler dropped are skipped."""
-    g = gl()
+    g = gl(prog.ctx)
     g.use_program(prog.glo)
     for name, unit in units.items():
         if name in prog:

@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""The GPU tracer: one headless (EGL) OpenGL 3.3 core context per process, scene data in
-buffer textures (tracer/gl_buffers.py), one fragment shader that traces every pixel.
+"""The GPU tracer: one standalone OpenGL 3.3 core context per process (EGL or GLX on Linux,
+WGL on Windows, CGL on macOS: tracer/gl_context.py), scene data in buffer textures
+(tracer/gl_buffers.py), one fragment shader that traces every pixel.
 
 Only `set_strands`/`update_strands` upload; a render with a new camera, light or setting
 sends uniforms and nothing else (`stats["bytes_uploaded"]` proves it).
@@ -16,6 +17,7 @@ from .cylinders import (SHARP_BEND_DEG, CylinderPlan, column_bounds, cylinders_f
                         repeat_distance, strands_to_cylinders)
 from .grid import Grid, build_grid, grid_frame
 from .gl_buffers import BufferTexture, set_samplers
+from .gl_context import create_context
 from .gpu_build import GpuBuilder, compute_available, set_uniforms
 from .settings import GRID_WIDEN_CAP, RenderSettings
 
@@ -41,21 +43,24 @@ void main() {   // one triangle that covers the screen; the scissor picks the pi
 """
 
 _CONTEXT = None
+_BACKEND = None
 _BUILDER = None
 BUILDS = ("auto", "gpu", "numpy")
 
 
 def shared_context():
-    """The process's one standalone EGL context (created on first use)."""
-    global _CONTEXT
+    """The process's one standalone OpenGL context (created on first use by the backend
+    KEYSTRAND_GL_BACKEND asks for; tracer/gl_context.py)."""
+    global _CONTEXT, _BACKEND
     if _CONTEXT is None:
-        import moderngl
-        try:
-            _CONTEXT = moderngl.create_standalone_context(backend="egl", require=330)
-        except Exception as e:   # no EGL, no driver: say what is missing
-            raise RuntimeError(f"tracer: cannot create a headless OpenGL 3.3 context through EGL ({e}); "
-                               "install Mesa's EGL (libegl1) or a GPU driver") from e
+        _CONTEXT, _BACKEND = create_context()
     return _CONTEXT
+
+
+def context_backend():
+    """The backend of the shared context ("egl", "glx", "wgl" or "cgl"), creating it first."""
+    shared_context()
+    return _BACKEND
 
 
 def load_shader(name):
@@ -78,7 +83,8 @@ class Renderer:
     num_cylinders, grid_dims, grid_refs, cylinders_per_full_cell, full_cell_fraction,
     layers_max (layers the shader was compiled for), screen_box and traversed_pixels (the
     projected bounds that were traced), and with RenderSettings(count=True) also
-    shadow_rays, layers_traced, cells_visited, cylinder_tests (summed over samples)."""
+    shadow_rays, layers_traced, cells_visited, cylinder_tests (summed over samples), and
+    gl_backend (the shared context's: egl, glx, wgl or cgl)."""
 
     def __init__(self, max_buffer_texels=None, build="auto"):
         """`max_buffer_texels`: the most texels one buffer texture may hold (default: the
@@ -107,7 +113,7 @@ class Renderer:
         # pixel width; then it is rebuilt once with radii widened by GRID_WIDEN_CAP and kept.
         self._grid_pad = 1.0
         self.stats = {"bytes_uploaded": 0, "uploads": 0, "upload_s": 0.0, "grid_s": 0.0,
-                      "render_s": 0.0, "renders": 0}
+                      "render_s": 0.0, "renders": 0, "gl_backend": context_backend()}
 
     # --- data ---------------------------------------------------------------------------
     @property

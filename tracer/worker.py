@@ -8,6 +8,7 @@ Blender down and Blender's own GL context is never touched.
 stats, quit. Only the parent that spawned the worker writes to its stdin; pickle is used
 because both ends are this package.
 """
+import importlib.util
 import os
 import pickle
 import queue
@@ -17,6 +18,42 @@ import sys
 import threading
 
 _HEADER = struct.Struct("<Q")
+# Packages the worker imports that may live elsewhere than the tracer: in Blender the
+# extension's wheels are in its own site-packages, which only the parent has on sys.path.
+_PACKAGES = ("numpy", "moderngl", "glcontext")
+# Their folders reach the worker here and go at the end of its sys.path, as in the parent,
+# before the tracer package (which imports numpy) loads: on PYTHONPATH a whole
+# site-packages would come before the standard library.
+_APPEND_ENV = "KEYSTRAND_WORKER_APPEND_PATH"
+_BOOT = ("import os, sys\n"
+         f"for p in os.environ.get({_APPEND_ENV!r}, '').split(os.pathsep):\n"
+         "    if p and p not in sys.path:\n"
+         "        sys.path.append(p)\n"
+         "from tracer.worker import main\n"
+         "main()\n")
+_PASSED_ENV = ("KEYSTRAND_GL_BACKEND",)
+
+
+def import_root(name):
+    """The sys.path folder that `name` (a top-level module or package) imports from, found
+    without importing it; None when it is not importable."""
+    try:
+        spec = importlib.util.find_spec(name)
+    except (ImportError, ValueError):
+        return None
+    if spec is None or not spec.has_location or not spec.origin:
+        return None
+    folder = os.path.dirname(os.path.abspath(spec.origin))
+    return os.path.dirname(folder) if spec.submodule_search_locations is not None else folder
+
+
+def package_paths():
+    """The folders numpy, moderngl and glcontext import from in this process, each once."""
+    paths = []
+    for path in (import_root(name) for name in _PACKAGES):
+        if path and path not in paths:
+            paths.append(path)
+    return paths
 
 
 class WorkerError(RuntimeError):
@@ -93,13 +130,17 @@ class WorkerClient:
 
     # --- process management -----------------------------------------------------------
     def _start(self):
-        package_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
         env = dict(os.environ if self.env is None else self.env)
+        for name in _PASSED_ENV:    # the worker's context is made by the backend asked for here
+            if name in os.environ:
+                env.setdefault(name, os.environ[name])
+        package_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
         paths = [package_root, *self.extra_sys_path]
         if env.get("PYTHONPATH"):
             paths.append(env["PYTHONPATH"])
         env["PYTHONPATH"] = os.pathsep.join(paths)
-        self._proc = subprocess.Popen([self.python, "-m", "tracer.worker"], stdin=subprocess.PIPE,
+        env[_APPEND_ENV] = os.pathsep.join(package_paths())
+        self._proc = subprocess.Popen([self.python, "-c", _BOOT], stdin=subprocess.PIPE,
                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
         self._answers = queue.Queue()
         self._stderr = []

@@ -1,10 +1,32 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
+import os
+
 import pytest
+
+
+def pytest_configure(config):
+    """KEYSTRAND_GL_BACKEND=glx without a DISPLAY: the tests get a private Xvfb, started
+    before any test module makes the context and stopped when the session ends."""
+    from tracer.gl_context import requested_backend
+    if requested_backend() != "glx" or os.environ.get("DISPLAY"):
+        return
+    from xvfb_display import Xvfb, XvfbError
+    try:
+        server = Xvfb()
+    except XvfbError as e:
+        raise pytest.UsageError(f"KEYSTRAND_GL_BACKEND=glx: {e}") from None
+    os.environ["DISPLAY"] = server.display
+
+    def stop():
+        os.environ.pop("DISPLAY", None)
+        server.stop()
+
+    config.add_cleanup(stop)
 
 
 @pytest.fixture(scope="session", params=["gpu", "numpy"])
 def renderer(request):
-    """One renderer per build (one EGL context for all) for the whole session, as in
+    """One renderer per build (one GL context for all) for the whole session, as in
     production: every renderer test runs with cylinders and grid made by the compute
     shaders and by numpy. Drivers without compute shaders (macOS) have only the numpy build."""
     from tracer import Renderer

@@ -1,8 +1,10 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """PNG writer, command line, worker process."""
 import os
+import shlex
 import signal
 import struct
+import subprocess
 import sys
 import time
 import zlib
@@ -14,6 +16,7 @@ from hairio import InputError, Strands
 from tracer import Camera, RenderSettings
 from tracer.__main__ import main
 from tracer.png import encode_png, linear_to_srgb, to_srgb8, write_png
+from tracer.renderer import context_backend
 from tracer.worker import WorkerClient, WorkerError
 
 from tracer_scenes import curls
@@ -113,6 +116,30 @@ def test_worker_renders_keeps_the_scene_and_restarts_after_a_crash():
         with pytest.raises(WorkerError):
             client.render(cam, RenderSettings())
         np.testing.assert_array_equal(client.render(cam, RenderSettings()), first)   # fresh worker, same scene
+
+
+def test_worker_imports_moderngl_from_where_this_process_does(tmp_path):
+    # As in Blender, where moderngl lives in the extension's site-packages, which only the
+    # parent put on sys.path: here the worker's interpreter runs without site-packages.
+    python = tmp_path / "python-without-site"
+    python.write_text(f'#!/bin/sh\nexec {shlex.quote(sys.executable)} -S "$@"\n')
+    python.chmod(0o755)
+    alone = subprocess.run([str(python), "-c", "import moderngl"], capture_output=True, text=True, timeout=60)
+    assert alone.returncode != 0 and "moderngl" in alone.stderr
+    s = curls(4, 4)
+    with WorkerClient(python=str(python), timeout=60) as client:
+        client.set_strands(s)
+        img = client.render(Camera.look_at((0, -2.5, 0.5), (0, 0, 0.5), size=(16, 16)), RenderSettings())
+        assert img[..., 3].max() > 0
+        assert client.stats["gl_backend"] == context_backend()      # the backend asked for here
+
+
+def test_worker_is_given_the_backend_asked_for_here_even_with_its_own_environment(monkeypatch):
+    env = {k: v for k, v in os.environ.items() if k != "KEYSTRAND_GL_BACKEND"}
+    monkeypatch.setenv("KEYSTRAND_GL_BACKEND", "no-such-backend")
+    with WorkerClient(env=env, timeout=60) as client:
+        with pytest.raises(InputError, match="KEYSTRAND_GL_BACKEND='no-such-backend': expected one of"):
+            client.set_strands(curls(2, 4))
 
 
 def test_worker_that_hangs_times_out_with_a_clear_error(tmp_path):
