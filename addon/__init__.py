@@ -2,15 +2,15 @@
 """Blender glue for key-strand hair: properties, operators, panels, bpy <-> numpy.
 
 register() walks one `classes` tuple and adds the object property, the live-update
-handlers and the File > Export entries; unregister() removes every one of them and stops
-the preview renderer. Nothing heavy is imported here: groom, tracer and moderngl load
-inside the operators.
+handlers, the File > Export entries and Add > Hair Head; unregister() removes every one of
+them and stops the preview renderer. Nothing heavy is imported here: groom, tracer and
+moderngl load inside the operators.
 """
 import bpy
 
-from . import live, operators, panels, preview, properties
+from . import add_head, live, operators, panels, preview, properties
 
-classes = properties.CLASSES + operators.CLASSES + panels.CLASSES
+classes = properties.CLASSES + operators.CLASSES + add_head.CLASSES + panels.CLASSES
 
 
 def register():
@@ -19,9 +19,11 @@ def register():
     properties.register_properties()
     live.register_handlers()
     bpy.types.TOPBAR_MT_file_export.append(operators.menu_export)
+    bpy.types.VIEW3D_MT_add.append(add_head.menu_add)
 
 
 def unregister():
+    bpy.types.VIEW3D_MT_add.remove(add_head.menu_add)
     bpy.types.TOPBAR_MT_file_export.remove(operators.menu_export)
     live.unregister_handlers()
     preview.close()

@@ -26,7 +26,8 @@ class VIEW3D_PT_keystrand_hair(_HairPanel, Panel):
         layout = self.layout
         scalp = find_scalp(context)
         if scalp is None:
-            layout.label(text="Select a scalp mesh", icon='INFO')
+            layout.label(text="Select a scalp mesh, or start from a head", icon='INFO')
+            layout.operator("hair.add_head", text="Add Head", icon='USER')
             return
         s = scalp.keystrand_hair
         layout.label(text=scalp.name, icon='MESH_DATA')
@@ -58,7 +59,7 @@ class VIEW3D_PT_keystrand_hair_shape(_HairPanel, Panel):
         col = self.layout.column()
         col.use_property_split = True
         for name in ("min_length", "max_length", "tidiness", "theta_max", "n_influence", "neighbour_mode",
-                     "intelligence", "seed", "sampling_mode", "normal_mode", "up", "front"):
+                     "intelligence", "seed", "sampling_mode", "normal_mode", "head_axes", "up", "front"):
             col.prop(s, name)
 
 

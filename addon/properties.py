@@ -11,11 +11,22 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorPro
                        IntProperty, PointerProperty)
 from bpy.types import PropertyGroup
 
+from . import head
+from .scene_data import SceneError
+
 ROLES = (
     ('NONE', "None", "Not part of a hairstyle"),
     ('SCALP', "Scalp", "A mesh that grows hair"),
     ('KEY', "Key Strand", "A Bézier curve that shapes the hair around its root"),
     ('HAIR', "Hair", "Hair generated from a scalp's key strands"),
+)
+
+HEAD_AXES = (
+    ('WORLD', "Scene", "Up and Front are directions in the scene (by default +Z is up and the face "
+                       "looks along -Y), whatever the scalp object's rotation: a head imported Y-up "
+                       "with a rotation on the object is read the right way up"),
+    ('LOCAL', "Mesh", "Up and Front are directions in the scalp mesh's own coordinates: they turn "
+                      "with the object (use it once a head is turned or tilted on purpose)"),
 )
 
 KEY_SHAPES = (
@@ -24,6 +35,24 @@ KEY_SHAPES = (
     ('CURLY', "Curly", "Tight corkscrew curls"),
     ('SWEPT', "Swept", "Swept back and up, like a quiff or a mohawk"),
 )
+
+
+def _get_head_axes(self):
+    return self.get("head_axes", 0)
+
+
+def _set_head_axes(self, value):
+    # Switching rewrites Up and Front in the other space, so the head's axes (and the hair)
+    # stay where they are; from then on they follow the scene or the mesh. A flattened
+    # object has no such rewrite: the vectors are kept and Generate reports the scale.
+    if value != _get_head_axes(self) and isinstance(self.id_data, bpy.types.Object):
+        to_mesh = HEAD_AXES[value][0] == 'LOCAL'
+        try:
+            self.up, self.front = (head.scene_to_mesh if to_mesh else head.mesh_to_scene)(
+                self.id_data, (tuple(self.up), tuple(self.front)))
+        except SceneError:
+            pass
+    self["head_axes"] = value
 
 
 def _live_update(self, context):
@@ -62,10 +91,16 @@ class HairSettings(PropertyGroup):
         items=(('interpolated', "Smooth", "Blend the vertex normals: hair flows smoothly across faces"),
                ('face', "Flat", "Each triangle's own normal, as in the thesis")),
         description="Which surface direction the hair grows from")
+    head_axes: EnumProperty(name="Head Axes", items=HEAD_AXES, default='WORLD',
+                            get=_get_head_axes, set=_set_head_axes,
+                            description="Which coordinates Up and Front are given in (switching keeps "
+                                        "the head's axes as they are); hairs grow down the head and "
+                                        "presets land on it by these two directions")
     up: FloatVectorProperty(name="Up", size=3, default=(0.0, 0.0, 1.0), subtype='DIRECTION',
-                            description="The head's up direction, in the scalp's own space")
+                            description="The head's up direction (in the scene or in the mesh, as Head Axes says)")
     front: FloatVectorProperty(name="Front", size=3, default=(0.0, -1.0, 0.0), subtype='DIRECTION',
-                               description="The direction the face looks, in the scalp's own space")
+                               description="The direction the face looks (in the scene or in the mesh, "
+                                           "as Head Axes says)")
     min_length: FloatProperty(name="Min Length", default=0.85, min=0.001, max=1.0, subtype='FACTOR',
                               description="Shortest hair, as a fraction of its key strand's length")
     max_length: FloatProperty(name="Max Length", default=1.0, min=0.001, max=1.0, subtype='FACTOR',
@@ -204,8 +239,14 @@ RENDER_FIELDS = ("preview_size", "preview_samples", "preview_shadows", "preview_
                  "preview_scene_lights", "preview_in_process")
 
 
+# Settings that describe the head, not the hairstyle: a preset leaves them as they are
+# (its keys are placed with the head's own axes, and Generate must use the same ones).
+HEAD_FIELDS = ("up", "front")
+
+
 def settings_to_dict(settings):
-    """The model parameters as a plain dict (GroomParams field names, JSON-able values)."""
+    """The model parameters as a plain dict (GroomParams field names, JSON-able values), as
+    the settings hold them (up and front in the space Head Axes names)."""
     out = {}
     for name in PARAM_FIELDS:
         value = getattr(settings, name)
@@ -214,20 +255,25 @@ def settings_to_dict(settings):
 
 
 def dict_to_settings(settings, params):
-    """Set the settings from a GroomParams-like dict; unknown names are ignored."""
+    """Set the settings from a GroomParams-like dict (a preset's); unknown names and the
+    head's axes are left alone."""
     for name in PARAM_FIELDS:
+        if name in HEAD_FIELDS:
+            continue
         if name in params and params[name] is not None:
             setattr(settings, name, tuple(params[name]) if isinstance(params[name], (list, tuple))
                     else params[name])
 
 
 def groom_params(settings, count=None):
-    """groom.GroomParams from the settings (InputError on an out-of-range combination)."""
+    """groom.GroomParams from a scalp's settings, with up and front in the scalp's own space
+    (the space groom works in), the same axes presets are placed with (InputError on an
+    out-of-range combination, SceneError on a scalp whose axes cannot be read)."""
     from groom import GroomParams
     d = settings_to_dict(settings)
     if count is not None:
         d["count"] = int(count)
-    d["up"], d["front"] = tuple(d["up"]), tuple(d["front"])
+    d["up"], d["front"] = head.scalp_axes(settings.id_data)
     for name in ("color", "color_variation", "color_variation_point"):
         d[name] = tuple(d[name])
     return GroomParams(**d)
