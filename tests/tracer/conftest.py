@@ -7,8 +7,13 @@ import pytest
 def pytest_configure(config):
     """KEYSTRAND_GL_BACKEND=glx without a DISPLAY: the tests get a private Xvfb, started
     before any test module makes the context and stopped when the session ends."""
+    from hairio import InputError
     from tracer.gl_context import requested_backend
-    if requested_backend() != "glx" or os.environ.get("DISPLAY"):
+    try:
+        backend = requested_backend()
+    except InputError as e:
+        raise pytest.UsageError(str(e)) from None
+    if backend != "glx" or os.environ.get("DISPLAY"):
         return
     from xvfb_display import Xvfb, XvfbError
     try:
