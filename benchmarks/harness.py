@@ -141,10 +141,11 @@ def cpu_model():
 def gl_renderer():
     """GL renderer string of the headless context the tracer would get (probed in a child
     process so a broken driver cannot take the benchmark down)."""
-    code = ("import moderngl; c = moderngl.create_standalone_context(backend='egl'); "
-            "print(c.info['GL_RENDERER'], '|', c.info['GL_VERSION'])")
+    code = ("from tracer.gl_context import create_context; c, b = create_context(); "
+            "print(c.info['GL_RENDERER'], '|', c.info['GL_VERSION'], '|', b)")
     try:
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=root)
         if out.returncode == 0 and out.stdout.strip():
             return out.stdout.strip().splitlines()[-1]
         return "unavailable (" + (out.stderr.strip().splitlines() or ["no output"])[-1][:120] + ")"
