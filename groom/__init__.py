@@ -6,12 +6,21 @@
     preset = load_preset("wavy")
     result = generate(scalp, preset.keys_on(scalp), preset.params)
     result.strands.save_npz("wavy.npz")
+
+On a mesh of your own (here a Y-up .obj facing +Z), give the head's axes in its space:
+
+    scalp = load_obj("scalp.obj")
+    placement = preset.place_keys(scalp, up=(0, 1, 0), front=(0, 0, 1))
+    print(placement.warning() or "every key has its own root")
+    result = generate(scalp, placement.keys, placement.params)
 """
-from .scalp import Scalp, default_scalp, load_obj
+from .scalp import Scalp, default_head, default_scalp, load_obj
 from .keys import KeyStrand, place_key
 from .params import GroomParams
 from .generate import GroomResult, Generator, generate
-from .presets import Preset, list_presets, load_preset, save_preset
+from .head import HeadFrame, fit_head_frame
+from .presets import Placement, Preset, list_presets, load_preset, save_preset
 
-__all__ = ["Scalp", "default_scalp", "load_obj", "KeyStrand", "place_key", "GroomParams",
-           "GroomResult", "Generator", "generate", "Preset", "list_presets", "load_preset", "save_preset"]
+__all__ = ["Scalp", "default_head", "default_scalp", "load_obj", "KeyStrand", "place_key", "GroomParams",
+           "GroomResult", "Generator", "generate", "HeadFrame", "fit_head_frame", "Placement", "Preset",
+           "list_presets", "load_preset", "save_preset"]

@@ -1,12 +1,15 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Command line: grow a preset hairstyle, or export strands to another format.
 
-    python -m groom generate --preset NAME [--scalp MESH.obj] [--count N] [--seed S] --out FILE.npz
+    python -m groom generate --preset NAME [--scalp MESH.obj [--up X,Y,Z] [--front X,Y,Z]]
+                             [--count N] [--seed S] --out FILE.npz
     python -m groom export ...   (see `python -m groom export --help`)
 
-Bad input exits 2 with a message naming it; no partial output file is ever written.
+Bad input exits 2 with a message naming it; no partial output file is ever written. Keys
+that cannot each find a root of their own on the scalp are named on stderr.
 """
 import argparse
+import re
 import sys
 import time
 
@@ -19,12 +22,45 @@ def _parser():
     g = sub.add_parser("generate", help="grow a preset hairstyle and write the strands as .npz")
     g.add_argument("--preset", required=True, help="preset name (see --list) or a preset .json file")
     g.add_argument("--scalp", help="scalp mesh (.obj); default: the bundled head")
+    g.add_argument("--up", metavar="X,Y,Z",
+                   help="the head's up direction in the mesh's own space, e.g. 0,1,0 for a Y-up .obj "
+                        "(default: the preset's, 0,0,1)")
+    g.add_argument("--front", metavar="X,Y,Z",
+                   help="the direction the face looks, in the mesh's own space, e.g. 0,0,1 for a Y-up .obj "
+                        "(default: the preset's, 0,-1,0)")
     g.add_argument("--count", type=int, help="number of strands (overrides the preset)")
     g.add_argument("--seed", type=int, help="random seed (overrides the preset)")
     g.add_argument("--out", required=True, help="output .npz file (SPEC §0 arrays)")
     sub.add_parser("export", help="convert strands between formats", add_help=False)
     sub.add_parser("list", help="list the bundled presets")
     return p
+
+
+# Options whose value may start with a minus sign ("--front -1,0,0"), which argparse would
+# otherwise take for an option of its own.
+_VECTOR_OPTIONS = ("--up", "--front")
+
+
+def _vector_option(option, text):
+    """'X,Y,Z' -> 3 floats, or InputError naming the option."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 3:
+        raise InputError(f"{option} {text!r}: expected three numbers X,Y,Z, e.g. 0,1,0")
+    return values
+
+
+def _head_axes(args, params):
+    """(up, front) for the scalp from --up/--front, each defaulting to the preset's, checked."""
+    from .head import head_axes
+    up = params.up if args.up is None else _vector_option("--up", args.up)
+    front = params.front if args.front is None else _vector_option("--front", args.front)
+    names = ("--up" if args.up is not None else "the preset's up",
+             "--front" if args.front is not None else "the preset's front")
+    head_axes(up, front, names)
+    return up, front
 
 
 def generate_main(args):
@@ -36,11 +72,16 @@ def generate_main(args):
     if args.seed is not None and args.seed < 0:
         raise InputError(f"--seed {args.seed}: must be >= 0")
     preset = load_preset(args.preset)
+    up, front = _head_axes(args, preset.params)
     scalp = load_obj(args.scalp) if args.scalp else default_scalp()
-    changes = {k: v for k, v in (("count", args.count), ("seed", args.seed)) if v is not None}
-    params = preset.params.replace(**changes) if changes else preset.params
     start = time.perf_counter()
-    result = generate(scalp, preset.keys_on(scalp), params)
+    placement = preset.place_keys(scalp, up, front)
+    warning = placement.warning()
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr)
+    changes = {k: v for k, v in (("count", args.count), ("seed", args.seed)) if v is not None}
+    params = placement.params.replace(**changes) if changes else placement.params
+    result = generate(scalp, placement.keys, params)
     elapsed = time.perf_counter() - start
     s = result.strands
     try:
@@ -64,7 +105,13 @@ def main(argv=None):
             print("error: export: this installation has no hairio.cli exporter", file=sys.stderr)
             return 2
         return export_main(argv[1:])
-    args = _parser().parse_args(argv)
+    joined = []
+    for a in argv:
+        if joined and joined[-1] in _VECTOR_OPTIONS and re.match(r"-[\d.]", a):
+            joined[-1] = f"{joined[-1]}={a}"
+        else:
+            joined.append(a)
+    args = _parser().parse_args(joined)
     try:
         if args.command == "list":
             from .presets import list_presets

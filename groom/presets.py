@@ -7,7 +7,7 @@ A preset file:
      "params": {... GroomParams names ...},
      "keys": [{"anchor": {"point": [x, y, z]}        # nearest scalp point to this
                         | {"direction": [x, y, z]},  # outermost scalp point seen from the
-                                                     # scalp's centre in this direction
+                                                     # head's centre in this direction
                "frame": "root" | "world",            # profile axes: root frame (x down the head,
                                                      # y across, z out) or world axes
                "profile": [[x, y, z], ...],          # control points, row 0 the root
@@ -15,8 +15,10 @@ A preset file:
                "kind": "bezier" | "cubic", "color": null | [r, g, b],
                "root_radius": null | r, "group": 0}, ...]}
 
-`Preset.keys_on(scalp)` places the keys on any scalp mesh, so one preset grooms the bundled
-head and a user's mesh alike.
+Anchors and "world" profiles are in the bundled head's space (groom.default_scalp: metres,
+Z up, -Y front). `Preset.place_keys(scalp, up, front)` carries them onto any scalp mesh
+through a head frame fitted to it (head.py), so one preset grooms the bundled head and a
+user's mesh alike, and says which keys could not find a root of their own.
 """
 import json
 import os
@@ -27,8 +29,19 @@ import numpy as np
 from hairio import InputError, atomic_write
 
 from .frames import root_frames
+from .head import CANONICAL_FRONT, CANONICAL_UP, fit_head_frame
 from .keys import KeyStrand, place_key
 from .params import GroomParams
+
+# Keys whose roots land closer than this fraction of the head's size (2 mm on the bundled
+# head; bundled presets space their anchors 1.2 cm and more apart) share a root.
+COLLAPSE_FRACTION = 0.02
+# A key's anchor this far from its root (a fraction of the head's size) is off the scalp
+# even away from an edge: the mesh is not head-shaped there (measured: 5 mm at most, 4.5 %,
+# on the real cap and head of the test data).
+_OFF_SURFACE_FRACTION = 0.15
+# Outside these bounds of the bundled head's size the head is likely in other units.
+_PLAUSIBLE_SCALE = (1.0 / 3.0, 3.0)
 
 def _preset_dir():
     """$KEYSTRAND_PRESETS, else the repository's presets/, else the copy installed inside groom."""
@@ -51,7 +64,8 @@ def list_presets():
 
 
 class Preset:
-    """name, description, params (GroomParams) and key specs; `keys_on(scalp)` -> [KeyStrand]."""
+    """name, description, params (GroomParams) and key specs; `place_keys(scalp)` ->
+    Placement, `keys_on(scalp)` -> [KeyStrand]."""
 
     def __init__(self, name, params, key_specs, description=""):
         self.name, self.params, self.description = name, params, description
@@ -59,27 +73,163 @@ class Preset:
             raise InputError(f"preset {name!r}: no keys; a preset needs at least one key strand")
         self.key_specs = [_check_spec(name, i, s) for i, s in enumerate(key_specs)]
 
-    def keys_on(self, scalp):
-        """Key strands placed on `scalp`: each anchor goes to the nearest (or the outermost,
-        for a direction) surface point, and root-frame profiles use that point's frame."""
-        specs = self.key_specs
-        queries = np.array([_anchor_query(scalp, s["anchor"]) for s in specs])
+    def place_keys(self, scalp, up=None, front=None):
+        """Place the key strands on `scalp` (a groom.Scalp): a Placement.
+
+        up, front: the head's axes in the scalp's own space (None: the preset parameters'
+        up and front, those of the bundled head). A head frame is fitted to the scalp
+        (head.fit_head_frame) and every anchor goes through it: a point anchor to the
+        matching place on this head, then to the nearest scalp point; a direction anchor
+        from the fitted centre along the mapped direction, to the outermost scalp point
+        there. "root" profiles are drawn in each root's frame (normal, down the head),
+        "world" profiles turn with the head.
+
+        Profiles keep their lengths in metres, on a big head or a small one: a length is
+        the hairstyle's (a 30 cm bob is 30 cm on any adult, whose heads differ by some
+        10 %), and so are the parameters' radius and tolerance, which scaling the keys alone
+        would make too thin or too coarse for the hair. A head in other units shows up as a
+        size far from the bundled one, which Placement.warning reports."""
+        p = self.params
+        up = p.up if up is None else up
+        front = p.front if front is None else front
+        frame = fit_head_frame(scalp, up, front)
+        queries, missed = [], []
+        for i, s in enumerate(self.key_specs):  # a few keys, not strands
+            kind, value = next(iter(s["anchor"].items()))
+            if kind == "point":
+                queries.append(frame.to_scalp(value))
+                continue
+            d = frame.direction_to_scalp(value)
+            hit = _outermost_hit(scalp, frame.centre, d)
+            if hit is None:  # the scalp does not cover that direction: come as close as it lets
+                missed.append(i)
+                hit = frame.centre + d * float(np.linalg.norm(np.ptp(scalp.vertices, axis=0)))
+            queries.append(hit)
+        queries = np.array(queries)
         tri, bary, roots = scalp.closest_points(queries)
-        normals = scalp.normals_at(tri, bary, self.params.normal_mode)
-        frames = root_frames(normals, self.params.up, self.params.front)
+        normals = scalp.normals_at(tri, bary, p.normal_mode)
+        # The raw up and front, as generate() uses them, so keys and hair share their frames.
+        frames = root_frames(normals, up, front)
+        turn = frame.rotation
         keys = []
-        for s, root, frame in zip(specs, roots, frames):  # a few keys, not strands
+        for s, root, root_frame in zip(self.key_specs, roots, frames):
             prof = np.asarray(s["profile"], dtype=np.float64)
             if s["frame"] == "root":
-                pts = place_key(prof, root, frame, s["angles"])
+                pts = place_key(prof, root, root_frame, s["angles"])
             else:
-                pts = root + (prof - prof[0])
+                pts = root + (prof - prof[0]) @ turn.T
             keys.append(KeyStrand(pts, s["kind"], s["color"], s["root_radius"], s["group"]))
-        return keys
+        off = np.linalg.norm(roots - queries, axis=1) / frame.size
+        edge = _on_boundary(scalp, tri, bary)
+        far = (edge & (off > COLLAPSE_FRACTION)) | (off > _OFF_SURFACE_FRACTION)
+        off_scalp = sorted(set(missed) | set(np.flatnonzero(far).tolist()))
+        params = p.replace(up=tuple(up), front=tuple(front))
+        if p.parting is not None:
+            params = params.replace(parting={
+                "point": tuple(frame.to_scalp(p.parting["point"])),
+                "normal": tuple(frame.normal_to_scalp(p.parting["normal"]))})
+        return Placement(self.name, keys, frame, params, _collapsed(roots, COLLAPSE_FRACTION * frame.size),
+                         tuple(off_scalp))
+
+    def keys_on(self, scalp, up=None, front=None):
+        """The key strands of place_keys(scalp, up, front), [KeyStrand]."""
+        return self.place_keys(scalp, up, front).keys
 
     def to_dict(self):
         return {"name": self.name, "description": self.description, "params": self.params.to_dict(),
                 "keys": self.key_specs}
+
+
+class Placement:
+    """A preset's keys placed on one scalp (Preset.place_keys).
+
+    keys         [KeyStrand], in the preset's order
+    frame        the HeadFrame fitted to the scalp
+    params       the preset's GroomParams for this scalp: its up and front, and the parting
+                 plane carried onto this head (grow the hair with these)
+    collapsed    [(i, j, ...)]: groups of key indices whose roots landed on the same place
+                 (closer than COLLAPSE_FRACTION of the head's size); empty when every key
+                 has its own root
+    off_scalp    (i, ...): keys whose anchor the scalp does not reach (beyond its edge, far
+                 from its surface, or in a direction it does not cover), placed on the
+                 nearest scalp point instead
+    """
+
+    def __init__(self, preset_name, keys, frame, params, collapsed, off_scalp):
+        self.preset_name, self.keys, self.frame, self.params = preset_name, keys, frame, params
+        self.collapsed, self.off_scalp = collapsed, off_scalp
+
+    def warning(self):
+        """A few sentences for an artist when the placement is doubtful, else None."""
+        parts = []
+        if self.collapsed:
+            groups = [_listing(g) for g in self.collapsed]
+            roots = len(self.keys) - sum(len(g) - 1 for g in self.collapsed)
+            parts.append(f"{len(self.keys)} keys on {roots} roots: keys {groups[0]} share a root"
+                         + "".join(f", so do {g}" for g in groups[1:]))
+        if self.off_scalp:
+            parts.append(f"keys {_listing(self.off_scalp)} have their anchors off the scalp (beyond its edge or "
+                         "far from its surface: the preset grows hair there, this scalp does not reach) and sit "
+                         "on its nearest point")
+        if parts:
+            f = self.frame
+            parts.append(f"if the scalp is upside down or faces another way, set its up and front (now up "
+                         f"{_vector(f.up)}, front {_vector(f.front)}, in the scalp's own space); otherwise "
+                         "extend the scalp or move these keys")
+        lo, hi = _PLAUSIBLE_SCALE
+        if not lo <= self.frame.scale <= hi:
+            parts.append(f"this head is {self.frame.scale:.3g} times the size of the bundled one, and preset "
+                         "lengths are in metres: check the mesh's units (or its object's scale)")
+        if not parts:
+            return None
+        return f"preset {self.preset_name!r}: " + "; ".join(parts) + "."
+
+
+def _listing(indices):
+    """'3', '3 and 4', '3, 4 and 5' (0-based, as the key objects are numbered)."""
+    names = [str(i) for i in indices]
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+
+
+def _vector(v):
+    return "(" + ", ".join(f"{x:.3g}" for x in np.where(np.abs(v) < 5e-4, 0.0, v)) + ")"
+
+
+def _collapsed(roots, distance):
+    """Groups (sorted tuples, sorted) of indices of roots within `distance` of another root
+    of the group, chained (single linkage); singletons left out."""
+    n = len(roots)
+    d = np.linalg.norm(roots[:, None] - roots[None], axis=-1)
+    group = list(range(n))
+
+    def top(i):
+        while group[i] != i:
+            i = group[i]
+        return i
+
+    for i, j in zip(*np.nonzero(np.triu(d < distance, 1))):
+        group[top(j)] = top(i)
+    members = {}
+    for i in range(n):
+        members.setdefault(top(i), []).append(i)
+    return sorted(tuple(m) for m in members.values() if len(m) > 1)
+
+
+def _on_boundary(scalp, tri, bary):
+    """Per surface point: does it lie on an open edge of the mesh (or an open edge's vertex)?"""
+    t = scalp.triangles
+    edges = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
+    unique, count = np.unique(edges, axis=0, return_counts=True)
+    open_edges = {tuple(e) for e in unique[count == 1].tolist()}
+    open_vertices = {v for e in open_edges for v in e}
+    out = []
+    for ti, b in zip(tri, bary):  # a few keys
+        corners = sorted(int(v) for v, w in zip(t[ti], b) if w > 1e-9)
+        if len(corners) == 1:
+            out.append(corners[0] in open_vertices)
+        else:
+            out.append(len(corners) == 2 and tuple(corners) in open_edges)
+    return np.array(out, bool)
 
 
 def _check_spec(name, i, spec):
@@ -121,19 +271,6 @@ def _check_spec(name, i, spec):
     except (TypeError, ValueError) as e:
         raise InputError(f"{where}: {e}") from None
     return out
-
-
-def _anchor_query(scalp, anchor):
-    if "point" in anchor:
-        return np.asarray(anchor["point"], dtype=np.float64)
-    d = np.asarray(anchor["direction"], dtype=np.float64)
-    d = d / np.linalg.norm(d)
-    lo, hi = scalp.vertices.min(axis=0), scalp.vertices.max(axis=0)
-    centre = 0.5 * (lo + hi)
-    hit = _outermost_hit(scalp, centre, d)
-    if hit is None:
-        return centre + d * float(np.linalg.norm(hi - lo))
-    return hit
 
 
 def _outermost_hit(scalp, origin, direction):
@@ -185,9 +322,28 @@ def load_preset(name):
     return Preset(data.get("name", path.stem), params, data["keys"], data.get("description", ""))
 
 
-def save_preset(path, keys, params, name=None, description=""):
+def save_preset(path, keys, params, name=None, description="", scalp=None):
     """Write keys (absolute KeyStrands, stored as world-frame profiles anchored at their roots)
-    and params as a preset file, atomically."""
+    and params as a preset file, atomically.
+
+    scalp: the groom.Scalp the keys sit on (its up and front those of params). Given, the
+    anchors, profiles, up, front and parting go into the bundled head's space through the
+    scalp's head frame, so the preset lands the same way on this head and on any other;
+    without it they are taken to be in the bundled head's space already."""
+    if scalp is not None:
+        frame = fit_head_frame(scalp, params.up, params.front)
+        turn = frame.rotation  # v @ turn: a scalp-space vector in canonical axes, same length
+        canonical = []
+        for k in keys:
+            root = frame.to_canonical(k.root)
+            canonical.append(KeyStrand(np.vstack([root, root + (k.points[1:] - k.root) @ turn]), k.kind,
+                                       k.color, k.root_radius, k.group))
+        keys = canonical
+        parting = params.parting
+        if parting is not None:
+            parting = {"point": tuple(frame.to_canonical(parting["point"])),
+                       "normal": tuple(frame.normal_to_canonical(parting["normal"]))}
+        params = params.replace(up=CANONICAL_UP, front=CANONICAL_FRONT, parting=parting)
     specs = []
     for k in keys:
         specs.append({"anchor": {"point": k.root.tolist()}, "frame": "world",

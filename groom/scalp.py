@@ -310,6 +310,73 @@ def default_scalp(rings=13):
     return Scalp(verts, tris, uv=uv)
 
 
+def default_head(frequency=12):
+    """The bundled head: a closed mesh the bundled scalp (default_scalp) lies on, as a Scalp
+    (vertices, triangles, normals; no UVs). Same space: metres, Z up, -Y front.
+
+    The cranium is default_scalp's ellipsoid (half-axes 0.08, 0.1, 0.1 m about the origin);
+    below the middle of the head and in front of it the jaw is longer (the chin 2 cm lower)
+    and narrower, so the head has a face side. Where the scalp lies the surface is the bare
+    ellipsoid, so every scalp vertex is on the head (outside it by at most the sagitta of
+    the head's triangles, ~0.1 mm). A geodesic sphere of `frequency` subdivisions per
+    icosahedron edge (20·frequency² triangles: 2880 for 12, none of them slivers) mapped
+    onto that shape; triangles counter-clockwise seen from outside. No neck."""
+    if frequency < 1:
+        raise InputError("default_head frequency: must be >= 1")
+    directions, tris = _geodesic_sphere(int(frequency))
+    p = directions * np.array([0.08, 0.1, 0.1])
+    x, y, z = p.T
+    # Weights of the face side (in front of y = 0.02) and of the lower head (z < 0): their
+    # product is zero wherever the scalp is (its vertices below z = 0 all lie behind
+    # y = 0.023), so the scalp keeps the bare ellipsoid.
+    front = _smoothstep(0.02, -0.05, y)
+    low = _smoothstep(0.0, -0.1, z)
+    below = np.minimum(z, 0.0)
+    # z' = z - 0.35·front·z²/0.1 and x' = x·(1 - 0.25·front·low) keep dz'/dz > 0 and
+    # dx'/dx > 0 with y unchanged, so the map is one-to-one: the surface stays closed and
+    # unfolded, its orientation kept.
+    p = np.stack([x * (1.0 - 0.25 * front * low), y, z - 0.35 * front * below * below / 0.1], 1)
+    return Scalp(p, tris)
+
+
+def _smoothstep(edge0, edge1, v):
+    t = np.clip((v - edge0) / (edge1 - edge0), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def _geodesic_sphere(n):
+    """Unit vertices and outward counter-clockwise triangles of an icosahedron whose edges
+    are cut in n, projected onto the sphere."""
+    g = (1.0 + 5.0 ** 0.5) / 2.0
+    ico = np.array([(-1, g, 0), (1, g, 0), (-1, -g, 0), (1, -g, 0), (0, -1, g), (0, 1, g), (0, -1, -g),
+                    (0, 1, -g), (g, 0, -1), (g, 0, 1), (-g, 0, -1), (-g, 0, 1)], np.float64)
+    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2),
+             (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5),
+             (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    # Lattice points (i, j), i + j <= n, of one face, and its small triangles in lattice indices.
+    ij = [(i, j) for i in range(n + 1) for j in range(n + 1 - i)]
+    index = {q: k for k, q in enumerate(ij)}
+    small = []
+    for i, j in ij:
+        if i + j < n:
+            small.append((index[i, j], index[i + 1, j], index[i, j + 1]))
+        if i + j < n - 1:
+            small.append((index[i + 1, j], index[i + 1, j + 1], index[i, j + 1]))
+    ij, small = np.array(ij, np.float64) / n, np.array(small, np.int64)
+    points, tris = [], []
+    for f, (a, b, c) in enumerate(faces):
+        points.append(ico[a] + ij[:, :1] * (ico[b] - ico[a]) + ij[:, 1:] * (ico[c] - ico[a]))
+        tris.append(small + f * len(ij))
+    points, tris = np.concatenate(points), np.concatenate(tris)
+    # Faces share their edge points; merge them (the lattice spacing is far above the rounding).
+    _, first, inverse = np.unique(np.round(points * (8 * n), 3), axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    tris = inverse[tris]
+    points = points[first]
+    points /= np.linalg.norm(points, axis=1, keepdims=True)
+    return points, tris
+
+
 def load_obj(path):
     """Read a Wavefront .obj: `v`, `vt` and `f` (polygons fan-triangulated; v, v/vt, v//vn,
     v/vt/vn forms; negative indices count from the end). Returns a Scalp; UVs are kept per
