@@ -56,7 +56,7 @@ def generate_timings(scalp, count=100_000, runs=5):
             "points": result.strands.num_points,
             "operator_s": _median(operator, runs),
             "groom_s": _median(lambda: Generator(scalp_data, keys, params).generate(), runs),
-            "write_s": _median(lambda: hair.write_hair(scalp, result.strands), runs),
+            "write_s": _median(lambda: hair.write_hair(scalp, result.strands, result.root_uv), runs),
             "read_s": _median(lambda: hair.read_inputs(scalp, bpy.context.evaluated_depsgraph_get()), runs),
         }
     finally:

@@ -11,9 +11,16 @@ Python loop over strands or points. Attributes written:
                                       which Cycles renders black, see below)
     alpha        POINT  FLOAT         the strand opacity profile on its own, for shader nodes
     wisp         CURVE  INT           index of the key strand whose wisp the strand belongs to
+    surface_uv_coordinate  CURVE  FLOAT2  the root's UV on the scalp's UV map (Blender's own
+                                      hair attachment attribute; only when the scalp has one)
 
 Curve type is POLY: the strands are polylines (the tracer's cylinders), so Blender's
 evaluated curve, its exporters and the tracer all see the same points.
+
+Blender 4.2 has only `add_curves` on a Curves datablock (no `set_types`, `remove_curves`);
+what each Blender has is tested for, not its version number: POLY comes from the built-in
+`curve_type` attribute there, and a new strand layout from a new datablock put in the old
+one's place (`_replace_datablock`).
 """
 import numpy as np
 import bpy
@@ -28,7 +35,10 @@ COLOR_ATTRIBUTE = "strand_rgba"
 # The name the colour had before; read when no COLOR_ATTRIBUTE is present, and dropped on refill.
 LEGACY_COLOR_ATTRIBUTE = "color"
 
-ATTRIBUTES = ("position", "radius", COLOR_ATTRIBUTE, "alpha", "wisp")
+# Blender's name for a hair curve's attachment UV (its sculpt tools and geometry nodes read it).
+ROOT_UV_ATTRIBUTE = "surface_uv_coordinate"
+
+ATTRIBUTES = ("position", "radius", COLOR_ATTRIBUTE, "alpha", "wisp", ROOT_UV_ATTRIBUTE)
 
 
 def _attribute(curves, name, data_type, domain):
@@ -42,11 +52,83 @@ def _attribute(curves, name, data_type, domain):
     return attr
 
 
-def fill_curves(curves, strands):
-    """Replace the contents of the Curves datablock `curves` with `strands` (bulk writes).
+# Blender's CurveType value for poly curves (DNA_curves_types.h); the built-in `curve_type`
+# attribute holds one such INT8 per curve.
+CURVE_TYPE_POLY = 1
 
-    Keeps the datablock (and so its materials and users); resizes it only when the strand
-    layout changed, otherwise overwrites the point attributes in place.
+# Settings of a Curves datablock a replacement takes over (those this Blender has).
+_CARRIED_SETTINGS = ("surface", "surface_uv_map", "surface_collision_distance", "use_mirror_x",
+                     "use_mirror_y", "use_mirror_z", "use_sculpt_collision", "use_fake_user")
+
+
+def make_poly(curves):
+    """Make every curve of the Curves datablock `curves` a POLY (polyline) curve."""
+    if hasattr(curves, "set_types"):
+        curves.set_types(type='POLY')
+        return
+    attr = _attribute(curves, "curve_type", 'INT8', 'CURVE')
+    attr.data.foreach_set("value", np.full(len(curves.curves), CURVE_TYPE_POLY, np.int8))
+    # Blender keeps a count of the curves of each type beside that attribute, and a direct
+    # attribute write does not recount: with the count still saying Catmull-Rom, evaluating
+    # the curves writes past Blender's own buffers (heap corruption, a crash later). A topology
+    # change recounts, and add_curves of nothing is one that adds nothing.
+    curves.add_curves([])
+
+
+def _relayout(curves, counts):
+    """`curves` emptied and refilled with curves of `counts` points (POLY, attributes at their
+    defaults); returns the datablock that now holds them (see _replace_datablock)."""
+    if not hasattr(curves, "remove_curves"):
+        return _replace_datablock(curves, counts)
+    if len(curves.curves):
+        curves.remove_curves()
+    if len(counts):
+        # add_curves wants Python ints; one list conversion, not a loop in our code.
+        curves.add_curves(counts.tolist())
+    make_poly(curves)
+    return curves
+
+
+def _replace_datablock(old, counts):
+    """A new Curves datablock with curves of `counts` points (POLY) that takes `old`'s place:
+    its name, materials, surface and settings, its other attributes (at their defaults, as
+    a resize leaves them) and every user of `old`, which is removed. Where a Blender cannot
+    resize a Curves datablock in place (4.2), this is the resize; a failure before the swap
+    removes the new datablock and leaves `old` as it was."""
+    new = bpy.data.hair_curves.new(old.name)
+    try:
+        if len(counts):
+            new.add_curves(counts.tolist())
+        make_poly(new)
+        for mat in old.materials:
+            new.materials.append(mat)
+        for setting in _CARRIED_SETTINGS:
+            if hasattr(old, setting):
+                setattr(new, setting, getattr(old, setting))
+        for key in old.keys():
+            new[key] = old[key]
+        for attr in old.attributes:
+            if not attr.name.startswith(".") and attr.name not in new.attributes:
+                new.attributes.new(attr.name, attr.data_type, attr.domain)
+    except BaseException:
+        bpy.data.hair_curves.remove(new)
+        raise
+    name = old.name
+    old.user_remap(new)
+    bpy.data.hair_curves.remove(old)
+    new.name = name
+    return new
+
+
+def fill_curves(curves, strands, root_uv=None):
+    """Replace the contents of the Curves datablock `curves` with `strands` (bulk writes);
+    returns the datablock that holds them. root_uv: (S, 2) UVs of the roots on the surface's
+    UV map, or None (then no ROOT_UV_ATTRIBUTE, since an old one would be stale).
+
+    That is `curves` itself (materials, users and settings kept) unless the strand layout
+    changed in a Blender that cannot resize a datablock in place: then a new one has taken
+    its place (see _replace_datablock). When the layout is unchanged the point attributes
+    are overwritten in place.
     """
     counts = np.asarray(strands.counts, np.int32)
     same_layout = len(curves.curves) == len(counts)
@@ -54,13 +136,15 @@ def fill_curves(curves, strands):
         offsets = np.empty(len(counts) + 1, np.int32)
         curves.curve_offset_data.foreach_get("value", offsets)
         same_layout = np.array_equal(np.diff(offsets), counts)
+    if root_uv is not None:
+        root_uv = np.ascontiguousarray(root_uv, np.float32)
+        if root_uv.shape != (len(counts), 2):
+            raise ValueError(f"root_uv: shape {root_uv.shape}, expected ({len(counts)}, 2)")
     if not same_layout:
-        if len(curves.curves):
-            curves.remove_curves()
-        if len(counts):
-            # add_curves wants Python ints; one list conversion, not a loop in our code.
-            curves.add_curves(counts.tolist())
-        curves.set_types(type='POLY')
+        curves = _relayout(curves, counts)
+    stale = curves.attributes.get(ROOT_UV_ATTRIBUTE)
+    if root_uv is None and stale is not None:
+        curves.attributes.remove(stale)
     if not len(counts):
         return curves
     n_p = strands.num_points
@@ -80,11 +164,23 @@ def fill_curves(curves, strands):
         "value", np.ascontiguousarray(strands.alpha, np.float32))
     _attribute(curves, "wisp", 'INT', 'CURVE').data.foreach_set(
         "value", np.ascontiguousarray(strands.wisp, np.int32))
+    if root_uv is not None:
+        _attribute(curves, ROOT_UV_ATTRIBUTE, 'FLOAT2', 'CURVE').data.foreach_set("vector", root_uv.ravel())
     curves.update_tag()
     return curves
 
 
-def strands_to_curves(name, strands, collection=None, parent=None, obj=None):
+def root_uv(curves):
+    """(S, 2) float32 root UVs stored on a Curves datablock (ROOT_UV_ATTRIBUTE), or None."""
+    attr = curves.attributes.get(ROOT_UV_ATTRIBUTE)
+    if attr is None or attr.domain != 'CURVE' or attr.data_type != 'FLOAT2':
+        return None
+    uv = np.empty(len(curves.curves) * 2, np.float32)
+    attr.data.foreach_get("vector", uv)
+    return uv.reshape(-1, 2)
+
+
+def strands_to_curves(name, strands, collection=None, parent=None, obj=None, root_uv=None):
     """A hair Curves object named `name` holding `strands`; returns the object.
 
     collection: where to link a new object (default: the scene's active collection).
@@ -92,26 +188,31 @@ def strands_to_curves(name, strands, collection=None, parent=None, obj=None):
     identity local matrix and parent inverse, so the strand points are read in the
     parent's local space, exactly the space `groom` worked in. A mesh parent also becomes
     the curves' `surface`, so Blender's hair sculpt tools attach to it.
-    obj: an existing Curves object to refill instead of creating one (its datablock,
-    materials and modifiers are kept).
+    obj: an existing Curves object to refill instead of creating one (its modifiers and its
+    datablock's name, materials and settings are kept; see fill_curves).
+    root_uv: (S, 2) root UVs on the parent mesh's active UV map (see fill_curves), which
+    then becomes the curves' `surface_uv_map`.
     """
     if not isinstance(strands, Strands):
         raise TypeError(f"strands: expected hairio.Strands, got {type(strands).__name__}")
+    if obj is not None and obj.type != 'CURVES':
+        raise TypeError(f"obj: {obj.name!r} is a {obj.type} object, expected a hair Curves object")
     if obj is None:
         curves = bpy.data.hair_curves.new(name)
         obj = bpy.data.objects.new(name, curves)
         if collection is None:
             collection = bpy.context.collection or bpy.context.scene.collection
         collection.objects.link(obj)
-    elif obj.type != 'CURVES':
-        raise TypeError(f"obj: {obj.name!r} is a {obj.type} object, expected a hair Curves object")
-    fill_curves(obj.data, strands)
+    fill_curves(obj.data, strands, root_uv)
     if parent is not None:
         obj.parent = parent
         obj.matrix_parent_inverse.identity()
         obj.matrix_basis.identity()
         if parent.type == 'MESH':
             obj.data.surface = parent
+            uv_map = parent.data.uv_layers.active
+            if root_uv is not None and uv_map is not None:
+                obj.data.surface_uv_map = uv_map.name
     return obj
 
 
@@ -158,6 +259,17 @@ def ensure_hair_material(obj, name="Key-Strand Hair"):
         links.new(bsdf.outputs[0], out.inputs["Surface"])
     obj.data.materials.append(mat)
     return mat
+
+
+def transform_strand_arrays(points, radius, matrix):
+    """(points, radius) as float32 carried by the 4x4 `matrix`, computed in float64: points by
+    the matrix, radii by its uniform scale (the cube root of its volume scale). One rule for
+    every consumer of world-space strands (preview, the panel's exports, Alembic/USD), so
+    their files agree to the bit."""
+    m = np.asarray(matrix, np.float64)
+    world = np.asarray(points, np.float64) @ m[:3, :3].T + m[:3, 3]
+    scale = abs(np.linalg.det(m[:3, :3])) ** (1.0 / 3.0)
+    return world.astype(np.float32), (np.asarray(radius, np.float64) * scale).astype(np.float32)
 
 
 def curves_to_strands(obj):

@@ -1,6 +1,10 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Alembic and USD export of a hair Curves object through Blender's own exporters.
 
+`export_hair` is the one export of a hair object, for the panel's Export and for
+`python -m groom export --format abc|usd` alike: it adds the groom attributes Unreal reads
+(hairio.unreal.groom_attributes, root UVs when known) and runs `export_curves_object`.
+
 `export_curves_object` never touches the user's scene: it copies the Curves datablock,
 bakes the object's world matrix, the scale and the axis choice into the copy's points and
 radii (so the file holds final coordinates and widths with identity transforms), links it
@@ -27,12 +31,13 @@ What the files hold (verified by tests/hairio/test_io_blender_export.py):
   (= 2 * radius), and every attribute of `attributes` as a primvar of the same name
   (hairio.unreal.groom_attributes). Orientation and units are left to Blender's USD options
   so the stage stays self-describing: axis="y-up" sets upAxis Y with a root rotation,
-  scale s sets metersPerUnit = 1/s with a root scale.
+  scale s sets metersPerUnit = 1/s with a root scale (a Blender whose USD exporter has no
+  unit options, 4.2, gets the points scaled by s instead, and the same metersPerUnit).
 
 Run as a script (what `python -m groom export --format abc|usd` does, in a subprocess so the
 command-line packages never import bpy):
 
-    python addon/export_blender.py STRANDS.npz OUT.abc [--scale 100] [--axis y-up]
+    python addon/export_blender.py STRANDS.npz OUT.abc [--scale 100] [--axis y-up] [--root-uv UV.npy]
 """
 import contextlib
 import os
@@ -54,6 +59,10 @@ class ExportError(ValueError):
     """Bad export request: the message names the input and the fix."""
 
 
+class ExporterFailed(RuntimeError):
+    """Blender's exporter ran and wrote no file; the message says what it reported."""
+
+
 def _check(format, path, axis, scale):
     if format not in FORMATS:
         raise ExportError(f"format: {format!r}; choose 'abc' or 'usd'")
@@ -72,17 +81,16 @@ def _check(format, path, axis, scale):
     return ext, axis, scale
 
 
-def _bake(data, matrix, width_scale, attributes):
-    """Make the Curves datablock `data` (a copy) POLY, apply `matrix` to its points, scale
-    its radii by `width_scale`, add the generic `attributes`."""
+def _bake(data, matrix, attributes):
+    """Make the Curves datablock `data` (a copy) POLY, carry its points and radii by `matrix`
+    (blender_curves.transform_strand_arrays), add the generic `attributes`."""
+    from .blender_curves import make_poly, transform_strand_arrays
     n_p = len(data.points)
     if len(data.curves):
-        data.set_types(type='POLY')
+        make_poly(data)
     if n_p:
         pos = np.empty(n_p * 3, np.float32)
         data.attributes["position"].data.foreach_get("vector", pos)
-        pos = pos.reshape(n_p, 3).astype(np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
-        data.attributes["position"].data.foreach_set("vector", pos.astype(np.float32).ravel())
         radius = np.full(n_p, 0.0, np.float32)
         attr = data.attributes.get("radius")
         if attr is not None and attr.domain == 'POINT' and attr.data_type == 'FLOAT':
@@ -90,7 +98,9 @@ def _bake(data, matrix, width_scale, attributes):
         else:
             attr = data.attributes.new("radius", 'FLOAT', 'POINT')
             radius[:] = 0.005  # Blender's own default hair radius when none is stored
-        attr.data.foreach_set("value", radius * np.float32(width_scale))
+        pos, radius = transform_strand_arrays(pos.reshape(n_p, 3), radius, matrix)
+        data.attributes["position"].data.foreach_set("vector", pos.ravel())
+        attr.data.foreach_set("value", radius)
     for name, (domain, data_type, values) in (attributes or {}).items():
         old = data.attributes.get(name)
         if old is not None:
@@ -100,6 +110,20 @@ def _bake(data, matrix, width_scale, attributes):
             "color" if data_type == 'FLOAT_COLOR' else "value")
         attr.data.foreach_set(key, np.ascontiguousarray(values).ravel())
     data.update_tag()
+
+
+def export_hair(obj, path, format="abc", scale=1.0, axis=None, root_uv=None, groom_attributes=True):
+    """Export the hair Curves object `obj` with the per-strand attributes Unreal's groom
+    importer reads (hairio.unreal.groom_attributes; `root_uv` (S, 2), e.g. from the scalp's
+    UV map, becomes groom_root_uv). The panel's Export and the command line both run this.
+    Other arguments as export_curves_object; returns the path written."""
+    _check(format, path, axis, scale)
+    attributes = None
+    if groom_attributes:
+        from hairio.unreal import groom_attributes as attributes_of
+        from .blender_curves import curves_to_strands
+        attributes = attributes_of(curves_to_strands(obj), root_uv=root_uv)
+    return export_curves_object(obj, path, format, scale=scale, axis=axis, attributes=attributes)
 
 
 def export_curves_object(obj, path, format="abc", scale=1.0, axis=None, attributes=None):
@@ -117,13 +141,14 @@ def export_curves_object(obj, path, format="abc", scale=1.0, axis=None, attribut
                           f"{'nothing' if obj is None else obj.type}")
     ext, axis, scale = _check(format, path, axis, scale)
     world = np.array(obj.matrix_world, np.float64)
-    # Widths scale with the object's uniform scale (its volume scale's cube root).
-    width_scale = abs(np.linalg.det(world[:3, :3])) ** (1.0 / 3.0)
     matrix = world.copy()
-    if format == "abc":
-        conv = scale * (_ALEMBIC_KEEP_Z_UP if axis == "z-up" else np.eye(3))
+    # Alembic has no units, and a USD exporter without unit options (Blender 4.2) takes the
+    # stage's metersPerUnit from the scene's unit scale: both get `scale` baked into the
+    # points (widths follow the matrix's uniform scale, so into them too).
+    bake_scale = format == "abc" or not _usd_unit_options()
+    if bake_scale:
+        conv = scale * (_ALEMBIC_KEEP_Z_UP if format == "abc" and axis == "z-up" else np.eye(3))
         matrix[:3, :] = conv @ world[:3, :]
-        width_scale *= scale
     folder = os.path.dirname(os.path.abspath(path))
     fd, tmp_path = tempfile.mkstemp(prefix=".tmp-", suffix=ext, dir=folder)
     os.close(fd)
@@ -134,7 +159,7 @@ def export_curves_object(obj, path, format="abc", scale=1.0, axis=None, attribut
     try:
         data = obj.data.copy()
         created.append(data)
-        _bake(data, matrix, width_scale, attributes)
+        _bake(data, matrix, attributes)
         obj.name = name + ".hair-export-original"
         obj.data.name = data_name + ".hair-export-original"
         data.name = data_name
@@ -145,7 +170,7 @@ def export_curves_object(obj, path, format="abc", scale=1.0, axis=None, attribut
         scene.collection.objects.link(tmp_obj)
         scene.frame_start = scene.frame_end = scene.frame_current = bpy.context.scene.frame_current
         view_layer = scene.view_layers[0]
-        with bpy.context.temp_override(scene=scene, view_layer=view_layer):
+        with bpy.context.temp_override(scene=scene, view_layer=view_layer), _exporter_errors(format):
             if format == "abc":
                 result = bpy.ops.wm.alembic_export(
                     filepath=tmp_path, check_existing=False, selected=False,
@@ -153,8 +178,12 @@ def export_curves_object(obj, path, format="abc", scale=1.0, axis=None, attribut
                     export_custom_properties=False, as_background_job=False,
                     evaluation_mode='RENDER', init_scene_frame_range=False)
             else:
-                units = {1.0: 'METERS', 100.0: 'CENTIMETERS', 1000.0: 'MILLIMETERS'}.get(scale, 'CUSTOM')
-                unit_opts = dict(convert_scene_units=units, meters_per_unit=1.0 / scale)
+                unit_opts = {}
+                if bake_scale:
+                    scene.unit_settings.scale_length = 1.0 / scale
+                else:
+                    units = {1.0: 'METERS', 100.0: 'CENTIMETERS', 1000.0: 'MILLIMETERS'}.get(scale, 'CUSTOM')
+                    unit_opts = dict(convert_scene_units=units, meters_per_unit=1.0 / scale)
                 result = bpy.ops.wm.usd_export(
                     filepath=tmp_path, check_existing=False, selected_objects_only=False,
                     export_animation=False, export_materials=False,
@@ -162,7 +191,7 @@ def export_curves_object(obj, path, format="abc", scale=1.0, axis=None, attribut
                     export_global_forward_selection='NEGATIVE_Z',
                     evaluation_mode='RENDER', **unit_opts)
         if 'FINISHED' not in result or os.path.getsize(tmp_path) == 0:
-            raise RuntimeError(f"Blender's {format} exporter did not finish ({result})")
+            raise ExporterFailed(f"Blender's {format} exporter did not finish ({result})")
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp made it private; exports are ordinary files
@@ -177,6 +206,20 @@ def export_curves_object(obj, path, format="abc", scale=1.0, axis=None, attribut
         obj.data.name = data_name
 
 
+def _usd_unit_options():
+    """Whether this Blender's USD exporter converts units itself (convert_scene_units; 4.2's has not)."""
+    return "convert_scene_units" in bpy.ops.wm.usd_export.get_rna_type().properties.keys()
+
+
+@contextlib.contextmanager
+def _exporter_errors(format):
+    # bpy.ops raises RuntimeError with the operator's own error report.
+    try:
+        yield
+    except RuntimeError as e:
+        raise ExporterFailed(f"Blender's {format} exporter failed: {e}") from e
+
+
 def _remove(block):
     if isinstance(block, bpy.types.Scene):
         bpy.data.scenes.remove(block)
@@ -189,13 +232,9 @@ def _remove(block):
 def main(argv=None):
     """Script entry: read strands, build a Curves object in an empty scene, export."""
     import argparse
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    if root not in sys.path:
-        sys.path.insert(0, root)
     from hairio import InputError
     from hairio.formats import read_strands
-    from hairio.unreal import groom_attributes
-    from addon.blender_curves import strands_to_curves
+    from .blender_curves import strands_to_curves
 
     ap = argparse.ArgumentParser(prog="export_blender", description="Alembic/USD export through Blender")
     ap.add_argument("input")
@@ -209,16 +248,25 @@ def main(argv=None):
     fmt = args.format or ("abc" if args.out.lower().endswith(".abc") else "usd")
     try:
         strands = read_strands(args.input)
-        root_uv = np.load(args.root_uv) if args.root_uv else None
-        attrs = None if args.no_groom_attributes else groom_attributes(strands, root_uv=root_uv)
+        root_uv = None
+        if args.root_uv:
+            try:
+                root_uv = np.load(args.root_uv, allow_pickle=False)
+            except (OSError, ValueError) as e:
+                raise InputError(f"--root-uv {args.root_uv}: cannot read a .npy array ({e})") from e
         bpy.ops.wm.read_factory_settings(use_empty=True)
         obj = strands_to_curves("hair", strands, collection=bpy.context.scene.collection)
-        export_curves_object(obj, args.out, fmt, scale=args.scale, axis=args.axis, attributes=attrs)
-    except (InputError, ExportError) as e:
+        export_hair(obj, args.out, fmt, scale=args.scale, axis=args.axis, root_uv=root_uv,
+                    groom_attributes=not args.no_groom_attributes)
+    except (InputError, ExportError, ExporterFailed) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # Run as a script: import this file again as addon.export_blender, a module of the package,
+    # so that its relative imports resolve, and run that module's main.
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    from addon import export_blender
+    sys.exit(export_blender.main())

@@ -10,6 +10,7 @@ import time
 import bpy
 
 from . import blender_curves, preview, scene_data
+from .transaction import transaction
 from .properties import groom_params
 
 
@@ -37,22 +38,30 @@ def build_generator(scalp_data, keys, settings, count=None):
     return gen, gen.generate()
 
 
-def write_hair(scalp, strands):
-    """Write strands (scalp space) into the scalp's hair object, creating it on first use."""
-    hair = existing_hair(scalp)
-    collection = None
-    if hair is None and scalp.users_collection:
-        collection = scalp.users_collection[0]
-    new = hair is None
-    hair = blender_curves.strands_to_curves(hair_name(scalp), strands, collection=collection,
-                                            parent=scalp, obj=hair)
-    if new:
-        blender_curves.ensure_hair_material(hair)
+def write_hair(scalp, strands, root_uv=None):
+    """Write strands (scalp space) into the scalp's hair object, creating it on first use;
+    root_uv: the roots' UVs on the scalp's UV map (GroomResult.root_uv), or None.
+    All or nothing: a failure midway leaves the scalp, its hair and the file as they were."""
+    with transaction() as tx:
+        hair = existing_hair(scalp)
+        tx.keep_settings(scalp)
+        collection = None
+        if hair is None and scalp.users_collection:
+            collection = scalp.users_collection[0]
+        new = hair is None
+        if not new:
+            tx.keep_settings(hair)
+            tx.keep_transform(hair)
+            tx.keep_curves(hair)
+        hair = blender_curves.strands_to_curves(hair_name(scalp), strands, collection=collection,
+                                                parent=scalp, obj=hair, root_uv=root_uv)
+        if new:
+            blender_curves.ensure_hair_material(hair)
+        hair.keystrand_hair.role = 'HAIR'
+        hair.keystrand_hair.scalp = scalp
+        if scalp.keystrand_hair.hair_object != hair:
+            scalp.keystrand_hair.hair_object = hair
     preview.bump(hair.data)
-    hair.keystrand_hair.role = 'HAIR'
-    hair.keystrand_hair.scalp = scalp
-    if scalp.keystrand_hair.hair_object != hair:
-        scalp.keystrand_hair.hair_object = hair
     return hair
 
 
@@ -60,7 +69,8 @@ def generate(scalp, depsgraph=None, count=None):
     """Full generation for a scalp object. Returns (hair object, GroomResult, timings dict).
 
     Reads and computes everything before the first write, so an error (SceneError,
-    hairio.InputError) leaves the file untouched.
+    hairio.InputError) leaves the file untouched; the writes are one transaction, so an
+    unexpected error among them leaves it untouched too.
     """
     from . import live
     settings = scalp.keystrand_hair
@@ -69,9 +79,11 @@ def generate(scalp, depsgraph=None, count=None):
     t1 = time.perf_counter()
     gen, result = build_generator(scalp_data, keys, settings, count)
     t2 = time.perf_counter()
-    if settings.role != 'SCALP':
-        settings.role = 'SCALP'
-    hair = write_hair(scalp, result.strands)
+    with transaction() as tx:
+        tx.keep_settings(scalp)
+        if settings.role != 'SCALP':
+            settings.role = 'SCALP'
+        hair = write_hair(scalp, result.strands, result.root_uv)
     t3 = time.perf_counter()
     live.remember(scalp, scalp_data, keys, gen, result)
     return hair, result, {"read_s": t1 - t0, "groom_s": t2 - t1, "write_s": t3 - t2, "total_s": t3 - t0}

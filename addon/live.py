@@ -132,7 +132,7 @@ def process(now=None, settle=False):
             print(f"Key-strand hair: live update skipped ({e})")
             continue
         if result is not None:
-            hair.write_hair(scalp, result.strands)
+            hair.write_hair(scalp, result.strands, result.root_uv)
             state.last_edit = now
             written += 1
     for uid, state in list(_states.items()):
@@ -194,7 +194,7 @@ def _finish_catch_up(uid, state, wait=False):
     scalp = _scalp_by_uid(uid)
     if state.dragging or scalp is None or hair.existing_hair(scalp) is None:
         return 0  # a newer drag is on screen; its own catch-up follows
-    hair.write_hair(scalp, result.strands)
+    hair.write_hair(scalp, result.strands, result.root_uv)
     return 1
 
 

@@ -1,14 +1,18 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Operators: Add Key Strand, Generate, Render Preview, presets, export.
 
-Each one checks everything it needs before its first change to the file, so a failure is
-a report in the UI and leaves the scene exactly as it was (and makes no undo step).
-Heavy modules (groom, tracer, moderngl) are imported inside execute(), so enabling the
+Each one checks and computes everything it needs before its first change to the file, and
+makes its changes as one transaction (transaction.py), so a failure is a report in the UI
+and leaves the scene and the files exactly as they were (and makes no undo step). A bad
+input is reported as the user's to fix; anything else is a bug, reported as an internal
+error with its traceback in the console, and undone all the same. Never a traceback in the
+UI. Heavy modules (groom, tracer, moderngl) are imported inside execute(), so enabling the
 extension costs nothing.
 """
 import os
 import pathlib
 import time
+import traceback
 
 import bpy
 from bpy.props import EnumProperty, FloatVectorProperty, BoolProperty, StringProperty
@@ -17,6 +21,7 @@ from bpy_extras.io_utils import ExportHelper
 
 from . import scene_data
 from .scene_data import SceneError, find_scalp
+from .transaction import transaction
 
 EXPORT_FORMATS = (
     ('npz', "NumPy arrays (.npz)", "Strand arrays (points, counts, radius, color, alpha, wisp)"),
@@ -31,6 +36,15 @@ def _errors():
     """The exception types that mean 'the user can fix this': reported, never raised."""
     from hairio import InputError
     return (SceneError, InputError)
+
+
+def _report_internal_error(op, error):
+    """Report an error that is not the user's (a bug): the press was undone, the console has
+    the traceback for the bug report."""
+    traceback.print_exception(error)
+    op.report({'ERROR'}, f"Internal error in {op.bl_label} ({type(error).__name__}: {error}); "
+                         "nothing was changed. Please report this, with the traceback printed "
+                         "in Blender's system console")
 
 
 def _scalp_or_report(op, context):
@@ -160,11 +174,16 @@ class HAIR_OT_add_key_strand(Operator):
             frame = root_frames(normal, tuple(settings.up), tuple(settings.front))[0]
             profile = scene_data.shape_profile(settings.key_shape, settings.key_length)
             points = place_key(profile, root[0], frame)
+            with transaction() as tx:
+                tx.keep_settings(scalp)
+                settings.role = 'SCALP'
+                key = scene_data.new_key_object(scalp, points, name=f"{scalp.name} Key")
         except _errors() as e:
             self.report({'ERROR'}, str(e))
             return {'CANCELLED'}
-        settings.role = 'SCALP'
-        key = scene_data.new_key_object(scalp, points, name=f"{scalp.name} Key")
+        except Exception as e:
+            _report_internal_error(self, e)
+            return {'CANCELLED'}
         for obj in context.selected_objects:
             obj.select_set(False)
         key.select_set(True)
@@ -192,6 +211,9 @@ class HAIR_OT_generate(Operator):
             hair, result, t = generate(scalp, context.evaluated_depsgraph_get())
         except _errors() as e:
             self.report({'ERROR'}, str(e))
+            return {'CANCELLED'}
+        except Exception as e:
+            _report_internal_error(self, e)
             return {'CANCELLED'}
         s = result.strands
         self.report({'INFO'}, f"Generated {s.num_strands:,} strands ({s.num_points:,} points) in "
@@ -227,6 +249,9 @@ class HAIR_OT_render_preview(Operator):
         t0 = time.perf_counter()
         try:
             pixels, t = preview.render(context.scene, hair, camera, scalp.keystrand_hair)
+            with transaction():
+                image = preview.write_image(pixels)
+                preview.show_image(context, image)
         except _errors() as e:
             self.report({'ERROR'}, str(e))
             return {'CANCELLED'}
@@ -234,8 +259,9 @@ class HAIR_OT_render_preview(Operator):
             self.report({'ERROR'}, f"The preview renderer stopped ({e}). Blender is fine; "
                                    "press Render Preview again to start a new renderer")
             return {'CANCELLED'}
-        image = preview.write_image(pixels)
-        preview.show_image(context, image)
+        except Exception as e:
+            _report_internal_error(self, e)
+            return {'CANCELLED'}
         h, w = pixels.shape[:2]
         self.report({'INFO'}, f"Rendered {w}x{h} in {time.perf_counter() - t0:.2f} s")
         return {'FINISHED'}
@@ -259,6 +285,7 @@ class HAIR_OT_load_preset(Operator):
 
     def execute(self, context):
         from groom import load_preset
+        from . import head
         from .properties import dict_to_settings
         scalp = _scalp_or_report(self, context)
         if scalp is None:
@@ -270,22 +297,32 @@ class HAIR_OT_load_preset(Operator):
         try:
             preset = load_preset(source)
             scalp_data = scene_data.read_scalp(scalp, context.evaluated_depsgraph_get())
-            keys = preset.keys_on(scalp_data)
+            placement = head.place_preset(preset, scalp, scalp_data)
+            keys = placement.keys
+            with transaction() as tx:
+                tx.keep_settings(scalp)
+                old = scene_data.key_objects(scalp) if self.replace else []
+                settings = scalp.keystrand_hair
+                settings.role = 'SCALP'
+                dict_to_settings(settings, preset.params.to_dict())
+                names = [f"{scalp.name} Key {i:02d}" for i in range(len(keys))]
+                made = [scene_data.key_strand_to_object(scalp, key, name=name)
+                        for key, name in zip(keys, names)]
+                # Removing cannot be undone, so the old keys go last, once every new one is
+                # made; the new ones then take the names the old ones held.
+                scene_data.remove_key_objects(old)
+                for obj, name in zip(made, names):
+                    obj.name = obj.data.name = name
         except _errors() as e:
             self.report({'ERROR'}, str(e))
             return {'CANCELLED'}
-        if self.replace:
-            for obj in scene_data.key_objects(scalp):
-                curve = obj.data
-                bpy.data.objects.remove(obj)
-                if curve.users == 0:
-                    bpy.data.curves.remove(curve)
-        settings = scalp.keystrand_hair
-        settings.role = 'SCALP'
-        dict_to_settings(settings, preset.params.to_dict())
-        for i, key in enumerate(keys):
-            scene_data.key_strand_to_object(scalp, key, name=f"{scalp.name} Key {i:02d}")
+        except Exception as e:
+            _report_internal_error(self, e)
+            return {'CANCELLED'}
         self.report({'INFO'}, f"Loaded preset {preset.name!r}: {len(keys)} key strands")
+        warning = placement.warning()
+        if warning is not None:
+            self.report({'WARNING'}, warning)
         return {'FINISHED'}
 
 
@@ -319,15 +356,37 @@ class HAIR_OT_save_preset(Operator, ExportHelper):
         try:
             keys = scene_data.read_keys(scalp)
             params = groom_params(scalp.keystrand_hair)
-            save_preset(self.filepath, keys, params, description=self.description)
+            # Given the scalp, the preset is stored in the bundled head's space through this
+            # head's frame, so Load Preset places it the same way here and on any other head.
+            scalp_data = scene_data.read_scalp(scalp, context.evaluated_depsgraph_get())
+            save_preset(self.filepath, keys, params, description=self.description, scalp=scalp_data)
         except _errors() as e:
             self.report({'ERROR'}, str(e))
             return {'CANCELLED'}
         except OSError as e:
             self.report({'ERROR'}, f"Cannot write {self.filepath}: {e}")
             return {'CANCELLED'}
+        except Exception as e:
+            _report_internal_error(self, e)
+            return {'CANCELLED'}
         self.report({'INFO'}, f"Saved preset {self.filepath}")
         return {'FINISHED'}
+
+
+def export_to_file(hair, path, format, world_space=True, blender_exporter=None):
+    """Write a hair object to `path` through the command line's own writers, with the same
+    attributes (`python -m groom export` on the hair's strands writes the same file): numpy
+    formats through hairio.cli.export_strands, Alembic/USD (always world space: Blender's
+    exporters bake the object's matrix) through export_blender.export_hair. Root UVs are
+    the ones Generate stored from the scalp's UV map, when it has one."""
+    from . import blender_curves, preview
+    uv = blender_curves.root_uv(hair.data)
+    if format in ('abc', 'usd'):
+        return blender_exporter.export_hair(hair, path, format, root_uv=uv)
+    from hairio.cli import export_strands
+    strands = preview.world_strands(hair) if world_space else blender_curves.curves_to_strands(hair)
+    source = f"{os.path.basename(bpy.data.filepath) or 'unsaved .blend file'}: {hair.name}"
+    return export_strands(strands, path, format, root_uv=uv, source=source)
 
 
 def export_blender_module():
@@ -379,24 +438,23 @@ class HAIR_OT_export(Operator, ExportHelper):
         if not path.lower().endswith("." + self.format) and not (
                 self.format == 'usd' and path.lower().endswith((".usda", ".usdc"))):
             path = os.path.splitext(path)[0] + "." + self.format
+        module = export_blender_module() if self.format in ('abc', 'usd') else None
+        if self.format in ('abc', 'usd') and module is None:
+            self.report({'ERROR'}, f"Export to .{self.format} is not available in this version")
+            return {'CANCELLED'}
+        user_errors = _errors() + ((module.ExportError,) if module else ())
+        cannot_write = (OSError,) + ((module.ExporterFailed,) if module else ())
         try:
-            if self.format in ('abc', 'usd'):
-                module = export_blender_module()
-                if module is None:
-                    self.report({'ERROR'}, f"Export to .{self.format} is not available in this version")
-                    return {'CANCELLED'}
-                # Always world space: Blender's exporters bake the object's matrix.
-                module.export_curves_object(hair, path, format=self.format)
-            else:
-                from hairio.formats import write_strands
-                from . import preview, blender_curves
-                strands = preview.world_strands(hair) if self.world_space else blender_curves.curves_to_strands(hair)
-                write_strands(path, strands)
-        except _errors() + (ValueError,) as e:
+            with transaction():
+                export_to_file(hair, path, self.format, self.world_space, module)
+        except user_errors as e:
             self.report({'ERROR'}, str(e))
             return {'CANCELLED'}
-        except (OSError, RuntimeError) as e:
+        except cannot_write as e:
             self.report({'ERROR'}, f"Cannot write {path}: {e}")
+            return {'CANCELLED'}
+        except Exception as e:
+            _report_internal_error(self, e)
             return {'CANCELLED'}
         self.report({'INFO'}, f"Exported {path}")
         return {'FINISHED'}

@@ -16,6 +16,7 @@ import numpy as np
 import bpy
 
 from . import blender_curves
+from .transaction import transaction
 
 IMAGE_NAME = "Hair Preview"
 
@@ -134,9 +135,8 @@ def world_strands(hair_obj):
     m = np.array(hair_obj.matrix_world, np.float64)
     if np.allclose(m, np.eye(4)):
         return s
-    points = s.points @ m[:3, :3].T + m[:3, 3]
-    scale = abs(np.linalg.det(m[:3, :3])) ** (1.0 / 3.0)
-    return Strands.from_arrays(points, s.counts, s.radius * scale, s.color, s.alpha, s.wisp)
+    points, radius = blender_curves.transform_strand_arrays(s.points, s.radius, m)
+    return Strands.from_arrays(points, s.counts, radius, s.color, s.alpha, s.wisp)
 
 
 def render(scene, hair_obj, camera_obj, settings):
@@ -175,19 +175,39 @@ def render(scene, hair_obj, camera_obj, settings):
 
 
 def write_image(pixels):
-    """Put (H, W, 4) top-row-first linear RGBA into the image "Hair Preview" (created or
-    resized as needed) with one foreach_set; returns the image."""
+    """Put (H, W, 4) top-row-first linear RGBA into the image "Hair Preview" with one
+    foreach_set; returns the image.
+
+    All or nothing: an image of another size or kind is replaced by a new one only when the
+    whole change commits (the new one then takes its name and users), and an image filled in
+    place gets its old pixels back on rollback."""
     h, w = pixels.shape[:2]
-    image = bpy.data.images.get(IMAGE_NAME)
-    if image is not None and (image.size[0] != w or image.size[1] != h or not image.is_float):
-        bpy.data.images.remove(image)
-        image = None
-    if image is None:
-        image = bpy.data.images.new(IMAGE_NAME, w, h, alpha=True, float_buffer=True)
     # Blender stores rows bottom-up.
-    image.pixels.foreach_set(np.ascontiguousarray(pixels[::-1], np.float32).ravel())
+    flat = np.ascontiguousarray(pixels[::-1], np.float32).ravel()
+    with transaction() as tx:
+        image = bpy.data.images.get(IMAGE_NAME)
+        if image is not None and image.size[0] == w and image.size[1] == h and image.is_float:
+            old = np.empty(len(image.pixels), np.float32)
+            image.pixels.foreach_get(old)
+            tx.undo(lambda: _fill_image(image, old))
+            target = image
+        else:
+            target = bpy.data.images.new(IMAGE_NAME, w, h, alpha=True, float_buffer=True)
+            if image is not None:
+                tx.on_commit(lambda: _replace_image(image, target))
+        _fill_image(target, flat)
+    return target
+
+
+def _fill_image(image, flat):
+    image.pixels.foreach_set(flat)
     image.update()
-    return image
+
+
+def _replace_image(old, new):
+    old.user_remap(new)
+    bpy.data.images.remove(old)
+    new.name = IMAGE_NAME
 
 
 def show_image(context, image):

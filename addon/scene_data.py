@@ -34,6 +34,17 @@ def key_objects(scalp):
     return sorted(keys, key=lambda o: o.name)
 
 
+def remove_key_objects(objs):
+    """Remove key strand objects, and their curves when nothing else uses them, in one batch."""
+    if not objs:
+        return
+    curves = {o.data.session_uid: o.data for o in objs}
+    bpy.data.batch_remove(list(objs))
+    orphans = [c for c in curves.values() if c.users == 0]
+    if orphans:
+        bpy.data.batch_remove(orphans)
+
+
 def _matrix(m):
     return np.array(m, dtype=np.float64).reshape(4, 4)
 

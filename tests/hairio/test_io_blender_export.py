@@ -125,10 +125,22 @@ def test_usd_is_linear_basis_curves_with_vertex_widths_and_groom_primvars(export
 
 
 def test_usd_units_and_axis_are_stage_metadata(exported):
+    """Centimetres and Y up are said by the stage: metersPerUnit 0.01, upAxis Y with a root
+    rotation. The factor 100 is a root scale where Blender's USD exporter converts units
+    (5.x), and in the points where it cannot (4.2, which takes metersPerUnit from the scene's
+    unit scale, a float32: 0.0099999998): either way a point of the file is 100 x the world
+    point, in the rotated root."""
     tmp, s, _ = exported
     text = _usda(tmp / "cm.usda")
-    assert 'upAxis = "Y"' in text and "metersPerUnit = 0.01" in text
-    assert "xformOp:scale = (100, 100, 100)" in text and "xformOp:rotateXYZ = (-90" in text
+    assert 'upAxis = "Y"' in text and "xformOp:rotateXYZ = (-90" in text
+    mpu = float(re.search(r"metersPerUnit = ([\d.e-]+)", text).group(1))
+    assert mpu == pytest.approx(0.01, rel=1e-6)
+    root_scale = re.search(r"xformOp:scale = \(([^)]*)\)", text)
+    factor = 1.0 if root_scale is None else float(root_scale.group(1).split(",")[0])
+    pts = _array(text, "point3f[] points").reshape(-1, 3)
+    np.testing.assert_allclose(factor * pts, 100 * (s.points + [1, 2, 3]), rtol=1e-6, atol=1e-4)
+    widths = _array(text, "float[] widths")
+    np.testing.assert_allclose(factor * widths, 100 * 2 * s.radius, rtol=1e-5)
 
 
 def test_alembic_holds_scaled_points_and_widths_in_the_chosen_axes(exported):

@@ -1,0 +1,153 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""All or nothing for one press of an operator: when it fails midway, every datablock it made
+is removed and everything it changed is put back, so the file is exactly as it was.
+
+    with transaction() as tx:
+        tx.keep_settings(scalp)     # its Key-Strand Hair settings come back
+        tx.keep_transform(hair)     # its parent and matrices come back
+        tx.keep_curves(hair)        # its Curves datablock comes back, as it was
+        ... write ...
+
+An exception inside the block rolls back and propagates; the caller decides how to report
+it. Datablocks made inside the block need no bookkeeping: every ID that was not in the file
+when the block began is removed on rollback. A `transaction()` opened inside another joins
+it, so a writer such as hair.write_hair is all or nothing alone (live update) and as a part
+of an operator's larger change alike.
+"""
+import contextlib
+import traceback
+
+import bpy
+
+_active = None
+
+
+def _all_ids():
+    """session_uid -> ID of every datablock in the file (every collection of bpy.data)."""
+    out = {}
+    for prop in bpy.types.BlendData.bl_rna.properties:
+        if prop.type != 'COLLECTION':
+            continue
+        for block in getattr(bpy.data, prop.identifier):
+            if isinstance(block, bpy.types.ID):
+                out[block.session_uid] = block
+    return out
+
+
+def _settings_values(settings):
+    """The writable values of a property group, arrays as tuples, ID pointers as the ID."""
+    out = {}
+    for prop in settings.bl_rna.properties:
+        if prop.identifier == "rna_type" or prop.is_readonly or prop.type == 'COLLECTION':
+            continue
+        value = getattr(settings, prop.identifier)
+        if prop.type == 'POINTER' and value is not None and not isinstance(value, bpy.types.ID):
+            continue  # a nested group: not used by these settings
+        if getattr(prop, "is_array", False):
+            value = tuple(value)
+        out[prop.identifier] = value
+    return out
+
+
+class Transaction:
+    """The undo log of one press; use through `transaction()`."""
+
+    def __init__(self):
+        self._before = set(_all_ids())
+        self._undo = []        # callables putting back what was changed, run last first
+        self._on_commit = []   # callables dropping the copies kept for the undo
+        self._survivors = set()  # session_uids of datablocks made here that a rollback keeps
+
+    def keep_settings(self, obj):
+        """Put back every Key-Strand Hair setting of `obj` on rollback."""
+        settings = obj.keystrand_hair
+        saved = _settings_values(settings)
+
+        def undo():
+            # Twice: a setter may rewrite others (Head Axes rewrites Up and Front), and the
+            # second pass puts those back too. Only values that differ are set, so no update
+            # callback runs for a setting that never changed.
+            for _ in range(2):
+                now = _settings_values(settings)
+                for name, value in saved.items():
+                    if now.get(name) != value:
+                        setattr(settings, name, value)
+        self._undo.append(undo)
+
+    def keep_transform(self, obj):
+        """Put back `obj`'s parent and matrices on rollback."""
+        parent = obj.parent
+        parent_inverse = obj.matrix_parent_inverse.copy()
+        basis = obj.matrix_basis.copy()
+
+        def undo():
+            obj.parent = parent
+            obj.matrix_parent_inverse = parent_inverse
+            obj.matrix_basis = basis
+        self._undo.append(undo)
+
+    def keep_curves(self, obj):
+        """Put back `obj`'s Curves datablock as it is now on rollback, even if it was filled
+        in place or replaced by another one meanwhile.
+
+        The copy costs no memory at first (Blender shares the arrays until one side writes);
+        on commit it is dropped."""
+        original = obj.data
+        name, fake_user = original.name, original.use_fake_user
+        backup = original.copy()
+
+        def undo():
+            current = obj.data
+            current.user_remap(backup)
+            if current.users == 0:
+                bpy.data.hair_curves.remove(current)
+            backup.name = name
+            backup.use_fake_user = fake_user
+            self._survivors.add(backup.session_uid)
+
+        def drop():
+            bpy.data.hair_curves.remove(backup)
+        self._undo.append(undo)
+        self._on_commit.append(drop)
+
+    def undo(self, fn):
+        """Run `fn` on rollback (before the datablocks made here are removed)."""
+        self._undo.append(fn)
+
+    def on_commit(self, fn):
+        """Run `fn` once every change of the press has succeeded (for steps that cannot be
+        undone, such as removing what the change replaces)."""
+        self._on_commit.append(fn)
+
+    def commit(self):
+        for fn in self._on_commit:
+            fn()
+
+    def rollback(self):
+        for fn in reversed(self._undo):
+            try:
+                fn()
+            except Exception:  # put back as much as can be; the first error is the one reported
+                traceback.print_exc()
+        made = [block for uid, block in _all_ids().items()
+                if uid not in self._before and uid not in self._survivors]
+        if made:
+            bpy.data.batch_remove(made)
+
+
+@contextlib.contextmanager
+def transaction():
+    """The press's Transaction: a new one, or the one already open (joined)."""
+    global _active
+    if _active is not None:
+        yield _active
+        return
+    tx = _active = Transaction()
+    try:
+        yield tx
+    except BaseException:
+        _active = None
+        tx.rollback()
+        raise
+    _active = None
+    tx.commit()
