@@ -83,8 +83,11 @@ def _check(format, path, axis, scale):
 
 def _bake(data, matrix, attributes):
     """Make the Curves datablock `data` (a copy) POLY, carry its points and radii by `matrix`
-    (blender_curves.transform_strand_arrays), add the generic `attributes`."""
+    (blender_curves.transform_strand_arrays), add the generic `attributes`, drop its
+    materials (Blender's shading is no part of the file: the USD exporter would still bind
+    an empty material to the curves even with materials off)."""
     from .blender_curves import make_poly, transform_strand_arrays
+    data.materials.clear()
     n_p = len(data.points)
     if len(data.curves):
         make_poly(data)
@@ -117,12 +120,18 @@ def export_hair(obj, path, format="abc", scale=1.0, axis=None, root_uv=None, gro
     importer reads (hairio.unreal.groom_attributes; `root_uv` (S, 2), e.g. from the scalp's
     UV map, becomes groom_root_uv). The panel's Export and the command line both run this.
     Other arguments as export_curves_object; returns the path written."""
+    from .blender_curves import ROOT_UV_ATTRIBUTE, curves_to_strands
     _check(format, path, axis, scale)
-    attributes = None
+    attributes = {}
     if groom_attributes:
         from hairio.unreal import groom_attributes as attributes_of
-        from .blender_curves import curves_to_strands
         attributes = attributes_of(curves_to_strands(obj), root_uv=root_uv)
+    if root_uv is not None:
+        from hairio.validate import check_finite, check_shape
+        root_uv = check_finite("root_uv", check_shape("root_uv", np.asarray(root_uv), (len(obj.data.curves), 2)))
+        # Blender's own attachment attribute, as Generate stores it: the file is then the same
+        # whether the hair came from a scalp or, with its UVs, from a strand file.
+        attributes[ROOT_UV_ATTRIBUTE] = ('CURVE', 'FLOAT2', np.asarray(root_uv, np.float32))
     return export_curves_object(obj, path, format, scale=scale, axis=axis, attributes=attributes)
 
 

@@ -36,12 +36,26 @@ def export_file(input_path, out, format=None, vertices_per_strand=32, pinned=2, 
                 guides=None, root_uv=None, scale=1.0, axis=None, flip_v=True, pad_strands=False,
                 shuffle_seed=None, units=None, guides_out=None):
     """Export the strands in `input_path` to `out`; returns the list of files written.
-    The command line's engine, callable from benchmarks. Raises InputError for bad input."""
-    from .formats import (AXES, convert_strands, read_strands, spherical_root_uv, write_hair,
-                          write_npz, write_tfx, write_tfx_pair, write_usc)
-    from .formats.tressfx import guides_path_for
+    The command line's engine, callable from benchmarks. Raises InputError for bad input.
+    guides and root_uv are file names here (KEYS strand file, UV.npy)."""
+    from .formats import read_strands
 
     out = os.fspath(out)
+    format, scale, axis = _check_request(out, format, scale, axis, guides is not None)
+    if format in BLENDER_FORMATS:
+        return _export_with_blender(input_path, out, format, scale, axis, root_uv)
+    strands = read_strands(input_path)
+    # Root UVs only mean something to TressFX files.
+    uv = _load_root_uv(root_uv, strands.num_strands) if format == "tfx" else None
+    return export_strands(strands, out, format, vertices_per_strand, pinned, pin_tip,
+                          guides=None if guides is None else read_strands(guides), root_uv=uv,
+                          scale=scale, axis=axis, flip_v=flip_v, pad_strands=pad_strands,
+                          shuffle_seed=shuffle_seed, units=units, guides_out=guides_out,
+                          source=os.path.basename(os.fspath(input_path)))
+
+
+def _check_request(out, format, scale, axis, with_guides=False):
+    """(format, scale, axis) of an export request, checked; InputError names what is wrong."""
     if format is None:
         ext = os.path.splitext(out)[1].lower()
         if ext not in EXTENSIONS:
@@ -50,7 +64,7 @@ def export_file(input_path, out, format=None, vertices_per_strand=32, pinned=2, 
         format = EXTENSIONS[ext]
     if format not in NUMPY_FORMATS + BLENDER_FORMATS:
         raise InputError(f"--format {format}: choose one of {', '.join(NUMPY_FORMATS + BLENDER_FORMATS)}")
-    if guides is not None and format != "tfx":
+    if with_guides and format != "tfx":
         raise InputError("--guides: separate guide files are a TressFX convention; use it with --format tfx")
     folder = os.path.dirname(os.path.abspath(out))
     if not os.path.isdir(folder):
@@ -62,14 +76,31 @@ def export_file(input_path, out, format=None, vertices_per_strand=32, pinned=2, 
         axis = BLENDER_AXES[format][0] if axis is None else axis
         if axis not in BLENDER_AXES[format]:
             raise InputError(f"--axis {axis}: for {format} choose one of {', '.join(BLENDER_AXES[format])}")
-        return _export_with_blender(input_path, out, format, scale, axis, root_uv)
+    return format, scale, axis
+
+
+def export_strands(strands, out, format=None, vertices_per_strand=32, pinned=2, pin_tip=False,
+                   guides=None, root_uv=None, scale=1.0, axis=None, flip_v=True, pad_strands=False,
+                   shuffle_seed=None, units=None, guides_out=None, source=None):
+    """Write hairio.Strands to `out` in a numpy format (hair, tfx, npz, data); returns the
+    list of files written. What `export_file` runs once it has read its input, and what
+    Blender's Export runs on the hair it holds, so both write the same files.
+    guides: key strands (tfx); root_uv: (S, 2) array or None (tfx: a spherical projection
+    then); source: where the strands came from (the npz sidecar). Raises InputError."""
+    from .formats import (AXES, convert_strands, spherical_root_uv, write_hair, write_npz,
+                          write_tfx, write_tfx_pair, write_usc)
+    from .formats.tressfx import guides_path_for
+
+    out = os.fspath(out)
+    format, scale, axis = _check_request(out, format, scale, axis, guides is not None)
+    if format in BLENDER_FORMATS:
+        raise InputError(f"--format {format}: written by Blender's exporter; use export_file, "
+                         "or the addon's export_blender.export_hair inside Blender")
     axis = "none" if axis is None else axis
     if axis not in AXES:
         raise InputError(f"--axis {axis}: choose one of {', '.join(AXES)}")
-
-    strands = read_strands(input_path)
     if format == "tfx":
-        uv = _load_root_uv(root_uv, strands.num_strands)
+        uv = root_uv
         # The projection needs the head's own up/front, so it runs before any axis change.
         if uv is None:
             uv = spherical_root_uv(strands.points[strands.offsets])
@@ -79,9 +110,8 @@ def export_file(input_path, out, format=None, vertices_per_strand=32, pinned=2, 
         if guides is None:
             write_tfx(out, strands, **opts)
             return [out]
-        keys = read_strands(guides)
-        key_uv = spherical_root_uv(keys.points[keys.offsets])
-        keys = convert_strands(keys, axis, scale)
+        key_uv = spherical_root_uv(guides.points[guides.offsets])
+        keys = convert_strands(guides, axis, scale)
         return list(write_tfx_pair(out, strands, keys, guides_out or guides_path_for(out),
                                    guide_root_uv=key_uv, **opts))
     strands = convert_strands(strands, axis, scale)
@@ -94,7 +124,7 @@ def export_file(input_path, out, format=None, vertices_per_strand=32, pinned=2, 
         handed = "left" if axis in ("unreal", "directx") else "right"
         write_npz(out, strands, units=units or UNITS.get(scale, f"{1 / scale:g} m"), up=up,
                   front={"none": "-Y", "y-up": "+Z", "unreal": "+Y", "directx": "-Z"}[axis],
-                  source=os.path.basename(os.fspath(input_path)), handedness=handed)
+                  source=source, handedness=handed)
         return [out, out + ".json"]
     return [out]
 

@@ -16,12 +16,15 @@ def clear_scene():
         data.batch_remove(blocks)
 
 
-def make_scalp(name="Scalp", radius=0.1, segments=24, rings=12):
-    """A UV sphere standing in for a head, made from arrays (no operators, no context)."""
+def make_scalp(name="Scalp", radius=0.1, segments=24, rings=12, uv=False):
+    """A UV sphere standing in for a head, made from arrays (no operators, no context);
+    uv: with a UV map."""
     import bmesh
     mesh = bpy.data.meshes.new(name)
     bm = bmesh.new()
-    bmesh.ops.create_uvsphere(bm, u_segments=segments, v_segments=rings, radius=radius)
+    if uv:
+        bm.loops.layers.uv.new("UVMap")
+    bmesh.ops.create_uvsphere(bm, u_segments=segments, v_segments=rings, radius=radius, calc_uvs=uv)
     bm.to_mesh(mesh)
     bm.free()
     obj = bpy.data.objects.new(name, mesh)

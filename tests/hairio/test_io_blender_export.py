@@ -36,9 +36,22 @@ def state():
 
 bpy.ops.wm.read_factory_settings(use_empty=True)
 s = Strands.load_npz(TMP + "/in.npz")
-ob = strands_to_curves("groom", s, collection=bpy.context.scene.collection)
+# Written first with a few strands, then refilled with a new layout: in place where Blender
+# can resize a Curves datablock, by a new datablock in its place in 4.2; both evaluated.
+k = 7
+n = int(s.counts[:k].sum())
+few = Strands.from_arrays(s.points[:n], s.counts[:k], s.radius[:n], s.color[:n], s.alpha[:n], s.wisp[:k])
+ob = strands_to_curves("groom", few, collection=bpy.context.scene.collection)
+ob.data.materials.append(bpy.data.materials.new("look"))
+bpy.context.view_layer.update()
+strands_to_curves("groom", s, obj=ob)
 ob.location = (1.0, 2.0, 3.0)
 bpy.context.view_layer.update()
+types = np.empty(len(ob.data.curves), np.int32)
+ob.data.attributes["curve_type"].data.foreach_get("value", types)
+refill = {"data": ob.data.name, "materials": [m.name for m in ob.data.materials],
+          "curves": len(ob.data.curves), "types": sorted(set(types.tolist())),
+          "hair_curves": [c.name for c in bpy.data.hair_curves]}
 before = state()
 uv = np.linspace(0, 1, 2 * s.num_strands).reshape(-1, 2)
 attrs = groom_attributes(s, root_uv=uv, group_id=np.arange(s.num_strands) % 2)
@@ -55,7 +68,7 @@ for bad in (dict(path=TMP + "/missing/x.abc"), dict(path=TMP + "/x.obj"), dict(p
     except Exception as e:
         errors.append(type(e).__name__)
 after = state()
-result = {"same_state": before == after, "before": before, "after": after, "errors": errors}
+result = {"same_state": before == after, "before": before, "after": after, "errors": errors, "refill": refill}
 for name in ("y", "z"):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.wm.alembic_import(filepath=TMP + "/" + name + ".abc")
@@ -79,6 +92,15 @@ def exported(tmp_path_factory):
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr[-3000:]
     return tmp, s, json.loads((tmp / "result.json").read_text())
+
+
+def test_a_new_strand_layout_keeps_the_datablock_its_name_and_materials(exported):
+    """Refilled with another strand count, the object keeps one Curves datablock of its name
+    and material, all POLY (curve type 1); the process then exits cleanly (a stale curve type
+    count in Blender corrupts its heap, which ends the subprocess with a signal)."""
+    tmp, s, result = exported
+    assert result["refill"] == {"data": "groom", "materials": ["look"], "curves": s.num_strands,
+                                "types": [1], "hair_curves": ["groom"]}
 
 
 def test_scene_is_left_exactly_as_it_was(exported):
