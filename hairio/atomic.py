@@ -1,8 +1,12 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Write a file completely or not at all: a failed export leaves no half file."""
+"""Write a file completely or not at all: a failed export leaves no half file; and find out
+before the work whether the file can be written at all."""
 import contextlib
 import os
+import shutil
 import tempfile
+
+from .validate import InputError
 
 
 @contextlib.contextmanager
@@ -29,3 +33,29 @@ def atomic_write(path, mode="wb"):
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+def check_destination(path, what=None, expected_bytes=0):
+    """InputError before any work when `path` cannot be written: it is a folder, its folder
+    is missing or refuses a new file (tried with a real temporary file, as atomic_write
+    will make one), or its disk has less room than `expected_bytes`. `what` names the
+    input in the message (default: the path). A disk may still fill up while the work
+    runs; atomic_write then leaves no half file."""
+    path = os.fspath(path)
+    name = what or path
+    if os.path.isdir(path):
+        raise InputError(f"{name}: is a folder; give a file name, e.g. {os.path.join(path, 'hair' + '.png')!r}")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise InputError(f"{name}: folder {folder!r} does not exist; create it first")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=".tmp-", dir=folder)
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as e:
+        raise InputError(f"{name}: cannot write in {folder!r} ({e.strerror or e}); choose a writable place") from None
+    if expected_bytes:
+        free = shutil.disk_usage(folder).free
+        if expected_bytes > free:
+            raise InputError(f"{name}: needs about {expected_bytes / 2**20:,.1f} MiB but {folder!r} has "
+                             f"{free / 2**20:,.1f} MiB free; free some space or write elsewhere")

@@ -5,7 +5,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .atomic import atomic_write
-from .validate import InputError, check_finite, check_shape
+from .npyfile import read_npz
+from .validate import InputError, as_array, check_shape, to_float32, to_int32
 
 NPZ_NAMES = ("points", "counts", "radius", "color", "alpha", "wisp")
 
@@ -24,34 +25,36 @@ class Strands:
     @classmethod
     def from_arrays(cls, points, counts, radius=None, color=None, alpha=None, wisp=None,
                     default_radius=1e-4, default_color=(0.3, 0.2, 0.1)):
-        """Validate and convert; missing per-point arrays get defaults (radius, color, alpha 1)."""
-        points = check_finite("points", check_shape("points", np.asarray(points), (None, 3)))
-        counts = check_shape("counts", np.asarray(counts), (None,))
+        """Validate and convert; missing per-point arrays get defaults (radius, color, alpha 1).
+
+        Every conversion is checked, so nothing is stored other than what was passed:
+        floats beyond float32's range, counts beyond int32 and fractional or NaN wisp ids
+        are refused (a cast would make them Inf, wrap them or round them)."""
+        points = to_float32("points", check_shape("points", as_array("points", points), (None, 3)))
+        counts = check_shape("counts", as_array("counts", counts), (None,))
         if counts.size and counts.dtype.kind not in "iu":
             raise InputError(f"counts: expected integers, got dtype {counts.dtype}")
-        counts = counts.astype(np.int32)
         if counts.size and counts.min() < 2:
             bad = int(np.argmax(counts < 2))
             raise InputError(f"counts: strand {bad} has {counts[bad]} point(s); every strand needs at least 2")
+        counts = to_int32("counts", counts, lo=2)
         total = int(counts.sum(dtype=np.int64))
         if total != len(points):
             raise InputError(f"counts: sum is {total} but points has {len(points)} rows; they must match")
         n_p, n_s = len(points), len(counts)
         radius = np.full(n_p, default_radius) if radius is None else radius
         color = np.broadcast_to(np.asarray(default_color, float), (n_p, 3)) if color is None else color
-        alpha = np.ones(n_p) if alpha is None else alpha
+        alpha = np.ones(n_p, np.float32) if alpha is None else alpha
         wisp = np.zeros(n_s, np.int32) if wisp is None else wisp
-        radius = check_finite("radius", check_shape("radius", np.asarray(radius), (n_p,)))
-        color = check_finite("color", check_shape("color", np.asarray(color), (n_p, 3)))
-        alpha = check_finite("alpha", check_shape("alpha", np.asarray(alpha), (n_p,)))
-        wisp = check_shape("wisp", np.asarray(wisp), (n_s,))
+        radius = to_float32("radius", check_shape("radius", as_array("radius", radius), (n_p,)))
+        color = to_float32("color", check_shape("color", as_array("color", color), (n_p, 3)))
+        alpha = to_float32("alpha", check_shape("alpha", as_array("alpha", alpha), (n_p,)))
+        wisp = to_int32("wisp", check_shape("wisp", as_array("wisp", wisp), (n_s,)), allow_integral_floats=True)
         if n_p and radius.min() < 0:
             raise InputError("radius: negative values; radii must be >= 0")
         if n_p and (alpha.min() < 0 or alpha.max() > 1):
             raise InputError("alpha: values outside [0, 1]; clamp them first")
-        return cls(points.astype(np.float32), counts, radius.astype(np.float32),
-                   np.ascontiguousarray(color, dtype=np.float32), alpha.astype(np.float32),
-                   wisp.astype(np.int32))
+        return cls(points, counts, radius, np.ascontiguousarray(color), alpha, wisp)
 
     @classmethod
     def empty(cls):
@@ -95,13 +98,10 @@ class Strands:
 
     @classmethod
     def load_npz(cls, path):
+        """Strands from a .npz of the SPEC §0 arrays (`save_npz`); every size in the archive
+        is checked before memory is taken (hairio.npyfile)."""
+        arrays = read_npz(path, NPZ_NAMES, required=("points", "counts"))
         try:
-            with np.load(path, allow_pickle=False) as z:
-                missing = [n for n in ("points", "counts") if n not in z.files]
-                if missing:
-                    raise InputError(f"{path}: not a strand .npz, missing array(s) {missing}")
-                return cls.from_arrays(**{n: z[n] for n in NPZ_NAMES if n in z.files})
-        except (OSError, ValueError) as e:
-            if isinstance(e, InputError):
-                raise
-            raise InputError(f"{path}: cannot read as .npz ({e})") from e
+            return cls.from_arrays(**arrays)
+        except InputError as e:
+            raise InputError(f"{path}: {e}") from None

@@ -23,15 +23,17 @@ def read_bytes(path, what):
 
 
 def need(data, end, path, what):
-    """Reject a truncated file before numpy reads past its end."""
+    """Reject a truncated file before numpy reads past its end, or allocates what a header
+    claims: `end` is computed in Python integers, which do not overflow."""
     if end > len(data):
-        raise InputError(f"{path}: truncated {what} file: needs {end} bytes, has {len(data)}; "
+        raise InputError(f"{path}: truncated {what} file: needs {end:,} bytes, has {len(data):,}; "
                          f"re-export it")
 
 
-def strands_without_short(points, counts, min_points=2, **per_point):
+def strands_without_short(points, counts, min_points=2, source=None, **per_point):
     """Strands from arrays, dropping strands with fewer than `min_points` points (and their
-    per-point values: keyword arrays of length P) in one masked copy, no loop."""
+    per-point values: keyword arrays of length P) in one masked copy, no loop. `source`
+    (a file) is named in the message when the arrays are refused."""
     counts = np.asarray(counts, np.int64)
     keep = counts >= min_points
     if not keep.all():
@@ -39,7 +41,12 @@ def strands_without_short(points, counts, min_points=2, **per_point):
         points = points[point_keep]
         per_point = {k: (None if v is None else v[point_keep]) for k, v in per_point.items()}
         counts = counts[keep]
-    return Strands.from_arrays(points, counts.astype(np.int32), **per_point)
+    try:
+        return Strands.from_arrays(points, counts, **per_point)
+    except InputError as e:
+        if source is None:
+            raise
+        raise InputError(f"{source}: {e}") from None
 
 
 def check_strands(strands):

@@ -39,7 +39,9 @@ INFO = f"{TOOL_NAME} {TOOL_VERSION} (key-strand hair)".encode("ascii")
 
 
 def read_hair(path):
-    """Strands from a .hair file (radius = thickness / 2, alpha = 1 - transparency)."""
+    """Strands from a .hair file (radius = thickness / 2, alpha = 1 - transparency).
+    Every size the header claims is checked against the file's length before an array is
+    made, so memory stays within a few times the file's size."""
     data = read_bytes(path, ".hair")
     need(data, HEADER.itemsize, path, ".hair")
     h = np.frombuffer(data, HEADER, count=1)[0]
@@ -48,33 +50,41 @@ def read_hair(path):
     n_s, n_p, flags = int(h["hair_count"]), int(h["point_count"]), int(h["arrays"])
     if not flags & POINTS:
         raise InputError(f"{path}: .hair file without a points array (flags {flags:#x}); nothing to read")
+    sizes = [(SEGMENTS, "segments", 2 * n_s), (POINTS, "points", 12 * n_p), (THICKNESS, "thickness", 4 * n_p),
+             (TRANSPARENCY, "transparency", 4 * n_p), (COLORS, "colors", 12 * n_p)]
+    need(data, HEADER.itemsize + sum(size for bit, _, size in sizes if flags & bit), path,
+         f".hair ({', '.join(name for bit, name, _ in sizes if flags & bit)} arrays of {n_s:,} strands, "
+         f"{n_p:,} points)")
+    if not flags & SEGMENTS and n_s * (int(h["d_segments"]) + 1) != n_p:
+        raise InputError(f"{path}: {n_s:,} strands of {int(h['d_segments']) + 1:,} points (the default segments) "
+                         f"are {n_s * (int(h['d_segments']) + 1):,} points but the header says {n_p:,}; "
+                         "the file is inconsistent")
     pos = HEADER.itemsize
 
-    def take(dtype, count, name):
+    def take(dtype, count):
         nonlocal pos
-        end = pos + np.dtype(dtype).itemsize * count
-        need(data, end, path, f".hair ({name} array)")
         arr = np.frombuffer(data, dtype, count=count, offset=pos)
-        pos = end
+        pos += arr.nbytes
         return arr
 
     if flags & SEGMENTS:
-        counts = take("<u2", n_s, "segments").astype(np.int64) + 1
+        counts = take("<u2", n_s).astype(np.int64) + 1
+        if int(counts.sum()) != n_p:
+            raise InputError(f"{path}: segments add up to {int(counts.sum()):,} points but the header says "
+                             f"{n_p:,}; the file is inconsistent")
     else:
         counts = np.full(n_s, int(h["d_segments"]) + 1, np.int64)
-    if int(counts.sum()) != n_p:
-        raise InputError(f"{path}: segments add up to {int(counts.sum())} points but the header says "
-                         f"{n_p}; the file is inconsistent")
-    points = take("<f4", 3 * n_p, "points").reshape(n_p, 3)
-    radius = (take("<f4", n_p, "thickness") if flags & THICKNESS
+    points = take("<f4", 3 * n_p).reshape(n_p, 3)
+    radius = (take("<f4", n_p) if flags & THICKNESS
               else np.full(n_p, h["d_thickness"], np.float32)) * np.float32(0.5)
-    transparency = (take("<f4", n_p, "transparency") if flags & TRANSPARENCY
+    transparency = (take("<f4", n_p) if flags & TRANSPARENCY
                     else np.full(n_p, h["d_transparency"], np.float32))
-    color = (take("<f4", 3 * n_p, "colors").reshape(n_p, 3) if flags & COLORS
+    color = (take("<f4", 3 * n_p).reshape(n_p, 3) if flags & COLORS
              else np.broadcast_to(h["d_color"].astype(np.float32), (n_p, 3)))
     # Other tools write transparency slightly outside [0, 1] (rounding); clamp, don't fail.
+    # NaN stays NaN through the clip and is refused with the other arrays' NaN.
     alpha = np.clip(np.float32(1) - transparency, 0, 1)
-    return strands_without_short(points, counts, radius=radius, color=color, alpha=alpha)
+    return strands_without_short(points, counts, source=path, radius=radius, color=color, alpha=alpha)
 
 
 def _uniform(a):

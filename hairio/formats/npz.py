@@ -63,5 +63,5 @@ def read_sidecar(path):
     try:
         with open(p, encoding="utf-8") as f:
             return json.load(f)
-    except (OSError, ValueError) as e:
+    except (OSError, ValueError, RecursionError) as e:     # RecursionError: JSON nested too deep
         raise InputError(f"{p}: unreadable sidecar ({e}); delete or rewrite it") from e

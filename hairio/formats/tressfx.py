@@ -36,6 +36,7 @@ so what the writer respects:
 Thickness (per strand) follows the .hair convention: a width, 2 * root radius. The AMD loader
 ignores it and the vertex colors, other engines read them.
 """
+import math
 import os
 from dataclasses import dataclass
 
@@ -76,7 +77,9 @@ def loaded_strand_count(num_strands, follow_per_guide=0):
 
 
 def load_tfx(path):
-    """The raw arrays of a .tfx v4 file (`TfxFile`)."""
+    """The raw arrays of a .tfx v4 file (`TfxFile`). Each array's size is worked out in
+    Python integers (a header's strand and vertex counts multiply past int64) and checked
+    against the file's length before it is read."""
     data = read_bytes(path, ".tfx")
     need(data, HEADER.itemsize, path, ".tfx")
     h = np.frombuffer(data, HEADER, count=1)[0]
@@ -90,20 +93,24 @@ def load_tfx(path):
     if h["offset_positions"] == 0:
         raise InputError(f"{path}: .tfx file without vertex positions (offset 0)")
 
-    def take(offset, dtype, shape, name):
+    def take(field, shape, name):
+        offset = int(h[field])
         if offset == 0:
             return None
-        count = int(np.prod(shape))
-        need(data, int(offset) + 4 * count, path, f".tfx ({name})")
-        return np.frombuffer(data, dtype, count=count, offset=int(offset)).reshape(shape)
+        if offset < HEADER.itemsize:
+            raise InputError(f"{path}: the {name} start at byte {offset}, inside the {HEADER.itemsize}-byte "
+                             "header; the file is damaged, re-export it")
+        count = math.prod(shape)
+        need(data, offset + 4 * count, path, f".tfx ({name} of {n_s:,} strands x {n_v:,} vertices)")
+        return np.frombuffer(data, "<f4", count=count, offset=offset).reshape(shape)
 
     return TfxFile(
         version=version,
-        positions=take(h["offset_positions"], "<f4", (n_s, n_v, 4), "positions"),
-        strand_uv=take(h["offset_strand_uv"], "<f4", (n_s, 2), "strand UVs"),
-        vertex_uv=take(h["offset_vertex_uv"], "<f4", (n_s, n_v, 2), "vertex UVs"),
-        thickness=take(h["offset_thickness"], "<f4", (n_s,), "thickness"),
-        vertex_color=take(h["offset_vertex_color"], "<f4", (n_s, n_v, 4), "vertex colors"),
+        positions=take("offset_positions", (n_s, n_v, 4), "positions"),
+        strand_uv=take("offset_strand_uv", (n_s, 2), "strand UVs"),
+        vertex_uv=take("offset_vertex_uv", (n_s, n_v, 2), "vertex UVs"),
+        thickness=take("offset_thickness", (n_s,), "thickness"),
+        vertex_color=take("offset_vertex_color", (n_s, n_v, 4), "vertex colors"),
     )
 
 
@@ -112,14 +119,15 @@ def read_tfx(path):
     color and alpha from the vertex colors when stored."""
     t = load_tfx(path)
     n_s, n_v = t.positions.shape[:2]
-    points = check_finite(f"{path}: positions", t.positions[..., :3].reshape(-1, 3))
+    points = t.positions[..., :3].reshape(-1, 3)
     radius = color = alpha = None
     if t.thickness is not None:
         radius = np.repeat(t.thickness * np.float32(0.5), n_v)
     if t.vertex_color is not None:
         color = np.clip(t.vertex_color[..., :3].reshape(-1, 3), 0, None)
         alpha = np.clip(t.vertex_color[..., 3].reshape(-1), 0, 1)
-    return strands_without_short(points, np.full(n_s, n_v, np.int32), radius=radius, color=color, alpha=alpha)
+    return strands_without_short(points, np.full(n_s, n_v, np.int64), source=path, radius=radius, color=color,
+                                 alpha=alpha)
 
 
 def _arc_positions(strands, n):

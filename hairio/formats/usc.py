@@ -18,13 +18,21 @@ from ._common import check_strands, need, read_bytes, strands_without_short
 def _strand_headers(words, n, path):
     """Word index of every strand's k. Records are variable length, so each header follows
     from the one before: try the common case (every k equal) as one array check, else walk
-    the headers (one int per strand; the points themselves are never touched in Python)."""
+    the headers (one int per strand; the points themselves are never touched in Python).
+    The walk must end exactly at the file's end: words left over mean the count or a k is
+    wrong, and reading them as points would shift every coordinate after them."""
     if n == 0:
+        if len(words) > 1:
+            raise InputError(f"{path}: the file says 0 strands but {len(words) - 1:,} words follow the count; "
+                             "the count is wrong or the file is not a USC .data file")
         return np.zeros(0, np.int64)
-    if len(words) < 2:
-        raise InputError(f"{path}: truncated .data file: no strand after the count")
+    # Every strand takes at least its header word: a count beyond that is a header's word
+    # not to be taken (2**31 - 1 strands from an 8-byte file would ask for 16 GiB here).
+    if n > len(words) - 1:
+        raise InputError(f"{path}: the file says {n:,} strands but holds {len(words) - 1:,} words after the "
+                         "count; truncated, or not a USC .data file")
     k0 = int(words[1])
-    if k0 >= 0:
+    if 0 <= k0 and 1 + 3 * k0 < len(words):
         heads = 1 + np.arange(n, dtype=np.int64) * (1 + 3 * k0)
         if heads[-1] < len(words) and (words[heads] == k0).all() and heads[-1] + 1 + 3 * k0 == len(words):
             return heads
@@ -32,14 +40,17 @@ def _strand_headers(words, n, path):
     i = 1
     for s in range(n):
         if i >= len(words):
-            raise InputError(f"{path}: truncated .data file: strand {s} of {n} missing")
+            raise InputError(f"{path}: truncated .data file: strand {s} of {n:,} missing")
         k = int(words[i])
         if k < 0:
             raise InputError(f"{path}: strand {s} has a negative point count {k}; not a USC .data file")
         heads[s] = i
         i += 1 + 3 * k
     if i > len(words):
-        raise InputError(f"{path}: truncated .data file: last strand needs {i * 4} bytes, file has {len(words) * 4}")
+        raise InputError(f"{path}: truncated .data file: last strand needs {i * 4:,} bytes, file has {len(words) * 4:,}")
+    if i < len(words):
+        raise InputError(f"{path}: {len(words) - i:,} words follow the last of the {n:,} strands the file "
+                         "announces; the strand count or a point count is wrong, re-export it")
     return heads
 
 
@@ -60,7 +71,7 @@ def read_usc(path, return_skipped=False):
     is_coord[0] = False
     is_coord[heads] = False
     points = words.view("<f4")[is_coord].reshape(-1, 3)
-    strands = strands_without_short(points, counts)
+    strands = strands_without_short(points, counts, source=path)
     if return_skipped:
         return strands, np.flatnonzero(counts < 2)
     return strands
