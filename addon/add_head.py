@@ -12,16 +12,17 @@ import bpy
 from bpy.types import Operator
 from bpy_extras.object_utils import AddObjectHelper, add_object_align_init
 
+from .operators import _report_internal_error
+from .transaction import transaction
+
 HEAD_NAME = "Hair Head"
 SCALP_NAME = "Hair Scalp"
 
 
-def _add_mesh_object(name, surface, collection, made):
+def _add_mesh_object(name, surface, collection):
     """A mesh object of a groom.Scalp (vertices, triangles, UVs when it has them), linked
-    into `collection`; every datablock made is appended to `made` at once, so a failure
-    part-way can remove it."""
+    into `collection`."""
     mesh = bpy.data.meshes.new(name)
-    made.append(mesh)
     mesh.from_pydata(surface.vertices.tolist(), [], surface.triangles.tolist(), shade_flat=False)
     if surface.uv is not None:
         loop_vertex = np.empty(len(mesh.loops), np.int32)
@@ -30,16 +31,8 @@ def _add_mesh_object(name, surface, collection, made):
         layer.data.foreach_set("uv", surface.uv[loop_vertex].astype(np.float32).ravel())
     mesh.update()
     obj = bpy.data.objects.new(name, mesh)
-    made.append(obj)
     collection.objects.link(obj)
     return obj
-
-
-def _remove(made):
-    """Remove the datablocks in `made`, objects first (a mesh still used cannot go)."""
-    for block in reversed(made):
-        blocks = bpy.data.objects if isinstance(block, bpy.types.Object) else bpy.data.meshes
-        blocks.remove(block)
 
 
 class HAIR_OT_add_head(Operator, AddObjectHelper):
@@ -67,27 +60,28 @@ class HAIR_OT_add_head(Operator, AddObjectHelper):
         matrix = add_object_align_init(context, self)
         head_surface, scalp_surface = default_head(), default_scalp()
         collection = context.collection or context.scene.collection
-        made = []
         try:
-            head = _add_mesh_object(HEAD_NAME, head_surface, collection, made)
-            scalp = _add_mesh_object(SCALP_NAME, scalp_surface, collection, made)
-            head.matrix_world = matrix
-            scalp.parent = head
-            scalp.matrix_parent_inverse.identity()
-            scalp.display_type = 'WIRE'
-            scalp.hide_render = True
-            settings = scalp.keystrand_hair
-            settings.role = 'SCALP'
-            # The bundled head is drawn Z up, face to -Y: its axes are known in the mesh, so
-            # they turn with it when the head is turned or tilted.
-            settings.head_axes = 'LOCAL'
-            settings.up, settings.front = CANONICAL_UP, CANONICAL_FRONT
-            # Selecting can fail (a collection outside the view layer), so it comes before
-            # anything else in the scene is touched.
-            scalp.select_set(True)
-        except BaseException:
-            _remove(made)
-            raise
+            # A failure part-way removes every datablock made so far (the transaction).
+            with transaction():
+                head = _add_mesh_object(HEAD_NAME, head_surface, collection)
+                scalp = _add_mesh_object(SCALP_NAME, scalp_surface, collection)
+                head.matrix_world = matrix
+                scalp.parent = head
+                scalp.matrix_parent_inverse.identity()
+                scalp.display_type = 'WIRE'
+                scalp.hide_render = True
+                settings = scalp.keystrand_hair
+                settings.role = 'SCALP'
+                # The bundled head is drawn Z up, face to -Y: its axes are known in the mesh,
+                # so they turn with it when the head is turned or tilted.
+                settings.head_axes = 'LOCAL'
+                settings.up, settings.front = CANONICAL_UP, CANONICAL_FRONT
+                # Selecting can fail (a collection outside the view layer): inside the
+                # transaction, before the other objects are deselected.
+                scalp.select_set(True)
+        except Exception as e:
+            _report_internal_error(self, e)
+            return {'CANCELLED'}
         for obj in context.selected_objects:
             if obj != scalp:
                 obj.select_set(False)
