@@ -26,21 +26,27 @@ def to_srgb8(rgba):
     return out
 
 
-def encode_png(rgba8):
-    """PNG bytes of an (H, W, 4) uint8 array (colour type 6, 8 bits, filter 0 on every row)."""
+def _chunk(kind, data):
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+
+def _png_head(w, h):
+    return b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 6, 0, 0, 0)) + _chunk(b"sRGB", b"\x00")
+
+
+def _filtered_rows(rgba8):
+    """PNG scanlines of an (h, w, 4) uint8 array: filter byte 0, then the row."""
     h, w, _ = rgba8.shape
     raw = np.zeros((h, 1 + 4 * w), np.uint8)
     raw[:, 1:] = rgba8.reshape(h, 4 * w)
+    return raw.tobytes()
 
-    def chunk(kind, data):
-        return (struct.pack(">I", len(data)) + kind + data
-                + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
 
-    return (b"\x89PNG\r\n\x1a\n"
-            + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 6, 0, 0, 0))
-            + chunk(b"sRGB", b"\x00")
-            + chunk(b"IDAT", zlib.compress(raw.tobytes(), 6))
-            + chunk(b"IEND", b""))
+def encode_png(rgba8):
+    """PNG bytes of an (H, W, 4) uint8 array (colour type 6, 8 bits, filter 0 on every row)."""
+    h, w, _ = rgba8.shape
+    return (_png_head(w, h) + _chunk(b"IDAT", zlib.compress(_filtered_rows(rgba8), 6))
+            + _chunk(b"IEND", b""))
 
 
 def write_png(path, rgba):
@@ -48,3 +54,25 @@ def write_png(path, rgba):
     data = encode_png(to_srgb8(rgba))
     with atomic_write(path) as f:
         f.write(data)
+
+
+def write_png_bands(path, width, height, bands):
+    """Write an sRGB PNG of `width` x `height` from `bands`, an iterable of (h, width, 4)
+    uint8 row bands from the top that add up to `height` rows: each band is compressed
+    and written as it comes, so an image far larger than memory can be written. All or
+    nothing, like write_png; the pixels decode to what encode_png would store."""
+    rows = 0
+    z = zlib.compressobj(6)
+    with atomic_write(path) as f:
+        f.write(_png_head(width, height))
+        for band in bands:
+            band = np.asarray(band, np.uint8)
+            if band.ndim != 3 or band.shape[1:] != (width, 4):
+                raise ValueError(f"band of shape {band.shape}; expected (rows, {width}, 4)")
+            rows += len(band)
+            data = z.compress(_filtered_rows(band))
+            if data:
+                f.write(_chunk(b"IDAT", data))
+        if rows != height:
+            raise ValueError(f"bands hold {rows} rows; the image has {height}")
+        f.write(_chunk(b"IDAT", z.flush()) + _chunk(b"IEND", b""))

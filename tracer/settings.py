@@ -7,6 +7,10 @@ import numpy as np
 from hairio import InputError
 
 MAX_LIGHTS = 8
+# Samples are summed in float32 (additive blending): the sum of n samples can be off by up
+# to n * 2^-24 of the pixel's value. 4096 keeps that below 0.025 %, a sixteenth of an 8-bit
+# step; far past it more samples make the image worse, not better (10^6: up to 6 %).
+MAX_SPP = 4096
 
 
 @dataclass(frozen=True)
@@ -66,6 +70,10 @@ class RenderSettings:
     def check(self):
         if self.spp < 1 or self.spp_n ** 2 != self.spp:
             raise InputError(f"spp: {self.spp}; use a square number (1, 4, 9, 16, ...) for stratified sampling")
+        if self.spp > MAX_SPP:
+            raise InputError(f"spp: {self.spp} samples per pixel, summed in float32, can be off by up to "
+                             f"{self.spp * 2.0 ** -24:.2%} of a pixel's value; use at most {MAX_SPP} "
+                             f"(error {MAX_SPP * 2.0 ** -24:.3%})")
         if self.shadow_mode not in ("hard", "transmittance"):
             raise InputError(f"shadow_mode: {self.shadow_mode!r}; use 'hard' or 'transmittance'")
         if self.shading not in ("phong", "kajiya-kay"):
