@@ -1,5 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Checks applied where arrays enter the project, so deeper code can trust them."""
+import os
+
 import numpy as np
 
 INT32_MAX = int(np.iinfo(np.int32).max)
@@ -84,3 +86,28 @@ def to_int32(name, array, lo=None, allow_integral_floats=False):
             raise InputError(f"{name}: value {value!r} (index {first}) outside {floor}..{INT32_MAX}; "
                              f"{name} must fit a 32-bit integer" + (f" >= {lo}" if lo is not None else ""))
     return array.astype(np.int32)
+
+
+def available_memory():
+    """Bytes of memory a new allocation can take now without swapping (Linux: MemAvailable;
+    elsewhere the free physical pages where the system reports them), or None when unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def check_memory(name, needed, fix):
+    """InputError before the work when its estimated memory `needed` (bytes) exceeds what is
+    available: the message gives the estimate, the limit and `fix`."""
+    free = available_memory()
+    if free is not None and needed > free:
+        raise InputError(f"{name}: needs about {needed / 2**30:,.2f} GiB of memory but {free / 2**30:,.2f} GiB "
+                         f"are available; {fix}")

@@ -1,30 +1,46 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """python -m tracer render INPUT --out IMAGE.png [--size 512x512] [--spp N]
 [--shadows|--no-shadows] [--layers K] [--shading phong|kajiya-kay]
-[--camera auto|x,y,z:tx,ty,tz:fov]"""
+[--camera auto|x,y,z:tx,ty,tz:fov]
+
+Bad input exits 2 with one line naming it and writes nothing. What can be known before the
+render is checked before it: the size, the samples, the destination (a folder, a missing
+or read-only place). The image is rendered in tiles of at most TILE_PIXELS and written to
+the PNG band by band as they finish, so a 16384 x 16384 image takes the memory of one band
+of tiles, not of the image (a whole 8192² image in float64 needs 2 GiB per copy). A disk
+that fills up while the PNG is written is an exit 2 too, and leaves no file.
+"""
 import argparse
 import os
 import sys
 import time
 
+import numpy as np
+
 from hairio import InputError
+
+MAX_SIZE = 16384
+# Pixels per tile: 4 MiB of float32 RGBA from the GPU; tiles are at most TILE_SIDE wide, so
+# a band of them is at most 16384 x 128 pixels (8 MiB of 8-bit rows). Smaller tiles cost
+# more in per-draw overhead than they save (1/4 the pixels: 1.8x the render time at 4096²).
+TILE_PIXELS = 1 << 18
+TILE_SIDE = 2048
+# Rows converted to 8-bit sRGB at once: the conversion works in float64 (~10 MiB at 2048 wide).
+CONVERT_ROWS = 32
 
 
 def read_any(path):
-    """Strands from any readable format; .npz works even without hairio.formats."""
-    if not os.path.isfile(path):
-        raise InputError(f"{path}: no such file")
+    """Strands from any readable format; .npz works even without hairio.formats. The
+    readers report every malformed file as an InputError naming it: anything else is a
+    bug and surfaces as one."""
     try:
         from hairio.formats import read_strands
     except ImportError:
         read_strands = None
     if read_strands is not None:
-        try:
-            return read_strands(path)
-        except InputError:
-            raise
-        except Exception as e:   # a reader tripping over a malformed file is still bad input
-            raise InputError(f"{path}: cannot read ({type(e).__name__}: {e})") from e
+        return read_strands(path)
+    if not os.path.isfile(path):
+        raise InputError(f"{path}: no such file")
     if path.lower().endswith(".npz"):
         from hairio import Strands
         return Strands.load_npz(path)
@@ -36,8 +52,8 @@ def parse_size(text):
         w, h = (int(x) for x in text.lower().split("x"))
     except ValueError:
         raise InputError(f"--size {text!r}: expected WIDTHxHEIGHT, e.g. 512x512") from None
-    if not (1 <= w <= 16384 and 1 <= h <= 16384):
-        raise InputError(f"--size {text!r}: width and height must lie in 1..16384")
+    if not (1 <= w <= MAX_SIZE and 1 <= h <= MAX_SIZE):
+        raise InputError(f"--size {text!r}: width and height must lie in 1..{MAX_SIZE}")
     return w, h
 
 
@@ -58,16 +74,60 @@ def parse_camera(text, strands, size):
     return Camera.look_at(eye, target, fov_deg=fov, size=size)
 
 
+def tile_camera(camera, x0, y0, w, h):
+    """The camera that sees exactly pixels [x0, x0+w) x [y0, y0+h) of `camera`'s image:
+    same pixel size, the image centre shifted. At 1 spp a tile's pixels are the whole
+    image's bit for bit; with more samples the jitter follows the tile's own pixel
+    numbers (same stratification, another fixed pattern)."""
+    from .camera import Camera
+    W, H = camera.size
+    shift = np.asarray(camera.shift_px, np.float64) + [x0 + w / 2 - W / 2, H / 2 - h / 2 - y0]
+    return Camera(camera.type, camera.position, camera.rotation, (int(w), int(h)), camera.pixel_size, shift)
+
+
+def tiles(size, tile_pixels=TILE_PIXELS, tile_side=TILE_SIDE):
+    """Row bands of tiles covering a (W, H) image: [(y0, h, [(x0, w), ...]), ...]."""
+    W, H = size
+    tw = min(W, tile_side)
+    th = min(H, max(1, tile_pixels // tw))
+    return [(y0, min(th, H - y0), [(x0, min(tw, W - x0)) for x0 in range(0, W, tw)]) for y0 in range(0, H, th)]
+
+
+def render_png(renderer, camera, settings, out, tile_pixels=TILE_PIXELS, tile_side=TILE_SIDE):
+    """Render `camera`'s image tile by tile and write it to the PNG `out` band by band;
+    returns the seconds spent tracing (the renderer's render_s summed over tiles)."""
+    from .png import to_srgb8, write_png_bands
+    W, H = camera.size
+    spent = [0.0]
+
+    def bands():
+        for y0, h, row in tiles(camera.size, tile_pixels, tile_side):
+            band = np.empty((h, W, 4), np.uint8)
+            for x0, w in row:
+                img = renderer.render(tile_camera(camera, x0, y0, w, h), settings)
+                spent[0] += renderer.stats["render_s"]
+                for r in range(0, h, CONVERT_ROWS):    # float64 temporaries of a few rows at a time
+                    band[r:r + CONVERT_ROWS, x0:x0 + w] = to_srgb8(img[r:r + CONVERT_ROWS])
+            yield band
+
+    write_png_bands(out, W, H, bands())
+    return spent[0]
+
+
 def build_parser():
+    from .settings import MAX_SPP
     parser = argparse.ArgumentParser(prog="python -m tracer", description="Render strands with the GPU ray tracer.")
     sub = parser.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a strand file to a PNG")
     r.add_argument("input", help="strand file to render (.npz, or any format hairio.formats reads)")
     r.add_argument("--out", required=True, help="PNG image to write (RGBA, transparent background); "
                    "its folder must exist")
-    r.add_argument("--size", default="512x512", help="image size WIDTHxHEIGHT in pixels, each 1..16384 (default %(default)s)")
+    r.add_argument("--size", default="512x512",
+                   help=f"image size WIDTHxHEIGHT in pixels, each 1..{MAX_SIZE}; large images are rendered "
+                        f"and written in tiles (default %(default)s)")
     r.add_argument("--spp", type=int, default=1,
-                   help="samples per pixel, a square number (1, 4, 9, ...) for stratified sampling (default %(default)s)")
+                   help=f"samples per pixel, a square number (1, 4, 9, ...) up to {MAX_SPP}, for stratified "
+                        f"sampling (default %(default)s)")
     r.add_argument("--shadows", dest="shadows", action="store_true", default=True,
                    help="trace shadow rays toward the lights (the default)")
     r.add_argument("--no-shadows", dest="shadows", action="store_false", help="no shadow rays: faster, flatter")
@@ -86,9 +146,8 @@ def main(argv=None):
     args = parser.parse_args(argv)
     try:
         size = parse_size(args.size)
-        folder = os.path.dirname(os.path.abspath(args.out))
-        if not os.path.isdir(folder):
-            raise InputError(f"--out {args.out}: folder {folder} does not exist; create it first")
+        from hairio.atomic import check_destination
+        check_destination(args.out, f"--out {args.out}")
         from .settings import RenderSettings
         settings = RenderSettings(spp=args.spp, shadows=args.shadows, layers=args.layers,
                                   shading=args.shading, background=(0.0, 0.0, 0.0, 0.0))
@@ -96,21 +155,25 @@ def main(argv=None):
         t0 = time.perf_counter()
         strands = read_any(args.input)
         t1 = time.perf_counter()
-        camera = parse_camera(args.camera, strands, size)
         from .renderer import Renderer
-        from .png import write_png
         renderer = Renderer()
-        renderer.set_strands(strands)
-        img = renderer.render(camera, settings)
-        st = renderer.stats
-        write_png(args.out, img)
+        try:
+            renderer.set_strands(strands)
+        except InputError as e:     # strands the tracer cannot resolve: name the file they came from
+            raise InputError(f"{args.input}: {e}") from None
+        camera = parse_camera(args.camera, strands, size)
+        st = dict(renderer.stats)
+        try:
+            render_s = render_png(renderer, camera, settings, args.out)
+        except OSError as e:     # the disk filled up, or the place changed, while rendering
+            raise InputError(f"--out {args.out}: cannot write it ({e.strerror or e}); nothing was written") from None
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     print(f"read {t1 - t0:.3f} s: {strands.num_strands} strands, {st['num_cylinders']} cylinders")
     print(f"upload {st['upload_s']:.3f} s (cylinders {st['cylinders_s']:.3f} s)")
     print(f"grid build {st['grid_s']:.3f} s: {st['grid_dims']} cells, {st['grid_refs']} references")
-    print(f"render {st['render_s']:.3f} s at {size[0]}x{size[1]}, {args.spp} spp")
+    print(f"render {render_s:.3f} s at {size[0]}x{size[1]}, {args.spp} spp")
     print(f"wrote {args.out}")
     return 0
 

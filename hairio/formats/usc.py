@@ -71,6 +71,7 @@ def read_usc(path, return_skipped=False):
     is_coord[0] = False
     is_coord[heads] = False
     points = words.view("<f4")[is_coord].reshape(-1, 3)
+    del data, words, is_coord      # the file's bytes are copied out: free them before the checks copy again
     strands = strands_without_short(points, counts, source=path)
     if return_skipped:
         return strands, np.flatnonzero(counts < 2)

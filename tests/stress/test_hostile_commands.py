@@ -1,0 +1,138 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""`python -m tracer render` with hostile options: what cannot work is refused before any
+work (exit 2, a message naming the option, with the limit), what can is done in tiles,
+and a write that fails after the work leaves nothing."""
+import contextlib
+import errno
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from hairio import InputError, Strands
+from tracer import Camera, RenderSettings
+from tracer.__main__ import main, parse_size, render_png, tiles
+from tracer.settings import MAX_SPP
+
+
+@pytest.fixture
+def tuft(tmp_path):
+    s = Strands.from_arrays(np.array([[0, 0, 0], [0, 0, 1.0], [0.3, 0, 0], [0.3, 0.1, 0.8]]), [2, 2],
+                            radius=np.full(4, 0.05))
+    path = tmp_path / "tuft.npz"
+    s.save_npz(path)
+    return path
+
+
+def _files(folder):
+    return sorted(p.name for p in folder.iterdir())
+
+
+@pytest.mark.parametrize("case", ["folder", "missing folder", "unwritable", "spp", "spp not square", "size"])
+def test_refused_before_the_input_is_read(tmp_path, case, capsys):
+    """The input does not exist: each refusal must come before the file is even opened."""
+    missing = str(tmp_path / "no-such-input.npz")
+    out = str(tmp_path / "x.png")
+    argv = {"folder": ["--out", str(tmp_path)],
+            "missing folder": ["--out", str(tmp_path / "nope" / "x.png")],
+            "unwritable": ["--out", "/proc/keystrand-test.png"],
+            "spp": ["--out", out, "--spp", str(1000 ** 2)],
+            "spp not square": ["--out", out, "--spp", "5"],
+            "size": ["--out", out, "--size", "16385x2"]}[case]
+    before = _files(tmp_path)
+    assert main(["render", missing] + argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and missing not in err
+    want = {"folder": "is a folder", "missing folder": "does not exist", "unwritable": "cannot write in",
+            "spp": f"use at most {MAX_SPP}", "spp not square": "square number", "size": "1..16384"}[case]
+    assert want in err
+    assert _files(tmp_path) == before
+
+
+def test_the_largest_size_is_accepted():
+    assert parse_size("16384x16384") == (16384, 16384)
+    with pytest.raises(InputError):
+        parse_size("0x10")
+
+
+def test_a_full_disk_while_writing_is_exit_2_and_leaves_nothing(tuft, tmp_path, monkeypatch, capsys):
+    import hairio.atomic
+    import tracer.png
+    real = hairio.atomic.atomic_write
+
+    @contextlib.contextmanager
+    def filling(path, mode="wb"):
+        with real(path, mode) as f:
+            class Full:
+                def write(self, data):
+                    raise OSError(errno.ENOSPC, "No space left on device")
+            yield Full()
+
+    monkeypatch.setattr(tracer.png, "atomic_write", filling)
+    out = tmp_path / "out.png"
+    assert main(["render", str(tuft), "--out", str(out), "--size", "32x32"]) == 2
+    err = capsys.readouterr().err
+    assert "No space left on device" in err and "nothing was written" in err
+    assert _files(tmp_path) == ["tuft.npz"]
+
+
+def test_tiles_cover_the_image_once():
+    for size in ((1, 1), (300, 7), (5000, 3000), (16384, 16384)):
+        seen = np.zeros(size[::-1], np.int8) if size[0] * size[1] < 1e8 else None
+        covered = 0
+        for y0, h, row in tiles(size):
+            for x0, w in row:
+                assert w * h <= max(1 << 18, w)
+                covered += w * h
+                if seen is not None:
+                    seen[y0:y0 + h, x0:x0 + w] += 1
+        assert covered == size[0] * size[1]
+        assert seen is None or (seen == 1).all()
+
+
+def _decode(path):
+    import struct
+    import zlib
+    data = path.read_bytes()
+    pos, idat = 8, b""
+    while pos < len(data):
+        (n,) = struct.unpack(">I", data[pos:pos + 4])
+        kind, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + n]
+        if kind == b"IHDR":
+            w, h = struct.unpack(">II", body[:8])
+        elif kind == b"IDAT":
+            idat += body
+        pos += 12 + n
+    raw = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(h, 1 + 4 * w)
+    return raw[:, 1:].reshape(h, w, 4)
+
+
+def test_a_tiled_render_is_the_whole_render_pixel_for_pixel(shared_data, tmp_path):
+    from hairio.formats import read_strands
+    from tracer.png import to_srgb8
+    from tracer.renderer import Renderer
+    s = read_strands(shared_data / "straight.hair")
+    r = Renderer()
+    r.set_strands(s)
+    lo, hi = s.bounds()
+    cam = Camera.frame_bounds(lo, hi, (301, 203))
+    whole = to_srgb8(r.render(cam, RenderSettings()))
+    assert (whole[..., 3] > 0).mean() > 0.1
+    out = tmp_path / "tiled.png"
+    render_png(r, cam, RenderSettings(), out, tile_pixels=4000, tile_side=64)   # 5 x 4 bands of odd tiles
+    np.testing.assert_array_equal(_decode(out), whole)
+
+
+def test_a_large_image_takes_the_memory_of_a_band(tuft, tmp_path):
+    """2048 x 2048 in float32 RGBA is 64 MiB, twice that in float64; tile by tile it is a
+    fraction of that (a 16384² image takes the same: a band is at most 16384 x 128 pixels)."""
+    out = tmp_path / "big.png"
+    tracemalloc.start()
+    try:
+        assert main(["render", str(tuft), "--out", str(out), "--size", "2048x2048"]) == 0
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 32 << 20, peak
+    img = _decode(out)
+    assert img.shape == (2048, 2048, 4) and 0.005 < (img[..., 3] > 0).mean() < 0.5
