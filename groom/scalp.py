@@ -72,6 +72,12 @@ class Scalp:
                 raise InputError(f"scalp groups: expected integer array of shape ({len(self.vertices)},)")
             self.groups = g.astype(np.int32)
         self._compute_normals()
+        if self.degenerate.all():
+            size = float(np.ptp(self.vertices, axis=0).max())
+            why = ("all its vertices coincide" if size == 0 else
+                   f"corners on one line or point, or too small next to the mesh's extent {size:.3g}: a stray vertex?")
+            raise InputError(f"scalp: every one of its {len(t)} triangle(s) has no area ({why}); "
+                             "a scalp needs faces with area to grow hair on")
 
     def _compute_normals(self):
         p = self.vertices[self.triangles]
@@ -238,12 +244,15 @@ def _closest_on_triangles(p, a, b, c):
         put((d1 <= 0) & (d2 <= 0), np.array([1.0, 0, 0]))
         put((d3 >= 0) & (d4 <= d3), np.array([0, 1.0, 0]))
         put((d6 >= 0) & (d5 <= d6), np.array([0, 0, 1.0]))
+        # An edge region needs an edge: a zero-length one (two identical corners) divides
+        # 0 by 0 there, and the other edges already cover the segment that is left.
         v = np.clip(d1 / (d1 - d3), 0, 1)
-        put((vc <= 0) & (d1 >= 0) & (d3 <= 0), np.stack([1 - v, v, 0 * v], -1))
+        put((vc <= 0) & (d1 >= 0) & (d3 <= 0) & (d1 - d3 > 0), np.stack([1 - v, v, 0 * v], -1))
         w = np.clip(d2 / (d2 - d6), 0, 1)
-        put((vb <= 0) & (d2 >= 0) & (d6 <= 0), np.stack([1 - w, 0 * w, w], -1))
+        put((vb <= 0) & (d2 >= 0) & (d6 <= 0) & (d2 - d6 > 0), np.stack([1 - w, 0 * w, w], -1))
         w = np.clip((d4 - d3) / ((d4 - d3) + (d5 - d6)), 0, 1)
-        put((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0), np.stack([0 * w, 1 - w, w], -1))
+        put((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0) & ((d4 - d3) + (d5 - d6) > 0),
+            np.stack([0 * w, 1 - w, w], -1))
         denom = va + vb + vc
         ok = np.abs(denom) > 0
         inner = np.stack([va, vb, vc], -1) / np.where(ok, denom, 1.0)[..., None]
@@ -404,12 +413,10 @@ def load_obj(path):
                 corners = []
                 for item in parts[1:]:
                     fields = item.split("/")
-                    vi = int(fields[0])
-                    vi = vi - 1 if vi > 0 else len(verts) + vi
+                    vi = _obj_index(fields[0], len(verts), "vertex")
                     ti = None
                     if len(fields) > 1 and fields[1]:
-                        ti = int(fields[1])
-                        ti = ti - 1 if ti > 0 else len(uvs) + ti
+                        ti = _obj_index(fields[1], len(uvs), "texture coordinate")
                     corners.append((vi, ti))
                 for k in range(1, len(corners) - 1):
                     tri = (corners[0], corners[k], corners[k + 1])
@@ -436,4 +443,20 @@ def load_obj(path):
             # Per-vertex UV: the last corner using a vertex wins (seams keep one side).
             uv = np.zeros((len(verts), 2))
             uv[tris.ravel()] = uvs[tuv.ravel()]
-    return Scalp(verts, tris, uv=uv)
+    try:
+        return Scalp(verts, tris, uv=uv)
+    except InputError as e:
+        raise InputError(f"scalp mesh {path!r}: {str(e).removeprefix('scalp: ')}") from None
+
+
+def _obj_index(text, count, what):
+    """A 0-based index from an OBJ face corner: 1-based, or negative counting back from the
+    last of the `count` read so far. 0 is no index in OBJ (it would wrap to a later vertex),
+    and one past int64 names no vertex of any mesh."""
+    i = int(text)
+    if i == 0:
+        raise ValueError(f"{what} index 0: OBJ indices count from 1")
+    i = i - 1 if i > 0 else count + i
+    if not 0 <= i < 1 << 62:
+        raise ValueError(f"{what} index {text} lies outside the file")
+    return i

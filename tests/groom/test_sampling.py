@@ -100,6 +100,8 @@ def test_bad_counts_are_rejected(scalp, m):
 
 
 def test_a_scalp_without_area_is_rejected():
-    s = Scalp([[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2]])
     with pytest.raises(InputError, match="area"):
-        sample_roots(s, 10)
+        sample_roots(Scalp([[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2]]), 10)
+    flat = Scalp([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], density=[0, 0, 0])
+    with pytest.raises(InputError, match="area"):
+        sample_roots(flat, 10)

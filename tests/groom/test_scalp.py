@@ -154,3 +154,29 @@ def test_closest_points_match_a_search_of_every_triangle(scalp, mesh):
         best = int(np.argmin(((near - p) ** 2).sum(axis=1)))
         assert np.linalg.norm(pts[j] - near[best]) <= 1e-12
         assert tri[j] == best or np.isclose(((near[tri[j]] - p) ** 2).sum(), ((near[best] - p) ** 2).sum(), rtol=1e-12)
+
+
+def test_a_triangle_with_two_identical_corners_has_finite_nearest_points():
+    """The nearest point on the segment it reduces to, not NaN (0/0 on its zero-length edge)."""
+    s = Scalp(np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]), np.array([[0, 1, 2], [1, 1, 3]]))
+    tri, bary, pts = s.closest_points(np.array([[1.0, 0.5, 0.3], [1.2, 0.9, 0.0], [1.0, 1.2, 0.0]]))
+    assert np.isfinite(bary).all()
+    np.testing.assert_allclose(pts, [[1, 0.5, 0], [1, 0.9, 0], [1, 1, 0]], atol=1e-12)
+
+
+def test_a_scalp_whose_every_triangle_is_degenerate_is_refused():
+    with pytest.raises(InputError, match="every one of its 2 triangle"):
+        Scalp(np.array([[0.0, 0, 0], [1, 0, 0], [2, 1e-16, 0], [3, 0, 0]]), np.array([[0, 1, 2], [1, 2, 3]]))
+
+
+@pytest.mark.parametrize("face,match", [("f 0 2 3", "vertex index 0: OBJ indices count from 1"),
+                                        ("f 1 2 99999999999999999999", "lies outside the file"),
+                                        ("f 1 2 -99999999999999999999", "lies outside the file"),
+                                        ("f 1/0 2/1 3/1", "texture coordinate index 0")])
+def test_obj_indices_that_name_no_vertex_are_refused(tmp_path, face, match):
+    # A face before the last vertex: index 0 would otherwise wrap to the vertex read later.
+    path = tmp_path / "bad.obj"
+    path.write_text(f"v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\n{face}\nv 0 0 1\n")
+    with pytest.raises(InputError, match=match) as e:
+        load_obj(path)
+    assert str(path) in str(e.value)
