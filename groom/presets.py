@@ -69,6 +69,8 @@ class Preset:
 
     def __init__(self, name, params, key_specs, description=""):
         self.name, self.params, self.description = name, params, description
+        if not isinstance(key_specs, (list, tuple)):
+            raise InputError(f"preset {name!r}: 'keys' must be a list of key objects, got {type(key_specs).__name__}")
         if not key_specs:
             raise InputError(f"preset {name!r}: no keys; a preset needs at least one key strand")
         self.key_specs = [_check_spec(name, i, s) for i, s in enumerate(key_specs)]
@@ -308,8 +310,8 @@ def load_preset(name):
     path = _preset_path(str(name))
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as e:
-        raise InputError(f"preset {str(path)!r}: cannot read it as JSON ({e})") from e
+    except (OSError, ValueError, RecursionError) as e:     # RecursionError: JSON nested past Python's stack
+        raise InputError(f"preset {str(path)!r}: cannot read it as JSON ({e})") from None
     if not isinstance(data, dict) or "keys" not in data:
         raise InputError(f"preset {str(path)!r}: expected an object with 'keys' and 'params'")
     unknown = sorted(set(data) - {"name", "description", "params", "keys"})

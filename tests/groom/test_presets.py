@@ -83,3 +83,16 @@ def test_broken_preset_files_are_rejected_clearly(tmp_path, mutate, word):
     path.write_text(json.dumps(data))
     with pytest.raises(InputError, match=word):
         load_preset(str(path))
+
+
+@pytest.mark.parametrize("text,match", [
+    ('{"params": {}, "keys": 5}', "'keys' must be a list of key objects, got int"),
+    ('{"params": {}, "keys": {"a": 1}}', "'keys' must be a list of key objects, got dict"),
+    ('{"params": {}, "keys": ' + "[" * 100000 + "]" * 100000 + "}", "cannot read it as JSON"),
+    ('{"keys": [], "params": ' + '{"a":' * 100000 + "1" + "}" * 100000 + "}", "cannot read it as JSON"),
+])
+def test_a_preset_of_the_wrong_shape_is_refused(tmp_path, text, match):
+    path = tmp_path / "bad.json"
+    path.write_text(text)
+    with pytest.raises(InputError, match=match):
+        load_preset(str(path))
