@@ -67,6 +67,8 @@ def generate_main(args):
     from . import default_scalp, generate, load_obj, load_preset
     if not args.out.lower().endswith(".npz"):
         raise InputError(f"--out {args.out!r}: the output must be a .npz file")
+    from hairio.atomic import check_destination
+    check_destination(args.out, f"--out {args.out!r}")    # before the work, not after it
     if args.count is not None and args.count < 1:
         raise InputError(f"--count {args.count}: must be at least 1")
     if args.seed is not None and args.seed < 0:
