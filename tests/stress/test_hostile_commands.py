@@ -136,3 +136,38 @@ def test_a_large_image_takes_the_memory_of_a_band(tuft, tmp_path):
     assert peak < 32 << 20, peak
     img = _decode(out)
     assert img.shape == (2048, 2048, 4) and 0.005 < (img[..., 3] > 0).mean() < 0.5
+
+
+# ------------------------------------------------------------------ python -m groom generate
+
+@pytest.mark.parametrize("argv,match", [
+    (["--count", str(2 ** 62)], "count 4,611,686,018,427,387,904: needs about"),
+    (["--count", str(10 ** 9)], "GiB are available"),
+    (["--count", "0"], "must be at least 1"),
+])
+def test_generate_refuses_a_count_that_cannot_work(tmp_path, argv, match, capsys):
+    from groom.__main__ import main as groom_main
+    out = tmp_path / "x.npz"
+    assert groom_main(["generate", "--preset", "wavy", "--out", str(out)] + argv) == 2
+    assert match in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())
+
+
+def test_generate_checks_its_memory_against_what_is_available(monkeypatch):
+    import groom
+    import hairio.validate
+    scalp = groom.default_scalp()
+    placement = groom.load_preset("wavy").place_keys(scalp)
+    monkeypatch.setattr(hairio.validate, "available_memory", lambda: 1 << 30)
+    params = placement.params.replace(count=200_000, points_per_strand=96)   # 1.2 GB estimated
+    with pytest.raises(InputError, match=r"count 200,000: needs about 1.14 GiB of memory but 1.00 GiB"):
+        groom.generate(scalp, placement.keys, params)
+    assert groom.generate(scalp, placement.keys, params.replace(count=100)).strands.num_strands == 100
+
+
+def test_generate_checks_out_before_the_work(tmp_path, capsys):
+    from groom.__main__ import main as groom_main
+    folder = tmp_path / "looks.npz"
+    folder.mkdir()
+    assert groom_main(["generate", "--preset", "wavy", "--out", str(folder)]) == 2
+    assert "is a folder" in capsys.readouterr().err
