@@ -13,6 +13,7 @@ import time
 import numpy as np
 
 from hairio import InputError, Strands
+from hairio.validate import check_memory
 from .cylinders import (SHARP_BEND_DEG, CylinderPlan, column_bounds, cylinders_from_plan, plan_cylinders,
                         repeat_distance, strands_to_cylinders)
 from .grid import Grid, build_grid, grid_frame
@@ -33,6 +34,16 @@ UPLOAD_CHUNK = 1024
 # The trace shader reads up to two list entries past a cell's list (it reads ahead); the
 # index buffer carries this many zeros after the last list.
 IDX_SLACK = 2
+# The shader squares distances in float32 (3.4e38 = (1.8e19)^2): past these a hit's
+# arithmetic overflows and the image comes out empty while the float64 reference shows
+# hair (a strand 1e20 from the origin did). Points within 1e18 seen from a camera within
+# 1e19 keep every squared distance finite (measured: hair at 1e18 and cameras out to 3e19
+# render as the reference does).
+MAX_POINT_COORDINATE = 1e18
+MAX_CAMERA_COORDINATE = 1e19
+# Host memory of one render: the framebuffer (a driver like llvmpipe keeps it in host memory),
+# its read-back bytes and the flipped image, RGBA float32 each.
+RENDER_COPIES = 3
 SHADER_DIR = pathlib.Path(__file__).resolve().parent / "shaders"
 
 _VERTEX = """#version 330 core
@@ -133,6 +144,7 @@ class Renderer:
             raise InputError(f"strands: expected hairio.Strands, got {type(strands).__name__}; "
                              "build one with Strands.from_arrays")
         t0 = time.perf_counter()
+        check_gpu_range(strands)
         # The GPU build checks for repeated points itself while it makes the cylinders.
         plan = plan_cylinders(strands, drop_repeats=self.build != "gpu")
         try:
@@ -202,7 +214,9 @@ class Renderer:
             self.strands = strands
             return
         t0 = time.perf_counter()
-        sub = plan_cylinders(_select_strands(strands, ids))
+        changed = _select_strands(strands, ids)
+        check_gpu_range(changed)
+        sub = plan_cylinders(changed)
         if not np.array_equal(sub.counts, self._plan.counts[ids]):
             self.set_strands(strands)    # a repeated point appeared or vanished
             return
@@ -478,6 +492,23 @@ class Renderer:
             self._fbos[key] = fbo
         return fbo
 
+    def _check_camera(self, camera, settings):
+        """What the GPU cannot draw is refused before the framebuffer is made: a camera so far
+        out that squared distances overflow, an image wider than the driver draws, or one
+        whose copies need more memory than there is."""
+        far = float(np.abs(camera.position).max())
+        if not far <= MAX_CAMERA_COORDINATE:
+            raise InputError(f"camera: position {far:.3g} from the origin; the GPU tracer squares distances in "
+                             f"float32, so it takes cameras within ±{MAX_CAMERA_COORDINATE:.0e}: move it closer "
+                             "or scale the scene down")
+        w, h = camera.size
+        side = min(int(self.ctx.info["GL_MAX_TEXTURE_SIZE"]), *(int(d) for d in self.ctx.info["GL_MAX_VIEWPORT_DIMS"]))
+        if max(w, h) > side:
+            raise InputError(f"camera size {w}x{h}: this GPU draws at most {side} pixels a side in one image; "
+                             "render a larger image in tiles (python -m tracer render does)")
+        check_memory(f"camera size {w}x{h}", (RENDER_COPIES + settings.count) * w * h * 16,
+                     "render a smaller image, or in tiles (python -m tracer render writes any size band by band)")
+
     def screen_bounds(self, camera):
         """Pixel rectangle (x0, y0, x1, y1), y from the top, that the grid box can cover;
         None when nothing can be seen."""
@@ -505,6 +536,7 @@ class Renderer:
         settings.check()
         if self.num_cylinders is None:
             raise InputError("render: no strands; call set_strands first")
+        self._check_camera(camera, settings)
         t0 = time.perf_counter()
         if settings.min_pixel_width and self._grid_pad < GRID_WIDEN_CAP:
             self._grid_pad = GRID_WIDEN_CAP
@@ -580,6 +612,18 @@ class Renderer:
         set_uniforms(prog, background=settings.premultiplied_background(),
                      material=(settings.ambient, settings.diffuse, settings.specular, settings.shininess),
                      mpw_cap=float(settings.min_pixel_width_cap), t_eps=float(settings.transmittance_eps))
+
+
+def check_gpu_range(strands):
+    """InputError when strands lie farther from the origin than the GPU's float32 arithmetic
+    can square (MAX_POINT_COORDINATE), naming how far they reach."""
+    if not strands.num_points:
+        return
+    far = float(np.abs(strands.points).max()) + float(strands.radius.max())
+    if not far <= MAX_POINT_COORDINATE:
+        raise InputError(f"points: coordinates reach {far:.3g}; the GPU tracer squares distances in float32, so "
+                         f"it takes strands within ±{MAX_POINT_COORDINATE:.0e} of the origin: scale them down "
+                         "(and the camera with them) or recentre them")
 
 
 def block_occupancy(grid):
