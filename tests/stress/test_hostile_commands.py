@@ -171,3 +171,45 @@ def test_generate_checks_out_before_the_work(tmp_path, capsys):
     folder.mkdir()
     assert groom_main(["generate", "--preset", "wavy", "--out", str(folder)]) == 2
     assert "is a folder" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ the renderer's own limits
+
+def _far_strand(offset, length):
+    pts = np.array([[offset, 0, 0], [offset, 0, length], [offset + length, 0, length]])
+    return Strands.from_arrays(pts, [3], radius=np.full(3, length / 20))
+
+
+def test_a_strand_too_far_for_float32_squares_is_refused_not_drawn_empty(tmp_path, capsys):
+    """At 1e20 the GPU image came out empty while the float64 reference showed hair."""
+    from tracer.reference import reference_render
+    from tracer.renderer import Renderer
+    r = Renderer()
+    near = _far_strand(5e16, 1e17)
+    r.set_strands(near)
+    cam = Camera.frame_bounds(*near.bounds(), (24, 24))
+    gpu, ref = r.render(cam, RenderSettings()), reference_render(near, cam, RenderSettings())
+    assert (gpu[..., 3] > 0).mean() > 0.02
+    np.testing.assert_array_equal(gpu[..., 3] > 0.5, ref[..., 3] > 0.5)
+    path = tmp_path / "far.npz"
+    _far_strand(1e20, 1e20).save_npz(path)
+    assert main(["render", str(path), "--out", str(tmp_path / "far.png")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {path}: points: coordinates reach 2.05e+20") and "1e+18" in err
+    assert not (tmp_path / "far.png").exists()
+
+
+def test_renderer_refuses_a_camera_too_far_and_an_image_too_large(monkeypatch):
+    import hairio.validate
+    from tracer.renderer import Renderer
+    r = Renderer()
+    r.set_strands(_far_strand(0, 1.0))
+    with pytest.raises(InputError, match="camera: position 1e\\+20"):
+        r.render(Camera.look_at([0, -1e20, 0], [0, 0, 0], size=(8, 8)), RenderSettings())
+    side = min(r.ctx.info["GL_MAX_TEXTURE_SIZE"], *r.ctx.info["GL_MAX_VIEWPORT_DIMS"])
+    with pytest.raises(InputError, match=f"draws at most {side} pixels a side"):
+        r.render(Camera.look_at([0, -3, 0], [0, 0, 0], size=(side + 1, 8)), RenderSettings())
+    monkeypatch.setattr(hairio.validate, "available_memory", lambda: 100 << 20)
+    with pytest.raises(InputError, match=r"camera size 2048x2048: needs about 0.19 GiB of memory but 0.10 GiB"):
+        r.render(Camera.look_at([0, -3, 0], [0, 0, 0], size=(2048, 2048)), RenderSettings())
+    assert r.render(Camera.look_at([0, -3, 0.5], [0, 0, 0.5], size=(64, 64)), RenderSettings()).shape == (64, 64, 4)
