@@ -21,6 +21,8 @@ import time
 
 import numpy as np
 
+from .atomic import check_destination
+from .npyfile import read_npy
 from .validate import InputError
 
 NUMPY_FORMATS = ("hair", "tfx", "npz", "data")
@@ -66,9 +68,8 @@ def _check_request(out, format, scale, axis, with_guides=False):
         raise InputError(f"--format {format}: choose one of {', '.join(NUMPY_FORMATS + BLENDER_FORMATS)}")
     if with_guides and format != "tfx":
         raise InputError("--guides: separate guide files are a TressFX convention; use it with --format tfx")
-    folder = os.path.dirname(os.path.abspath(out))
-    if not os.path.isdir(folder):
-        raise InputError(f"--out {out}: folder {folder!r} does not exist; create it first")
+    # Before the work: a folder, a missing or unwritable place would fail only at the end.
+    check_destination(out, f"--out {out}")
     scale = float(scale)
     if not np.isfinite(scale) or scale <= 0:
         raise InputError(f"--scale {scale}: must be a positive number")
@@ -132,10 +133,7 @@ def export_strands(strands, out, format=None, vertices_per_strand=32, pinned=2, 
 def _load_root_uv(path, num_strands):
     if path is None:
         return None
-    try:
-        uv = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as e:
-        raise InputError(f"--root-uv {path}: cannot read a .npy array ({e})") from e
+    uv = read_npy(path, f"--root-uv {path}")      # its header's shape checked against the file first
     if uv.shape != (num_strands, 2):
         raise InputError(f"--root-uv {path}: shape {uv.shape}, expected ({num_strands}, 2), one UV per strand")
     return uv
