@@ -173,3 +173,22 @@ def test_export_and_render_give_the_same_bad_file_the_same_answer(tmp_path, fmt,
     render_err = capsys.readouterr().err
     assert export_err == render_err and export_err.startswith(f"error: {path}")
     assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]
+
+
+@pytest.mark.parametrize("case", ["folder", "unwritable", "root-uv claims"])
+def test_export_checks_its_destination_and_root_uv_before_the_work(tmp_path, case, capsys):
+    from hairio.cli import export_main
+    src = tmp_path / "in.npz"
+    Strands.from_arrays(np.arange(12.0).reshape(4, 3), [2, 2]).save_npz(src)
+    (tmp_path / "dir.tfx").mkdir()
+    (tmp_path / "uv.npy").write_bytes(fz._npy("<f4", (10 ** 9, 2), bytes(16)))
+    argv = {"folder": ["--out", str(tmp_path / "dir.tfx")],
+            "unwritable": ["--out", "/proc/keystrand-test.tfx"],
+            "root-uv claims": ["--out", str(tmp_path / "x.tfx"), "--root-uv", str(tmp_path / "uv.npy")]}[case]
+    before = sorted(p.name for p in tmp_path.iterdir())
+    assert export_main([str(src)] + argv) == 2
+    err = capsys.readouterr().err
+    want = {"folder": "is a folder", "unwritable": "cannot write in",
+            "root-uv claims": "--root-uv " + str(tmp_path / "uv.npy") + ": the .npy header claims"}[case]
+    assert want in err and err.startswith("error: --")
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
