@@ -239,7 +239,7 @@ def _remove(block):
 
 
 def main(argv=None):
-    """Script entry: read strands, build a Curves object in an empty scene, export."""
+    """Script entry: read strands, build a Curves object in a new empty scene, export."""
     import argparse
     from hairio import InputError
     from hairio.formats import read_strands
@@ -263,8 +263,11 @@ def main(argv=None):
                 root_uv = np.load(args.root_uv, allow_pickle=False)
             except (OSError, ValueError) as e:
                 raise InputError(f"--root-uv {args.root_uv}: cannot read a .npy array ({e})") from e
-        bpy.ops.wm.read_factory_settings(use_empty=True)
-        obj = strands_to_curves("hair", strands, collection=bpy.context.scene.collection)
+        # A scene of its own, not read_factory_settings: resetting the preferences makes
+        # Blender remove the wheels of the user's enabled extensions from their shared
+        # site-packages, under a Blender that may be running beside this process.
+        scene = bpy.data.scenes.new("hair")
+        obj = strands_to_curves("hair", strands, collection=scene.collection)
         export_hair(obj, args.out, fmt, scale=args.scale, axis=args.axis, root_uv=root_uv,
                     groom_attributes=not args.no_groom_attributes)
     except (InputError, ExportError, ExporterFailed) as e:

@@ -161,6 +161,7 @@ class HAIR_OT_add_key_strand(Operator):
         import numpy as np
         from groom import place_key
         from groom.frames import root_frames
+        from . import head
         scalp = _scalp_or_report(self, context)
         if scalp is None:
             return {'CANCELLED'}
@@ -171,7 +172,8 @@ class HAIR_OT_add_key_strand(Operator):
             local = (np.linalg.inv(np.array(scalp.matrix_world, np.float64)) @ world)[:3]
             tri, bary, root = scalp_data.closest_points(local[None])
             normal = scalp_data.normals_at(tri, bary, settings.normal_mode)
-            frame = root_frames(normal, tuple(settings.up), tuple(settings.front))[0]
+            # The head's axes in the mesh, the ones Generate grows the hair with.
+            frame = root_frames(normal, *head.scalp_axes(scalp))[0]
             profile = scene_data.shape_profile(settings.key_shape, settings.key_length)
             points = place_key(profile, root[0], frame)
             with transaction() as tx:

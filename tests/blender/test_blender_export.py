@@ -2,9 +2,10 @@
 """The panel's Export writes the files the command line writes: the same hair exported from
 Blender and by `python -m groom export` (from the panel's own .npz, with the root UVs the
 hair holds) gives equal files in every format, groom primvars and root UVs included."""
-import importlib
 import json
+import pathlib
 import re
+import sys
 
 import numpy as np
 import pytest
@@ -58,6 +59,11 @@ def _panel_and_command_line(tmp_path, hair):
         uv_args = ["--root-uv", str(tmp_path / "uv.npy")]
     for ext in FORMATS:
         assert export_main([str(panel / "hair.npz"), "--out", str(cli / f"hair.{ext}"), *uv_args]) == 0
+    # The command line's Blender shares this one's user folder, as it would a running
+    # Blender's: it must leave the extensions' wheels installed there alone.
+    site = pathlib.Path(bpy.utils.user_resource('EXTENSIONS')) / ".local" / "lib" / \
+        f"python{sys.version_info.major}.{sys.version_info.minor}" / "site-packages"
+    assert (site / "groom").is_dir(), "the command line's export removed the extension's wheels"
     return panel, cli
 
 

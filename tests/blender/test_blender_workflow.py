@@ -101,6 +101,20 @@ def test_add_key_strand_grows_a_bezier_key_from_the_nearest_surface_point(clean)
     assert top[1].co.z > top[0].co.z
 
 
+def test_add_key_strand_follows_the_head_s_axes_on_a_turned_scalp(clean):
+    """A head imported Y up (a quarter turn on the object): the key still falls down the
+    head in the scene, with the scene's Up, as the hair Generate grows beside it."""
+    scalp = make_scalp()
+    scalp.rotation_euler = (1.5708, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    (key,) = add_keys(scalp, [(0.0, -0.08, 0.06)])
+    m = np.array(key.matrix_world)
+    bp = key.data.splines[0].bezier_points
+    root, tip = ((m @ np.append(np.array(bp[i].co), 1.0))[:3] for i in (0, -1))
+    assert tip[2] < root[2] - 0.05, (root, tip)
+    assert abs(tip[0] - root[0]) < 0.02
+
+
 def test_generate_writes_the_curves_groom_computes(clean):
     from groom import generate
     scalp = make_scalp()

@@ -2,6 +2,7 @@
 """Alembic and USD through Blender's exporters (bpy in a subprocess, a few seconds):
 what the files hold, scale and axes, the scene left as it was, no file after a failure."""
 import json
+import os
 import pathlib
 import re
 import subprocess
@@ -89,7 +90,10 @@ def exported(tmp_path_factory):
     s = make_wavy(30, (5, 12), seed=4)
     s.save_npz(tmp / "in.npz")
     code = f"ROOT = {str(ROOT)!r}; TMP = {str(tmp)!r}\n" + SCRIPT
-    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    # A user folder of its own: the script resets to factory settings, and Blender then
+    # removes the wheels of extensions no longer enabled from the user folder's site-packages.
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp / "blender-user"))
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
     assert run.returncode == 0, run.stderr[-3000:]
     return tmp, s, json.loads((tmp / "result.json").read_text())
 
