@@ -26,6 +26,8 @@ from .params import GroomParams
 from .sampling import sample_roots
 from .scalp import Scalp
 from .parallel import MIN_SPLIT, ranges, run_jobs
+from .collide import StrandCollision
+from .shaping import shape_strands, shaping_bound
 from .wisps import check_groups, guide_weights_by_guide, root_groups_for
 
 
@@ -34,7 +36,8 @@ class GroomResult:
     """strands: hairio.Strands (wisp = main key index); roots (S,3) float64; root_uv (S,2) or
     None; guides (S,3) int32 (main, n1, n2 key index); guide_weights (S,3) float32;
     root_ids (S,) int64 (stable per-root ids seeding each strand's random stream);
-    root_tri (S,), root_bary (S,3): where each root lies on the scalp."""
+    root_tri (S,), root_bary (S,3): where each root lies on the scalp; collision: a
+    collide.CollisionReport, or None when no collider was given."""
     strands: Strands
     roots: np.ndarray
     root_uv: np.ndarray
@@ -43,6 +46,7 @@ class GroomResult:
     root_ids: np.ndarray
     root_tri: np.ndarray
     root_bary: np.ndarray
+    collision: object = None
 
 
 def _check_inputs(scalp, keys, params):
@@ -97,9 +101,11 @@ class Generator:
     layout whole-array numpy code reads fastest; results are returned in the (S, 3) layout
     of GroomResult."""
 
-    def __init__(self, scalp, keys, params, samples=None):
+    def __init__(self, scalp, keys, params, samples=None, collider=None):
         """samples: optional sampling.RootSamples to grow from instead of sampling
-        params.count roots (measurements place roots where they need them)."""
+        params.count roots (measurements place roots where they need them). collider: the
+        mesh the hair stays out of (collide.as_collider: a Collider, a Scalp or (vertices,
+        triangles)), or None."""
         self.keys = _check_inputs(scalp, keys, params)
         self.scalp, self.params = scalp, params
         p = params
@@ -121,6 +127,10 @@ class Generator:
         per_root = [partial(self._per_root, lo, hi) for lo, hi in ranges(n)]
         run_jobs(per_root + assign_jobs, _threads_for(n))
         self._key_data = self._prepare_keys(self.keys)
+        self._collision = None
+        if collider is not None and p.collision:
+            self._collision = StrandCollision(collider, scalp, p, n)
+            self._collision.check_keys(self.keys, p)
         self._result = None
         self._cache = None
         self.last_recomputed = 0  # strands recomputed by the last update_keys
@@ -196,6 +206,8 @@ class Generator:
         pts, _ = evaluate_strands(self._roots[:, sel], self.transforms[:, sel], self._guides[:, sel],
                                   self._weights[:, sel].astype(np.float32), counts, rows, sigma=sigma,
                                   threads=_threads_for(len(sel)))
+        shape_strands(pts, counts, sigma, None, self.transforms[:, sel], self._guides[0, sel], self.samples.ids[sel],
+                      rows, np.array([d["root"] for d in self._key_data]), self.params, _threads_for(len(sel)))
         return pts, counts
 
     def _strands(self, sel, guides, weights):
@@ -222,13 +234,18 @@ class Generator:
             jobs, attrs = self._attribute_jobs(ids, counts, along, g, w, base_radius)
             pts, done = evaluate_strands(*args, counts, rows, frac=frac, also=jobs, threads=_threads_for(len(frac)))
             attrs = attrs or done[0]
+            sigma = None
         else:
             tol = p.tolerance * (base_radius if p.tolerance_units == "radius" else np.ones(len(frac)))
             tol = np.maximum(tol, 1e-300)
-            bins = np.stack([d["bound"] for d in kd])
+            bins = shaping_bound(np.stack([d["bound"] for d in kd]), rows, p)
             sigma, counts = adaptive_sigma(frac, g.T, w.T, bins, tol, max_cyl)
             pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma, threads=_threads_for(len(frac)))
             attrs = self._attributes(ids, counts, sigma / np.repeat(frac, counts), g, w, base_radius)
+        threads = _threads_for(len(frac))
+        shape_strands(pts, counts, sigma, frac, args[1], g[0], ids, rows, np.array([d["root"] for d in kd]), p, threads)
+        if self._collision is not None:
+            pts = self._collision.apply(pts, counts, attrs[0], sel, threads)
         return (pts, counts) + tuple(attrs)
 
     def _attributes(self, ids, counts, along, g, w, base_radius):
@@ -268,7 +285,8 @@ class Generator:
         strands = Strands(pts, counts.astype(np.int32), radius, color, alpha, guides[0].astype(np.int32))
         self._cache = {"pts": pts, "counts": counts, "radius": radius, "color": color, "alpha": alpha}
         self._result = GroomResult(strands, s.points, self.root_uv, np.ascontiguousarray(guides.T, dtype=np.int32),
-                                   np.ascontiguousarray(weights.T, dtype=np.float32), s.ids, s.tri, s.bary)
+                                   np.ascontiguousarray(weights.T, dtype=np.float32), s.ids, s.tri, s.bary,
+                                   None if self._collision is None else self._collision.report())
         self._guides, self._weights = guides, weights
         return self._result
 
@@ -304,6 +322,8 @@ class Generator:
         for i, d in zip(order, self._prepare_keys([changes[i] for i in order])):
             self.keys[i] = changes[i]
             self._key_data[i] = d
+        if self._collision is not None:
+            self._collision.check_keys(self.keys, self.params)
         changed = np.array(order, np.int64)
         old_g, old_w = self._guides, self._weights
         if all(np.array_equal(old_data[i]["root"], self._key_data[i]["root"])
@@ -365,7 +385,8 @@ class Generator:
         return out["pts"], new_counts, out["radius"], out["color"], out["alpha"]
 
 
-def generate(scalp, keys, params=None):
+def generate(scalp, keys, params=None, collider=None):
     """Grow ordinary strands on `scalp` from `keys` (list of KeyStrand) with `params`
-    (GroomParams; defaults when None). Returns a GroomResult."""
-    return Generator(scalp, keys, params or GroomParams()).generate()
+    (GroomParams; defaults when None), kept out of `collider` (see Generator). Returns a
+    GroomResult."""
+    return Generator(scalp, keys, params or GroomParams(), collider=collider).generate()

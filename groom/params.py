@@ -50,6 +50,16 @@ class GroomParams:
     alpha_start, alpha_tip   alpha 1 up to fraction alpha_start, then linear to alpha_tip
     parting          None or {'point': (3,), 'normal': (3,)}: roots on the normal's side are
                      group 1, the others group 0 (used when the scalp has no groups)
+    clump, clump_shape   wisps: each strand is pulled toward its wisp's key by clump·σ^clump_shape
+                     of the way (σ the fraction of the key's length: 0 at the root, loose, up to
+                     clump at the tip, tight); clump 0 = no pull
+    frizz            each strand wanders off its path by up to this (scene units) toward the tip,
+                     a smooth per-strand random wave of 2-4 periods along its length
+    curl, curl_period    each strand winds around its path in a helix of radius up to `curl`
+                     (growing from the root) with one turn per `curl_period` of length
+    collision        move strands out of the collider given to generate (none given: nothing
+                     to collide with); key strands inside it are reported, never moved
+    collision_margin every strand point ends at least its radius plus this outside the collider
     """
     count: int = 10000
     seed: int = 0
@@ -77,6 +87,13 @@ class GroomParams:
     alpha_start: float = 1.0
     alpha_tip: float = 1.0
     parting: dict = field(default=None)
+    clump: float = 0.0
+    clump_shape: float = 1.0
+    frizz: float = 0.0
+    curl: float = 0.0
+    curl_period: float = 0.02
+    collision: bool = True
+    collision_margin: float = 2e-4
 
     def __post_init__(self):
         self.count = _int("count", self.count, 1)
@@ -97,9 +114,17 @@ class GroomParams:
         self.tidiness = _float("tidiness", self.tidiness, 0.0, 1.0)
         self.theta_max = _float("theta_max", self.theta_max, 0.0, np.pi)
         self.n_influence = _float("n_influence", self.n_influence, 0.0, 100.0)
-        if not isinstance(self.intelligence, (bool, np.bool_)):
-            raise InputError(f"intelligence: expected true or false, got {self.intelligence!r}")
-        self.intelligence = bool(self.intelligence)
+        for name in ("intelligence", "collision"):
+            value = getattr(self, name)
+            if not isinstance(value, (bool, np.bool_)):
+                raise InputError(f"{name}: expected true or false, got {value!r}")
+            setattr(self, name, bool(value))
+        self.clump = _float("clump", self.clump, 0.0, 1.0)
+        self.clump_shape = _float("clump_shape", self.clump_shape, 0.0, 8.0, low_open=True)
+        self.frizz = _float("frizz", self.frizz, 0.0, np.inf)
+        self.curl = _float("curl", self.curl, 0.0, np.inf)
+        self.curl_period = _float("curl_period", self.curl_period, 0.0, np.inf, low_open=True)
+        self.collision_margin = _float("collision_margin", self.collision_margin, 0.0, np.inf)
         self.tolerance = _float("tolerance", self.tolerance, 0.0, np.inf, low_open=True)
         self.radius = _float("radius", self.radius, 0.0, np.inf)
         self.taper_start = _float("taper_start", self.taper_start, 0.0, 1.0)

@@ -1,0 +1,961 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Collision with the head (SPEC §5, Collision): a collider mesh, its signed distance, and
+strands moved out of it the way a groomer would comb them.
+
+Signed distance. The distance to the nearest triangle, signed by the angle-weighted
+pseudo-normal of the feature (face, edge or vertex) the nearest point lies on (Bærentzen &
+Aanæs 2005): outside where the point lies on the side the pseudo-normal points to. On a
+closed, consistently oriented mesh that is the exact inside/outside; a closed mesh whose
+faces all point inwards is turned round first (its volume says so), one whose faces disagree
+is refused (recalculate its normals). An OPEN mesh (a scalp used as its own collider) has no
+inside, only a back: a point counts as inside when its nearest point lies on a face or an
+inner edge or vertex and the point is behind it, within `band` of it (a shell behind the
+faces); a point whose nearest point is on the open border, or that lies deeper, is outside.
+So an open cap keeps hair off and out from under itself, and past its edge it holds nothing.
+
+Acceleration. The distance is sampled on a uniform grid over the mesh (about 2 M nodes, a
+cell of 1.7 mm on the bundled head): exact at every node within `band` (2.5 cells) of the
+surface, found by visiting, for each triangle, the nodes near it; farther nodes are clamped
+to ±band, their sign by ray parity along the grid's z lines (a closed mesh) or outside (an
+open one). A query interpolates trilinearly and subtracts the cell's error bound: the
+interpolation's error measured at the cell's centre against the exact distance there (the
+centres are a second grid treated like the nodes), doubled. Near a smooth surface that bound
+is some 0.02 mm; near a sharp feature (an ear's rim) it grows, and hair keeps that much more
+clear of it. `signed_distance` is the exact form, for checks and for a few points.
+
+Resolution (`resolve_strands`), root to tip, each strand on its own (so a strand's result
+never depends on which others are computed with it: incremental regeneration stays
+bit-identical). Point k must end at least its clearance outside, radius_k + margin (near a
+root that the scalp puts inside the collider, less: the clearance rises from the root's own
+depth by half the distance from the root, so the hair may leave at 30°). Points before the
+first one too close stay as they are. From there each segment keeps its length and, where it
+can, its direction, so the rest of the strand follows by translation; a segment that would
+end too close turns about its start toward the surface's outward direction, by the least
+angle that clears it (its end and its middle). A segment never turns away from the one
+before by more than the strand's sharpest original bend (or 20°, for a straight strand),
+unless that is the only way out; so a strand let go by the surface bends back toward its own
+direction gradually instead of kinking. The root never moves.
+"""
+import hashlib
+from collections import OrderedDict
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+
+from hairio import InputError
+
+from .parallel import cpu_threads, ranges, run_jobs
+from .scalp import Scalp, _closest_on_triangles
+
+# Grid nodes of the sampled distance (memory: 2 float32 per node, 16 MB).
+_TARGET_NODES = 2_000_000
+# The band of exact distances, in cells: a point of a cell closer to the surface than its
+# clearance (a fraction of a cell) has all 8 corners within sqrt(3) cells of it, so inside
+# the band: its interpolated distance is made of exact values.
+_BAND_CELLS = 2.0
+# Cell centres are sampled this near the surface: any point within a fifth of a cell of it
+# (clearances are smaller) lies in a cell whose centre is this near, and every corner of
+# such a cell is within 1.1 + sqrt(3)/2 < 2 cells, inside the band: exact.
+_CENTRE_CELLS = 1.1
+# The error bound per cell: this times the interpolation error at the cell's centre, plus
+# this fraction of a cell (the error elsewhere in the cell can exceed the centre's a little).
+_ERROR_SAFETY = 1.5
+_ERROR_FLOOR = 1e-3
+# Triangles per block of the node visits (bounds the (triangle, node) pairs held at once).
+_PAIR_BLOCK = 1 << 21
+# Faces with less area than this (relative to the mesh's size squared) have no direction.
+_DEGENERATE_AREA = 1e-14
+# The clearance near a root inside the collider rises by this per unit distance from it.
+RAMP_SLOPE = 0.5
+# A segment turns from the one before by at most the strand's sharpest bend or this (cosine
+# of 20°), unless it must turn more to clear the collider.
+_MIN_TURN_COS = float(np.cos(np.radians(20.0)))
+# Attempts to find the least turn that clears a segment before it goes straight out.
+_PUSH_ITERATIONS = 5
+# Samples along each key strand when looking for keys inside the collider, and how deep
+# (of the collider's size: 1 mm on the bundled head) a key may dip before it is reported.
+_KEY_CHECK_SAMPLES = 257
+_KEY_DEPTH = 0.005
+# More than this share of the scalp's area farther than `band` from the collider: it is not
+# this scalp's head.
+_FAR_SCALP_SHARE = 0.5
+
+
+class Collider:
+    """A triangle mesh hair must stay outside of.
+
+    vertices (V,3), triangles (T,3) vertex indices; `name` names the mesh in messages (e.g.
+    the Blender object's name). Bad input is an InputError naming it: NaN/Inf vertices, no
+    faces, faces of no area, faces that disagree about which side is outside.
+
+    closed: every edge between exactly two faces. band: the distance (scene units) within
+    which the sampled distance is exact. size: the mesh's largest extent."""
+
+    def __init__(self, vertices, triangles, name="collider", clearance=0.0):
+        self.name = str(name)
+        v = np.asarray(vertices)
+        if v.ndim != 2 or v.shape[1:] != (3,) or len(v) == 0 or v.dtype.kind not in "fiu":
+            raise InputError(f"collider {self.name!r}: expected vertices of shape (V, 3) with V >= 1, got "
+                             f"{v.shape} of {v.dtype}")
+        v = v.astype(np.float64)
+        bad = ~np.isfinite(v).all(axis=1)
+        if bad.any():
+            raise InputError(f"collider {self.name!r}: vertex {int(np.argmax(bad))} has NaN/Inf coordinates "
+                             f"({int(bad.sum())} such vertices); repair the mesh or choose another collider")
+        t = np.asarray(triangles)
+        if t.ndim != 2 or t.shape[1:] != (3,) or len(t) == 0:
+            raise InputError(f"collider {self.name!r}: no faces (triangles of shape {t.shape}); a collider "
+                             "needs a closed triangle mesh such as a head, not only vertices")
+        if t.dtype.kind not in "iu":
+            raise InputError(f"collider {self.name!r}: expected integer vertex indices, got {t.dtype}")
+        t = t.astype(np.int64)
+        if t.min() < 0 or t.max() >= len(v):
+            raise InputError(f"collider {self.name!r}: faces refer to vertices outside [0, {len(v) - 1}]")
+        a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
+        size = float(np.ptp(v[np.unique(t)], axis=0).max())
+        area2 = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        keep = area2 > 2.0 * _DEGENERATE_AREA * max(size, 1e-300) ** 2
+        if not keep.any():
+            raise InputError(f"collider {self.name!r}: its faces have no area; a collider needs a surface")
+        self.vertices, self.triangles = v, t[keep]
+        self.size = size
+        self.closed = self._orient()
+        self._pseudo_normals()
+        clearance = float(clearance)
+        if not (np.isfinite(clearance) and clearance >= 0):
+            raise InputError(f"collider {self.name!r}: clearance must be a finite distance >= 0, got {clearance}")
+        self._build_field(clearance)
+
+    # --- the mesh ---------------------------------------------------------------------------
+
+    def _orient(self):
+        """Closed or not; a closed mesh is turned outward-facing (positive volume)."""
+        t = self.triangles
+        directed = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+        key = np.sort(directed, axis=1)
+        edges, inverse, uses = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+        inverse = inverse.ravel()
+        self._edge_uses = uses
+        self._tri_edges = inverse.reshape(3, -1).T  # edge ids of (v0v1, v1v2, v2v0)
+        if not (uses == 2).all():
+            return False
+        # Each edge used twice must be used once in each direction by consistent faces.
+        forward = (directed[:, 0] < directed[:, 1]).astype(np.int64)
+        per_edge = np.bincount(inverse, weights=forward, minlength=len(edges))
+        flipped = int((per_edge != 1).sum())
+        if flipped:
+            raise InputError(f"collider {self.name!r}: a closed mesh whose faces disagree about which side is "
+                             f"outside ({flipped} edges run the same way in both their faces); recalculate its "
+                             "normals (in Blender: Mesh > Normals > Recalculate Outside)")
+        centre = self.vertices.mean(axis=0)
+        a, b, c = (self.vertices[t[:, i]] - centre for i in range(3))
+        if np.einsum("td,td->t", a, np.cross(b, c)).sum() < 0:
+            self.triangles = t[:, ::-1].copy()
+            return self._orient()
+        return True
+
+    def _pseudo_normals(self):
+        """Face normals, and angle-weighted pseudo-normals of edges and vertices
+        (Bærentzen & Aanæs); border features of an open mesh are flagged."""
+        v, t = self.vertices, self.triangles
+        p = [v[t[:, i]] for i in range(3)]
+        n = np.cross(p[1] - p[0], p[2] - p[0])
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        self.face_normals = n
+        edge_n = np.zeros((len(self._edge_uses), 3))
+        for i in range(3):
+            np.add.at(edge_n, self._tri_edges[:, i], n)
+        vert_n = np.zeros_like(v)
+        for i in range(3):
+            e1, e2 = p[(i + 1) % 3] - p[i], p[(i + 2) % 3] - p[i]
+            cos = np.einsum("td,td->t", e1, e2) / (np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1))
+            np.add.at(vert_n, t[:, i], np.arccos(np.clip(cos, -1.0, 1.0))[:, None] * n)
+        self._edge_normals, self._vertex_normals = edge_n, vert_n
+        border_edge = self._edge_uses == 1
+        border_vertex = np.zeros(len(v), bool)
+        if border_edge.any():
+            # The vertices of border edges: from the faces that use them.
+            for i in range(3):
+                on = border_edge[self._tri_edges[:, i]]
+                border_vertex[t[on, i]] = True
+                border_vertex[t[on, (i + 1) % 3]] = True
+        self._border_edge, self._border_vertex = border_edge, border_vertex
+
+    def _signs(self, points, tri, bary):
+        """+1 outside, -1 inside, for points whose nearest surface point is (tri, bary)."""
+        t = self.triangles[tri]
+        zero = bary == 0.0
+        nz = zero.sum(axis=1)
+        normal = self.face_normals[tri].copy()
+        border = np.zeros(len(tri), bool)
+        edge = nz == 1  # on the edge opposite the zero corner: v1v2 (0), v2v0 (1), v0v1 (2)
+        if edge.any():
+            which = np.array([1, 2, 0])[np.argmax(zero[edge], axis=1)]
+            e = self._tri_edges[tri[edge], which]
+            normal[edge] = self._edge_normals[e]
+            border[edge] = self._border_edge[e]
+        vert = nz == 2
+        if vert.any():
+            corner = t[vert, np.argmax(~zero[vert], axis=1)]
+            normal[vert] = self._vertex_normals[corner]
+            border[vert] = self._border_vertex[corner]
+        q = np.einsum("nd,nd->n", points - self.surface_points(tri, bary), normal)
+        return np.where((q >= 0) | border, 1.0, -1.0)
+
+    def surface_points(self, tri, bary):
+        v, t = self.vertices, self.triangles[tri]
+        return bary[:, :1] * v[t[:, 0]] + bary[:, 1:2] * v[t[:, 1]] + bary[:, 2:] * v[t[:, 2]]
+
+    def signed_distance(self, points):
+        """Exact signed distance (N,) float64 of points (N,3) (positive outside), by a search
+        of the triangles near each point: for checks and for a few thousand points (generation
+        uses the sampled form). On an open mesh, see the module's notes."""
+        q = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if not len(q):
+            return np.zeros(0)
+        tri, bary, near = self._mesh().closest_points(q)
+        d = np.linalg.norm(q - near, axis=1)
+        s = self._signs(q, tri, bary)
+        if not self.closed:
+            s = np.where((s < 0) & (d > self.band), 1.0, s)
+        return s * d
+
+    def _mesh(self):
+        if getattr(self, "_as_scalp", None) is None:
+            self._as_scalp = Scalp(self.vertices, self.triangles)
+        return self._as_scalp
+
+    # --- the sampled distance ---------------------------------------------------------------
+
+    def _build_field(self, clearance):
+        a, b, c = (self.vertices[self.triangles[:, i]] for i in range(3))
+        lo = np.minimum(np.minimum(a, b), c).min(axis=0)
+        hi = np.maximum(np.maximum(a, b), c).max(axis=0)
+        extent = np.maximum(hi - lo, 1e-9 * max(self.size, 1e-300))
+        h = float(np.cbrt(np.prod(extent) / _TARGET_NODES))
+        for _ in range(3):  # the padding depends on the cell
+            h = max(h, float(extent.max()) / 1000.0)
+            h = float(np.cbrt(np.prod(extent + 2 * (_BAND_CELLS + 2.0) * h) / _TARGET_NODES))
+        # Wide enough that every corner of a cell holding a point closer than the clearance
+        # is exact (see _BAND_CELLS), and so are the centres of such cells.
+        band_cells = max(_BAND_CELLS, clearance / h + 1.8)
+        centre_cells = max(_CENTRE_CELLS, clearance / h + 0.9)
+        pad = (band_cells + 2.0) * h
+        self.cell, self.band = h, band_cells * h
+        self.clearance = clearance
+        self.origin = lo - pad
+        shape = np.ceil((extent + 2 * pad) / h).astype(np.int64) + 1
+        self.shape = tuple(int(s) for s in shape)
+        self._strides = np.array([shape[1] * shape[2], shape[2], 1], np.int64)
+        self._corner_offsets = np.array([dx * self._strides[0] + dy * self._strides[1] + dz
+                                         for dx in (0, 1) for dy in (0, 1) for dz in (0, 1)], np.int64)
+        phi = self._sample_exact(np.zeros(3), shape, self.band)
+        inside = self._parity(shape) if self.closed else np.zeros(self.shape, bool)
+        far = np.isnan(phi)
+        phi[far] = np.where(inside[far], -self.band, self.band)
+        self.phi = phi.ravel().astype(np.float32)
+        # Cell centres: a grid offset by half a cell, one centre per cell (C order).
+        centre = self._sample_exact(np.full(3, 0.5), shape - 1, centre_cells * h).ravel()
+        i, j, k = np.meshgrid(*(np.arange(s - 1) for s in shape), indexing="ij")
+        base = (i * self._strides[0] + j * self._strides[1] + k).ravel()
+        del i, j, k
+        total = np.zeros(len(base), np.float32)
+        low = np.full(len(base), np.inf, np.float32)
+        for dx in (0, 1):
+            for dy in (0, 1):
+                for dz in (0, 1):
+                    corner = self.phi[base + dx * self._strides[0] + dy * self._strides[1] + dz]
+                    total += corner
+                    np.minimum(low, corner, out=low)
+        err = np.abs(total / np.float32(8.0) - centre)
+        err = _neighbourhood_max(np.where(np.isnan(centre), 0.0, err).reshape(tuple(shape - 1)).astype(np.float32))
+        # Per cell, stored at its lowest corner's node index (the index a query finds).
+        self.cell_error = np.zeros(self.phi.shape, np.float32)
+        self.cell_error[base] = _ERROR_SAFETY * err + _ERROR_FLOOR * h
+        # The least value any point of a cell can have: a first test for many points at once.
+        self.cell_lower = np.zeros(self.phi.shape, np.float32)
+        self.cell_lower[base] = low - self.cell_error[base]
+
+    def _sample_exact(self, offset, shape, reach):
+        """Signed distance at the nodes origin + (index + offset)·cell of a grid of `shape`,
+        exact within `reach` of the surface, NaN elsewhere. For each block of triangles the
+        nodes in its box grown by reach are visited (after a cheap test against the
+        triangle's plane), blocks on the worker threads; each node keeps its nearest
+        triangle, whose nearest feature then gives the sign."""
+        h = self.cell
+        org = self.origin + offset * h
+        strides = np.array([shape[1] * shape[2], shape[2], 1], np.int64)
+        v = self.vertices - org  # relative coordinates: float32 keeps 1e-7 of the box
+        t = self.triangles
+        a, b, c = (v[t[:, i]] for i in range(3))
+        tlo = np.clip(np.ceil((np.minimum(np.minimum(a, b), c) - reach) / h).astype(np.int64), 0, shape - 1)
+        thi = np.clip(np.floor((np.maximum(np.maximum(a, b), c) + reach) / h).astype(np.int64), -1, shape - 1)
+        # Boxes rounded up to even sizes: fewer shapes, so fewer and larger blocks of work.
+        dims = np.maximum(thi - tlo + 1, 0)
+        dims = np.where(dims > 0, dims + (dims & 1), 0)
+        geom = _TriangleGeometry(a, b, c)
+        # Triangles grouped by the shape of their box of nodes: each group's pairs are a
+        # broadcast of its boxes' corners and one table of offsets, with each triangle's
+        # constants broadcast over its nodes (no per-pair gathers).
+        shapes, group = np.unique(dims, axis=0, return_inverse=True)
+        group = group.ravel()
+        jobs = []
+        for gi, dim in enumerate(shapes):
+            n_box = int(np.prod(dim))
+            if not n_box:
+                continue
+            members = np.flatnonzero(group == gi)
+            step = max(1, _PAIR_BLOCK // n_box)
+            for lo in range(0, len(members), step):
+                jobs.append((members[lo:lo + step], dim))
+        r2 = np.float32(reach * reach)
+        limit = shape - 1
+
+        def visit(tris, dim):
+            """(node, key) of the pairs within reach: key orders by squared distance, then
+            triangle index (a positive float32's bits sort as integers)."""
+            offs = np.stack(np.meshgrid(*(np.arange(x) for x in dim), indexing="ij"), -1).reshape(-1, 3)
+            node = tlo[tris][:, None, :] + offs[None]
+            d2 = geom.distance2_boxes(tris, (node * h).astype(np.float32))
+            keep = (d2 <= r2) & (node <= limit).all(axis=2)
+            tri = np.broadcast_to(tris[:, None], keep.shape)[keep]
+            key = (d2[keep].view(np.uint32).astype(np.uint64) << np.uint64(32)) | tri.astype(np.uint64)
+            return node[keep] @ strides, key
+
+        n_nodes = int(np.prod(shape))
+        best = np.full(n_nodes, np.iinfo(np.uint64).max, np.uint64)
+        for flat, key in (visit(tris, dim) for tris, dim in jobs):  # threads only slowed it (measured)
+            np.minimum.at(best, flat, key)  # the nearest triangle, the lowest index on a tie
+        best_tri = np.where(best == np.iinfo(np.uint64).max, -1,
+                            (best & np.uint64(0xFFFFFFFF)).astype(np.int64))
+        found = np.flatnonzero(best_tri >= 0)
+        out = np.full(n_nodes, np.nan)
+        if found.size:
+            idx = np.stack(np.unravel_index(found, tuple(shape)), 1)
+            pts = org + idx * h
+            tri = best_tri[found]
+            pa, pb, pc = (self.vertices[self.triangles[tri, i]] for i in range(3))
+            bary = _closest_on_triangles(pts, pa, pb, pc)
+            near = bary[:, :1] * pa + bary[:, 1:2] * pb + bary[:, 2:] * pc
+            out[found] = self._signs(pts, tri, bary) * np.linalg.norm(pts - near, axis=1)
+        return out.reshape(tuple(shape))
+
+    def _parity(self, shape):
+        """Inside (odd number of surface crossings above) per node, along z lines shifted by
+        an irrational sliver of a cell so that no line meets an edge or a vertex exactly."""
+        h = self.cell
+        shift = np.array([np.sqrt(2.0) - 1.0, np.sqrt(3.0) - 1.0]) * 1e-4 * h
+        v = self.vertices - self.origin
+        t = self.triangles
+        a, b, c = (v[t[:, i]] for i in range(3))
+        xy_lo = np.minimum(np.minimum(a, b), c)[:, :2]
+        xy_hi = np.maximum(np.maximum(a, b), c)[:, :2]
+        ilo = np.clip(np.ceil((xy_lo - shift) / h).astype(np.int64), 0, np.array(shape[:2]) - 1)
+        ihi = np.clip(np.floor((xy_hi - shift) / h).astype(np.int64), -1, np.array(shape[:2]) - 1)
+        dims = np.maximum(ihi - ilo + 1, 0)
+        count = dims.prod(axis=1)
+        tri = np.repeat(np.arange(len(t)), count)
+        local = np.arange(len(tri)) - np.repeat(np.cumsum(count) - count, count)
+        ix = local // dims[tri, 1] + ilo[tri, 0]
+        iy = local % dims[tri, 1] + ilo[tri, 1]
+        x, y = ix * h + shift[0], iy * h + shift[1]
+        pa, pb, pc = a[tri], b[tri], c[tri]
+        # 2-D barycentrics of the line's point in the triangle's shadow.
+        det = (pb[:, 0] - pa[:, 0]) * (pc[:, 1] - pa[:, 1]) - (pc[:, 0] - pa[:, 0]) * (pb[:, 1] - pa[:, 1])
+        ok = det != 0
+        safe = np.where(ok, det, 1.0)
+        u = ((pb[:, 0] - x) * (pc[:, 1] - y) - (pc[:, 0] - x) * (pb[:, 1] - y)) / safe
+        w = ((pc[:, 0] - x) * (pa[:, 1] - y) - (pa[:, 0] - x) * (pc[:, 1] - y)) / safe
+        hit = ok & (u >= 0) & (w >= 0) & (u + w <= 1)
+        z = u * pa[:, 2] + w * pb[:, 2] + (1 - u - w) * pc[:, 2]
+        # Nodes k <= kz lie below the crossing.
+        kz = np.floor(z / h).astype(np.int64)
+        hit &= kz >= 0
+        kz = np.minimum(kz, shape[2] - 1)
+        marks = np.zeros(shape, np.int32)
+        np.add.at(marks, (ix[hit], iy[hit], kz[hit]), 1)
+        above = np.cumsum(marks[:, :, ::-1], axis=2)[:, :, ::-1]
+        return (above & 1).astype(bool)
+
+    def _locate(self, p):
+        """Cell base index (N,) and fractions (3, N) of points (N,3), float64. Points beyond the
+        grid fall in its border cells, whose corners are all `band` outside (the padding), so
+        they read as far outside with no gradient."""
+        base = np.zeros(len(p), np.int64)
+        frac = np.empty((3, len(p)))
+        for axis, n in enumerate(self.shape):
+            g = (p[:, axis] - self.origin[axis]) * (1.0 / self.cell)
+            i = np.clip(g, 0, n - 2).astype(np.int64)
+            np.clip(g - i, 0.0, 1.0, out=frac[axis])
+            base *= n
+            base += i
+        return base, frac
+
+    def clear_of(self, points, clearance):
+        """True where a point is certainly at least `clearance` outside: one look-up per point
+        of the lowest value its cell can hold, in the points' own precision (float32 points:
+        a cell found off by a rounding is a neighbour, whose bound differs by less than the
+        1e-6 of a cell added to the clearance). False means 'look closer' (`value`). Points
+        beyond the grid fall in its border cells, which are all clear (the grid's padding)."""
+        p = np.asarray(points)
+        dt = p.dtype if p.dtype in (np.float32, np.float64) else np.float64
+        scaled = (p - self.origin.astype(dt)) * dt.type(1.0 / self.cell)
+        idx = np.empty(len(p), np.int64)
+        for axis, n in enumerate(self.shape):
+            i = np.clip(scaled[:, axis], 0, n - 2).astype(np.int64)
+            if axis:
+                idx *= n
+                idx += i
+            else:
+                idx[:] = i
+        return self.cell_lower[idx] >= clearance + 1e-6 * self.cell
+
+    def value(self, points, gradient=False):
+        """The sampled signed distance less its error bound (N,) float64: the true distance is
+        at least this within the band. With gradient: also the interpolant's gradient (N,3)."""
+        base, (fx, fy, fz) = self._locate(np.asarray(points, dtype=np.float64))
+        c = self.phi[base[:, None] + self._corner_offsets].astype(np.float64).T  # (8, N), corner (dx, dy, dz) at 4dx+2dy+dz
+        # Along z, then y, then x.
+        c00, c01 = c[0] + fz * (c[1] - c[0]), c[2] + fz * (c[3] - c[2])
+        c10, c11 = c[4] + fz * (c[5] - c[4]), c[6] + fz * (c[7] - c[6])
+        c0, c1 = c00 + fy * (c01 - c00), c10 + fy * (c11 - c10)
+        val = c0 + fx * (c1 - c0) - self.cell_error[base]
+        if not gradient:
+            return val
+        gx = c1 - c0
+        gy = (1 - fx) * (c01 - c00) + fx * (c11 - c10)
+        d0 = (1 - fy) * (c[1] - c[0]) + fy * (c[3] - c[2])
+        d1 = (1 - fy) * (c[5] - c[4]) + fy * (c[7] - c[6])
+        gz = (1 - fx) * d0 + fx * d1
+        return val, np.stack([gx, gy, gz], 1) * (1.0 / self.cell)
+
+    def outward(self, points):
+        """Unit outward directions (N,3): the sampled distance's gradient, or away from the
+        mesh's centre where that is flat (deep inside or far away)."""
+        _, g = self.value(points, gradient=True)
+        length = np.linalg.norm(g, axis=1)
+        radial = points - 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0))
+        r = np.linalg.norm(radial, axis=1)
+        radial = np.where(r[:, None] > 0, radial / np.where(r > 0, r, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
+        flat = length < 0.1
+        return np.where(flat[:, None], radial, g / np.where(flat, 1.0, length)[:, None])
+
+
+def _neighbourhood_max(a):
+    """The largest value of each cell and its 6 face neighbours: a sharp feature between
+    two cells' centres shows in one of them, not always in the cell a point falls in
+    (measured on the USC head's eyes and ears: the cell's own error alone let points sit up
+    to 0.36 mm closer than it said; with the neighbours, 0.03 mm)."""
+    out = a.copy()
+    for axis in range(3):
+        lo, hi = [slice(None)] * 3, [slice(None)] * 3
+        lo[axis], hi[axis] = slice(0, -1), slice(1, None)
+        np.maximum(out[tuple(lo)], a[tuple(hi)], out=out[tuple(lo)])
+        np.maximum(out[tuple(hi)], a[tuple(lo)], out=out[tuple(hi)])
+    return out.ravel()
+
+
+class _TriangleGeometry:
+    """Per-triangle constants for many point-triangle distances (float32: relative
+    coordinates inside the grid's box)."""
+
+    def __init__(self, a, b, c):
+        f = np.float32
+        self.a = a.astype(f)
+        self.ab, self.ac, self.bc = (b - a).astype(f), (c - a).astype(f), (c - b).astype(f)
+        n = np.cross(b - a, c - a)
+        self.n = (n / np.linalg.norm(n, axis=1, keepdims=True)).astype(f)
+        d00 = np.einsum("td,td->t", b - a, b - a)
+        d01 = np.einsum("td,td->t", b - a, c - a)
+        d11 = np.einsum("td,td->t", c - a, c - a)
+        inv = 1.0 / (d00 * d11 - d01 * d01)
+        self.m = np.stack([d11 * inv, -d01 * inv, d00 * inv], 1).astype(f)
+        self.len2 = np.stack([d00, d11, np.einsum("td,td->t", c - b, c - b)], 1).astype(f)
+
+    def distance2_boxes(self, tris, p):
+        """Squared distances (n, m) of triangles tris (n,) to points p (n, m, 3), each
+        triangle's constants broadcast over its m points."""
+        a, ab, ac, bc = (x[tris][:, None, :] for x in (self.a, self.ab, self.ac, self.bc))
+        m = self.m[tris][:, None, :]
+        n = self.n[tris][:, None, :]
+        l2 = self.len2[tris][:, None, :]
+        ap = p - a
+        d20, d21 = _dot(ap, ab), _dot(ap, ac)
+        v = m[..., 0] * d20 + m[..., 1] * d21
+        w = m[..., 1] * d20 + m[..., 2] * d21
+        plane = _dot(ap, n)
+        inner = (v >= 0) & (w >= 0) & (v + w <= 1)
+        edges = np.minimum(_segment2(ap, ab, d20, l2[..., 0]), _segment2(ap, ac, d21, l2[..., 1]))
+        bp = ap - ab
+        edges = np.minimum(edges, _segment2(bp, bc, _dot(bp, bc), l2[..., 2]))
+        return np.where(inner, plane * plane, edges)
+
+
+def _segment2(ap, ab, dot_ap_ab, len2):
+    """Squared distance of points (relative to a) to the segments a→a+ab."""
+    t = np.clip(dot_ap_ab / np.maximum(len2, np.float32(1e-30)), 0.0, 1.0).astype(ap.dtype)
+    d = ap - t[..., None] * ab
+    return _dot(d, d)
+
+
+def _dot(u, v):
+    return u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1] + u[..., 2] * v[..., 2]
+
+
+# --- colliders made once ------------------------------------------------------------------------
+
+_CACHE = OrderedDict()
+_CACHE_SIZE = 4
+
+
+def collider_for(vertices, triangles, name="collider", clearance=0.0):
+    """A Collider for the mesh, made once per process for the same vertices and triangles
+    and a clearance at least this large (building one takes about a second; a Generate that
+    reruns on the same head reuses it)."""
+    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    t = np.ascontiguousarray(triangles)
+    if t.dtype.kind in "iu":
+        t = t.astype(np.int64)
+    digest = hashlib.blake2b(v.tobytes() + b"|" + t.tobytes() + str(v.shape).encode(), digest_size=16).digest()
+    for key, hit in reversed(_CACHE.items()):
+        if key[0] == digest and hit.clearance >= clearance:
+            _CACHE.move_to_end(key)
+            return hit if hit.name == str(name) else _renamed(hit, name)
+    made = Collider(v, t, name, clearance)
+    _CACHE[(digest, clearance)] = made
+    while len(_CACHE) > _CACHE_SIZE:
+        _CACHE.popitem(last=False)
+    return made
+
+
+def _renamed(collider, name):
+    """The same collider under another name (the arrays are shared, never changed)."""
+    out = object.__new__(Collider)
+    out.__dict__.update(collider.__dict__)
+    out.name = str(name)
+    return out
+
+
+def with_clearance(collider, clearance):
+    """`collider`, or the same mesh sampled with a band wide enough for `clearance`."""
+    if collider.clearance >= clearance:
+        return collider
+    return collider_for(collider.vertices, collider.triangles, collider.name, 1.5 * clearance)
+
+
+def default_collider():
+    """The bundled head (scalp.default_head) as a Collider: what the bundled scalp lies on."""
+    from .scalp import default_head
+    head = default_head()
+    return collider_for(head.vertices, head.triangles, "the bundled head")
+
+
+def as_collider(mesh, name=None):
+    """A Collider from a Collider (as it is), a groom.Scalp (a closed head mesh or the scalp
+    itself) or a (vertices, triangles) pair."""
+    if isinstance(mesh, Collider):
+        return mesh
+    if isinstance(mesh, Scalp):
+        return collider_for(mesh.vertices, mesh.triangles, name or "collider")
+    if isinstance(mesh, tuple) and len(mesh) == 2:
+        return collider_for(mesh[0], mesh[1], name or "collider")
+    raise InputError(f"collider: expected a groom.Collider, a groom.Scalp or (vertices, triangles), "
+                     f"got {type(mesh).__name__}")
+
+
+# --- checks before growing ----------------------------------------------------------------------
+
+def check_scalp(collider, scalp):
+    """InputError when the scalp is not on this collider: more than half of its area lies
+    farther than `band` from the collider's surface (another object, moved or scaled)."""
+    w = np.zeros(len(scalp.vertices))
+    for i in range(3):
+        np.add.at(w, scalp.triangles[:, i], scalp.face_areas)
+    used = w > 0
+    if not used.any():
+        return
+    d = collider.value(scalp.vertices[used]) + collider.cell_error[collider._locate(scalp.vertices[used])[0]]
+    far = np.abs(d) >= collider.band * 0.999
+    share = float(w[used][far].sum() / w[used].sum())
+    if share > _FAR_SCALP_SHARE:
+        where = "outside" if np.median(d[far]) > 0 else "inside"
+        raise InputError(f"collider {collider.name!r}: {share:.0%} of the scalp lies more than "
+                         f"{collider.band * 1e3:.1f} mm {where} it; a collider must be the head the scalp lies on "
+                         "(is it another object, or moved or scaled away from the scalp?)")
+
+
+@dataclass(frozen=True)
+class KeyInside:
+    """A key strand that passes through the collider: its index, how deep (scene units; at
+    least `band` where it says deeper) and the span of its length inside (fractions)."""
+    key: int
+    depth: float
+    span: tuple
+
+
+def keys_inside(collider, tables, roots, radii):
+    """[KeyInside] for keys whose sampled curve (tables: [(offsets (M,3), length)], roots
+    (K,3)) goes deeper inside the collider than its radius or _KEY_DEPTH of the collider's
+    size (a key drawn resting on the head dips in by its drawing's rounding), away from the
+    root (a root the scalp puts inside the collider is the scalp's business: see
+    resolve_strands)."""
+    found = []
+    for i, ((table, length), root, radius) in enumerate(zip(tables, roots, radii)):  # a few keys
+        pts = root + table
+        if not length > 0:
+            continue
+        v = collider.value(pts)
+        from_root = np.linalg.norm(table, axis=1)
+        allowed = np.minimum(-max(float(radius), _KEY_DEPTH * collider.size), v[0] + RAMP_SLOPE * from_root)
+        inside = v < allowed
+        inside[0] = False
+        if inside.any():
+            s = np.linspace(0.0, 1.0, len(pts))[inside]
+            deepest = pts[inside][np.argmin(v[inside])]
+            depth = -float(collider.signed_distance(deepest[None])[0])
+            found.append(KeyInside(i, max(depth, 0.0), (float(s.min()), float(s.max()))))
+    return found
+
+
+def describe_keys_inside(name, found):
+    """One sentence for an artist about keys inside the collider called `name`, or None."""
+    if not found:
+        return None
+    parts = [f"key {k.key} ({k.depth * 1e3:.1f} mm deep, {k.span[0]:.0%}–{k.span[1]:.0%} of its length)" for k in found]
+    return (f"collider {name!r}: " + ", ".join(parts) + " pass" + ("es" if len(found) == 1 else "")
+            + " through it; the key is left as drawn (the hair it guides is moved out): move it out "
+              "of the head if that is not what you meant")
+
+
+# --- moving strands out -------------------------------------------------------------------------
+
+@dataclass
+class CollisionStats:
+    """What resolve_strands did: strands / points tested, strands and points moved, the
+    largest push (scene units) and points left closer than their clearance (0 unless the
+    collider traps a segment: a narrow cleft)."""
+    strands: int = 0
+    points: int = 0
+    strands_moved: int = 0
+    points_moved: int = 0
+    points_inside_before: int = 0
+    largest_move: float = 0.0
+    unresolved: int = 0
+
+    def add(self, other):
+        for name in ("strands", "points", "strands_moved", "points_moved", "points_inside_before", "unresolved"):
+            setattr(self, name, getattr(self, name) + getattr(other, name))
+        self.largest_move = max(self.largest_move, other.largest_move)
+
+
+def resolve_strands(collider, points, counts, radius, margin, threads=None, dtype=np.float32):
+    """Strands moved out of the collider (see the module's notes): returns (points (P,3) of
+    `dtype`, moved (S,) bool, CollisionStats). points (P,3), counts (S,), radius (P,) per
+    point; margin in scene units. The strands are looked at in ranges on `threads` threads,
+    and those that must move are walked in one part per thread (the walk goes point by point,
+    and each part pays its steps' overhead once); each strand's numbers depend only on
+    itself, never on its range or part."""
+    counts = np.asarray(counts, np.int64)
+    points, radius = np.asarray(points), np.asarray(radius)
+    offsets = np.zeros(len(counts), np.int64)
+    np.cumsum(counts[:-1], out=offsets[1:])
+    out = np.array(points, dtype=dtype, copy=True)
+    moved = np.zeros(len(counts), bool)
+    stats = CollisionStats(strands=len(counts), points=int(counts.sum()))
+    if not len(counts):
+        return out, moved, stats
+    found = run_jobs([partial(_offending, collider, points, offsets, counts, radius, margin, lo, hi)
+                      for lo, hi in ranges(len(counts), threads)], threads)
+    strands = np.concatenate([f[0] for f in found])
+    k0 = np.concatenate([f[1] for f in found])
+    root_value = np.concatenate([f[2] for f in found])
+    stats.points_inside_before = sum(f[3] for f in found)
+    if not strands.size:
+        return out, moved, stats
+    parts = np.array_split(np.arange(len(strands)), min(len(strands), threads or cpu_threads()))
+    walked = run_jobs([partial(_walk_strands, collider, points, offsets, counts, radius, margin, strands[p], k0[p],
+                               root_value[p]) for p in parts if len(p)], threads)
+    for part, (rows, new, changed, unresolved, largest) in zip([p for p in parts if len(p)], walked):
+        out[rows[changed]] = new[changed]
+        moved[strands[part]] = np.logical_or.reduceat(changed, np.cumsum(counts[strands[part]]) - counts[strands[part]])
+        stats.points_moved += int(changed.sum())
+        stats.unresolved += unresolved
+        stats.largest_move = max(stats.largest_move, largest)
+    stats.strands_moved = int(moved.sum())
+    return out, moved, stats
+
+
+def _offending(collider, points, offsets, counts, radius, margin, lo, hi):
+    """For strands lo..hi: (the strands that must move (global indices), the first point of
+    each that is too close, their roots' sampled distance, points deeper than their radius)."""
+    off, cnt = offsets[lo:hi], counts[lo:hi]
+    first, stop = int(off[0]), int(off[-1] + cnt[-1])
+    pts, rad = points[first:stop], radius[first:stop]
+    off = off - first
+    target = rad + np.float32(margin)
+    none = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), 0)
+    # A cheap look-up first, of the points and of the segments' middles (a long segment's
+    # chord can dip into a convex head): most points are far from the head.
+    look = ~collider.clear_of(pts, target)
+    look[1:] |= ~collider.clear_of(0.5 * (pts[1:] + pts[:-1]), target[1:])
+    look[off] = False  # roots never move
+    look = np.flatnonzero(look)
+    if not look.size:
+        return none
+    # A closer look at those, with the clearance near the root.
+    strand_of = np.repeat(np.arange(len(cnt)), cnt)
+    suspect, which = np.unique(strand_of[look], return_inverse=True)
+    which = which.ravel()
+    roots = pts[off[suspect]].astype(np.float64)
+    root_value = collider.value(roots)
+    p = pts[look].astype(np.float64)
+    m = 0.5 * (p + pts[look - 1])
+    short = _shortfall(collider, p, m, target[look].astype(np.float64), root_value[which], roots[which])
+    inside = int((collider.value(p) < -rad[look]).sum())
+    bad = short > 0
+    first_bad = np.full(len(suspect), np.iinfo(np.int64).max)
+    np.minimum.at(first_bad, which[bad], (look - off[suspect][which])[bad])
+    hit = first_bad < np.iinfo(np.int64).max
+    return lo + suspect[hit], first_bad[hit], root_value[hit], inside
+
+
+def _walk_strands(collider, points, offsets, counts, radius, margin, strands, k0, root_value):
+    """(rows, new points float64, which rows changed, unresolved points, largest move) of
+    the strands walked."""
+    rows = _flat_points(offsets[strands], counts[strands])
+    original = points[rows].astype(np.float64)
+    target = radius[rows].astype(np.float64) + margin
+    new, unresolved = _walk(collider, original, target, counts[strands], k0, root_value)
+    move = np.sqrt(((new - original) ** 2).sum(axis=1))
+    return rows, new, move > 0, unresolved, float(move.max())
+
+
+def _flat_points(off, cnt):
+    """Flat indices of all points of strands starting at off with cnt points, in order."""
+    starts = np.cumsum(cnt) - cnt
+    return np.repeat(off - starts, cnt) + np.arange(int(cnt.sum()))
+
+
+def _clearance(target, root_value, p, root):
+    """The clearance of points p: their target, or near a root inside the collider, the
+    root's depth plus RAMP_SLOPE times the distance from the root."""
+    d = np.sqrt(((p - root) ** 2).sum(axis=1))
+    return np.minimum(target, root_value + RAMP_SLOPE * d)
+
+
+def _shortfall(collider, end, mid, target, root_value, root):
+    """How far the end (or twice how far the middle) of a segment falls short of its
+    clearance; <= 0 where it is clear."""
+    both = collider.value(np.concatenate([end, mid]))
+    n = len(end)
+    return np.maximum(_clearance(target, root_value, end, root) - both[:n],
+                      2.0 * (_clearance(target, root_value, mid, root) - both[n:]))
+
+
+def _turn_limits(pts, off, cnt):
+    """Per strand (cos, sin) of the largest turn a segment may make from the one before:
+    the strand's sharpest original bend, at least 20°."""
+    rows = _flat_points(off, cnt)
+    seg = pts[rows[1:]] - pts[rows[:-1]]
+    length = np.sqrt((seg ** 2).sum(axis=1))
+    unit = seg / np.where(length > 0, length, 1.0)[:, None]
+    joint = np.ones(len(rows))
+    joint[1:-1] = np.where((length[:-1] > 0) & (length[1:] > 0), (unit[:-1] * unit[1:]).sum(axis=1), 1.0)
+    start = np.cumsum(cnt) - cnt
+    joint[start] = 1.0            # a root is no joint (and the segment before it is another strand's)
+    joint[start + cnt - 1] = 1.0  # nor is a tip
+    cos = np.full(len(off), _MIN_TURN_COS)
+    np.minimum.at(cos, np.repeat(np.arange(len(off)), cnt), joint)
+    return cos, np.sqrt(np.maximum(0.0, 1.0 - cos * cos))
+
+
+def _walk(collider, pts, target, cnt, k0, root_value):
+    """The root-to-tip walk (see the module's notes) of strands whose points `pts` (float64,
+    strand after strand, `cnt` each) and `target` clearances are given, from their first
+    offending point k0. Returns (their points, same layout; points that could not be
+    cleared)."""
+    n = len(cnt)
+    off = np.cumsum(cnt) - cnt
+    result = pts.copy()
+    roots = pts[off]
+    cos_lim, sin_lim = _turn_limits(pts, off, cnt)
+    k = k0.copy()
+    prev = pts[off + k - 1].copy()          # the last point placed
+    u_prev = np.zeros((n, 3))               # the direction of the segment ending there
+    have = k >= 2
+    u_prev[have] = _unit(pts[off[have] + k[have] - 1] - pts[off[have] + k[have] - 2])
+    aligned = np.ones(n, bool)   # the strand so far is its original, translated
+    check = np.zeros(n, bool)    # aligned after a step: is the translated rest clear?
+    active = k < cnt
+    unresolved = 0
+    while True:
+        al = np.flatnonzero(active & check)
+        if al.size:
+            jump = _first_offence(collider, pts, target, off[al], cnt[al], k[al], prev[al], root_value[al], roots[al])
+            delta = prev[al] - pts[off[al] + k[al] - 1]
+            _translate(result, pts, off[al], k[al], jump, delta)
+            k[al] = jump
+            going = jump < cnt[al]
+            active[al] = going
+            go = al[going]
+            prev[go] = pts[off[go] + k[go] - 1] + delta[going]
+            u_prev[go] = _unit(pts[off[go] + k[go] - 1] - pts[off[go] + k[go] - 2])
+            check[al] = False
+        act = np.flatnonzero(active)
+        if not act.size:
+            break
+        at = off[act] + k[act]
+        d = pts[at] - pts[at - 1]
+        length = np.sqrt((d ** 2).sum(axis=1))
+        u = d / np.where(length > 0, length, 1.0)[:, None]
+        up = u_prev[act]
+        c = (u * up).sum(axis=1)
+        # Back toward the strand's own direction, by no more than its sharpest bend.
+        limited = ~aligned[act] & (c < cos_lim[act]) & (length > 0)
+        u_new = u.copy()
+        if limited.any():
+            li = np.flatnonzero(limited)
+            w = _perpendicular_toward(up[li], u[li], c[li])
+            u_new[li] = cos_lim[act[li], None] * up[li] + sin_lim[act[li], None] * w
+        p0 = prev[act]
+        need, rv, rt = target[at], root_value[act], roots[act]
+        short = _shortfall(collider, p0 + length[:, None] * u_new, p0 + 0.5 * length[:, None] * u_new, need, rv, rt)
+        push = (short > 0) & (length > 0)
+        if push.any():
+            pi = np.flatnonzero(push)
+            u_new[pi], left = _push_out(collider, p0[pi], u_new[pi], length[pi], need[pi], rv[pi], rt[pi], short[pi])
+            unresolved += left
+        placed = p0 + length[:, None] * u_new
+        result[at] = placed
+        prev[act] = placed
+        u_prev[act] = np.where((length > 0)[:, None], u_new, up)
+        aligned[act] = ~push & ~limited
+        check[act] = aligned[act]
+        k[act] += 1
+        active[act] = k[act] < cnt[act]
+    return result, unresolved
+
+
+def _unit(v):
+    n = np.sqrt((v ** 2).sum(axis=1))
+    return v / np.where(n > 0, n, 1.0)[:, None]
+
+
+def _perpendicular_toward(a, b, cos_ab):
+    """Unit vectors perpendicular to a, in the plane of a and b, on b's side (some
+    perpendicular where b is parallel to a)."""
+    w = b - cos_ab[:, None] * a
+    n = np.sqrt((w ** 2).sum(axis=1))
+    bad = n < 1e-12
+    if bad.any():
+        e = np.eye(3)[np.argmin(np.abs(a[bad]), axis=1)]
+        w[bad] = e - (e * a[bad]).sum(axis=1)[:, None] * a[bad]
+        n[bad] = np.sqrt((w[bad] ** 2).sum(axis=1))
+    return w / n[:, None]
+
+
+def _push_out(collider, p0, u, length, target, root_value, root, short):
+    """Directions that clear segments of `length` from p0, turned from u toward the outward
+    direction g at p0 (keeping u's side of g) by the least angle found: the cosine to g is
+    raised by each try's shortfall over the length (the end rises by length per unit of it)
+    until clear; straight out along g where five tries do not do it. Returns (directions,
+    how many are still short)."""
+    g = collider.outward(p0)
+    cos_ug = (u * g).sum(axis=1)
+    w = _perpendicular_toward(g, u, cos_ug)
+    s = cos_ug.copy()
+    out = u.copy()
+    todo = np.arange(len(p0))
+    for _ in range(_PUSH_ITERATIONS):
+        s[todo] = np.minimum(s[todo] + 1.05 * short[todo] / length[todo] + 1e-9, 1.0)
+        st = s[todo, None]
+        out[todo] = st * g[todo] + np.sqrt(np.maximum(0.0, 1.0 - st * st)) * w[todo]
+        t = todo
+        short[t] = _shortfall(collider, p0[t] + length[t, None] * out[t], p0[t] + 0.5 * length[t, None] * out[t],
+                              target[t], root_value[t], root[t])
+        todo = t[(short[t] > 0) & (s[t] < 1.0)]
+        if not todo.size:
+            break
+    out[todo] = g[todo]
+    if todo.size:
+        t = todo
+        short[t] = _shortfall(collider, p0[t] + length[t, None] * g[t], p0[t] + 0.5 * length[t, None] * g[t],
+                              target[t], root_value[t], root[t])
+    return out, int((short > 0).sum())
+
+
+def _first_offence(collider, pts, target, off, cnt, k, prev, root_value, roots):
+    """For strands whose rest (points k..) would be their original translated to put point
+    k-1 at prev: the first point of the rest that it or its segment's middle would bring too
+    close (cnt where none)."""
+    rest = cnt - k
+    idx = _flat_points(off + k, rest)
+    s_of = np.repeat(np.arange(len(off)), rest)
+    delta = (prev - pts[off + k - 1])[s_of]
+    p = pts[idx] + delta
+    m = 0.5 * (pts[idx] + pts[idx - 1]) + delta
+    look = np.flatnonzero(~(collider.clear_of(p, target[idx]) & collider.clear_of(m, target[idx])))
+    first = cnt.copy()
+    if look.size:
+        sl = s_of[look]
+        bad = _shortfall(collider, p[look], m[look], target[idx[look]], root_value[sl], roots[sl]) > 0
+        np.minimum.at(first, sl[bad], (idx[look] - off[sl])[bad])
+    return first
+
+
+def _translate(result, pts, off, k, end, delta):
+    """Points k..end-1 of strands = their original + delta."""
+    n_rest = end - k
+    if n_rest.sum():
+        rows = _flat_points(off + k, n_rest)
+        result[rows] = pts[rows] + np.repeat(delta, n_rest, axis=0)
+
+
+@dataclass(frozen=True)
+class CollisionReport:
+    """What collision did to a groom (GroomResult.collision): the collider's name, how many
+    strands it moved, the keys that pass through it ([KeyInside]) and the stats of the last
+    pass (a full generation, or the strands an update recomputed)."""
+    collider: str
+    strands_moved: int
+    keys_inside: tuple
+    last: CollisionStats
+
+    def warning(self):
+        """A sentence naming the keys inside the collider, or None."""
+        return describe_keys_inside(self.collider, self.keys_inside)
+
+
+class StrandCollision:
+    """Collision for a Generator: the collider sampled for the hair's clearance, the scalp
+    checked against it, the keys inside it, and which strands it moved (kept per strand, so an
+    incremental update reports the whole groom)."""
+
+    def __init__(self, collider, scalp, params, n_strands):
+        self.collider = as_collider(collider)
+        self.margin = params.collision_margin
+        check_scalp(self.collider, scalp)
+        self.moved = np.zeros(n_strands, bool)
+        self.keys_inside = ()
+        self.last = CollisionStats()
+
+    def check_keys(self, keys, params):
+        """Make sure the band fits the thickest hair, and find the keys inside."""
+        from .keys import arc_length_tables
+        radii = np.array([params.radius if k.root_radius is None else k.root_radius for k in keys])
+        self.collider = with_clearance(self.collider, float(radii.max()) + self.margin)
+        tables = arc_length_tables(keys, _KEY_CHECK_SAMPLES)
+        self.keys_inside = tuple(keys_inside(self.collider, tables, np.array([k.root for k in keys]), radii))
+
+    def apply(self, points, counts, radius, sel=None, threads=None):
+        """Points (float32) of strands `sel` (None: all) moved out of the collider."""
+        new, moved, self.last = resolve_strands(self.collider, points, counts, radius, self.margin, threads)
+        if sel is None:
+            self.moved = moved
+        else:
+            self.moved[sel] = moved
+        return new
+
+    def report(self):
+        return CollisionReport(self.collider.name, int(self.moved.sum()), self.keys_inside, self.last)
