@@ -101,11 +101,14 @@ class Generator:
     layout whole-array numpy code reads fastest; results are returned in the (S, 3) layout
     of GroomResult."""
 
-    def __init__(self, scalp, keys, params, samples=None, collider=None):
+    def __init__(self, scalp, keys, params, samples=None, collider=None, progress=None):
         """samples: optional sampling.RootSamples to grow from instead of sampling
         params.count roots (measurements place roots where they need them). collider: the
         mesh the hair stays out of (collide.as_collider: a Collider, a Scalp or (vertices,
-        triangles)), or None."""
+        triangles)), or None. progress: None or a callable(fraction in [0, 1], stage text),
+        called from this thread as the work goes on (a progress bar for long runs)."""
+        self.progress = progress
+        self._report(0.0, "sampling roots")
         self.keys = _check_inputs(scalp, keys, params)
         self.scalp, self.params = scalp, params
         p = params
@@ -129,11 +132,16 @@ class Generator:
         self._key_data = self._prepare_keys(self.keys)
         self._collision = None
         if collider is not None and p.collision:
+            self._report(0.15, "preparing the collider")
             self._collision = StrandCollision(collider, scalp, p, n)
             self._collision.check_keys(self.keys, p)
         self._result = None
         self._cache = None
         self.last_recomputed = 0  # strands recomputed by the last update_keys
+
+    def _report(self, fraction, stage):
+        if self.progress is not None:
+            self.progress(float(fraction), stage)
 
     def _axes(self, lo=0, hi=None):
         """frames.frame_axes of roots lo..hi."""
@@ -228,6 +236,7 @@ class Generator:
         _check_float32(self._reach, rows, radii)
         args = (pick(self._roots), pick(self.transforms), g, w.astype(np.float32))
         max_cyl = p.points_per_strand - 1
+        self._report(0.2, "growing strands")
         if p.resolution_mode == "fixed":
             counts = np.full(len(frac), max_cyl + 1, np.int64)
             along = np.arange(max_cyl + 1) / max_cyl
@@ -243,9 +252,12 @@ class Generator:
             pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma, threads=_threads_for(len(frac)))
             attrs = self._attributes(ids, counts, sigma / np.repeat(frac, counts), g, w, base_radius)
         threads = _threads_for(len(frac))
+        self._report(0.6, "clump, frizz and curl")
         shape_strands(pts, counts, sigma, frac, args[1], g[0], ids, rows, np.array([d["root"] for d in kd]), p, threads)
         if self._collision is not None:
+            self._report(0.7, "moving hair out of the collider")
             pts = self._collision.apply(pts, counts, attrs[0], sel, threads)
+        self._report(0.95, "writing strands")
         return (pts, counts) + tuple(attrs)
 
     def _attributes(self, ids, counts, along, g, w, base_radius):
@@ -288,6 +300,7 @@ class Generator:
                                    np.ascontiguousarray(weights.T, dtype=np.float32), s.ids, s.tri, s.bary,
                                    None if self._collision is None else self._collision.report())
         self._guides, self._weights = guides, weights
+        self._report(1.0, "done")
         return self._result
 
     def generate(self):
@@ -385,8 +398,8 @@ class Generator:
         return out["pts"], new_counts, out["radius"], out["color"], out["alpha"]
 
 
-def generate(scalp, keys, params=None, collider=None):
+def generate(scalp, keys, params=None, collider=None, progress=None):
     """Grow ordinary strands on `scalp` from `keys` (list of KeyStrand) with `params`
-    (GroomParams; defaults when None), kept out of `collider` (see Generator). Returns a
-    GroomResult."""
-    return Generator(scalp, keys, params or GroomParams(), collider=collider).generate()
+    (GroomParams; defaults when None), kept out of `collider`, telling `progress` how far it
+    is (see Generator). Returns a GroomResult."""
+    return Generator(scalp, keys, params or GroomParams(), collider=collider, progress=progress).generate()
