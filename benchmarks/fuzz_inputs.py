@@ -25,7 +25,8 @@ Memory: cases run in a child process. Before each case its address space is capp
 become strands of 2.7 x its size, plus the copies the checks make), 16 x + 64 MiB for OBJ
 text (Python's line parsing), 64 MiB for arrays and presets made in memory. A reader that takes
 memory on a header's word (16 GiB for a 128-byte .hair) fails its case as `memory`. Each
-case's peak of Python and numpy heap memory is measured too (tracemalloc).
+case's peak of Python and numpy heap memory is measured too (tracemalloc) for the readers and
+the commands.
 Deterministic: fixed seeds, hypothesis derandomized, bounded example counts.
 """
 import contextlib
@@ -57,6 +58,10 @@ SOURCES = {"hair": "straight.hair", "tfx": "Ratboy_mohawk.tfx", "tfx-small": "si
 NPZ_STRANDS = 300
 # Where the binary formats keep their headers: most mutations land there.
 HEADER_BYTES = {"hair": 128, "tfx": 160, "tfx-small": 160, "data": 8, "npz": 128}
+
+
+# The entry points whose heap peak is measured (tracemalloc); the others run under the cap alone.
+MEASURED = ("read", "render", "export")
 
 
 def memory_bound(entry, nbytes):
@@ -352,29 +357,38 @@ def _status(field):
 
 
 class _Limits:
-    """Per case: cap the address space at what the process holds now + a bound, and
-    measure the case's peak of Python and numpy heap memory (tracemalloc sees numpy's
-    array buffers; the GL driver's own memory it does not)."""
+    """Per case: cap the address space at what the process holds now + a bound, and, while
+    `measure` is on, measure the case's peak of Python and numpy heap memory (tracemalloc
+    sees numpy's array buffers, not the GL driver's own memory; it slows pure-Python work
+    several times, so the jobs whose inputs are made in memory or parsed in Python run
+    under the cap alone)."""
 
     def __init__(self):
         import resource
         import tracemalloc
         self.resource, self.tracemalloc = resource, tracemalloc
-        if not tracemalloc.is_tracing():
-            tracemalloc.start(1)
+        self.measure = False
+
+    def set_measure(self, on):
+        if on and not self.tracemalloc.is_tracing():
+            self.tracemalloc.start(1)
+        elif not on and self.tracemalloc.is_tracing():
+            self.tracemalloc.stop()
+        self.measure = on
 
     @contextlib.contextmanager
     def case(self, bound, record):
         r, tm = self.resource, self.tracemalloc
         vm = _status("VmSize")
-        tm.reset_peak()
-        held = tm.get_traced_memory()[0]
+        if self.measure:
+            tm.reset_peak()
+            held = tm.get_traced_memory()[0]
         r.setrlimit(r.RLIMIT_AS, (vm + bound, r.RLIM_INFINITY))
         try:
             yield
         finally:
             r.setrlimit(r.RLIMIT_AS, (r.RLIM_INFINITY, r.RLIM_INFINITY))
-            record["peak"] = max(0, tm.get_traced_memory()[1] - held)
+            record["peak"] = max(0, tm.get_traced_memory()[1] - held) if self.measure else None
 
 
 def _classify(record, run, check, names):
@@ -635,6 +649,7 @@ def child_main():
         import hairio.formats  # noqa: F401
         for job in spec["jobs"]:
             entry, fmt, n = job["entry"], job["format"], job["n"]
+            runner.limits.set_measure(entry in MEASURED)
             if entry == "render":
                 _command(__import__("tracer.__main__", fromlist=["main"]).main, ["--help"])
                 _warm_renderer()
@@ -694,19 +709,20 @@ def run_jobs(jobs, seed=18, seconds=None, timeout=600):
 
 
 def tally(records):
-    """{(entry, format): {tried, each outcome's count, peak (bytes), peak_ratio, bytes}}: the
-    largest heap peak, the largest peak / input of the inputs of 64 KiB or more (below that
+    """{(entry, format): {tried, each outcome's count, peak (bytes, None where not measured),
+    peak_ratio, bytes}}: the largest heap peak, the largest peak / input of the inputs of 64 KiB or more (below that
     the fixed cost of a call is all a ratio shows) and the largest input."""
     out = {}
     for r in records:
         key = (r["entry"], r["format"])
-        row = out.setdefault(key, {"tried": 0, **{k: 0 for k in OUTCOMES}, "peak": 0, "peak_ratio": 0.0, "bytes": 0})
+        row = out.setdefault(key, {"tried": 0, **{k: 0 for k in OUTCOMES}, "peak": None, "peak_ratio": 0.0, "bytes": 0})
         row["tried"] += 1
         row[r["kind"]] += 1
-        peak = r.get("peak") or 0
-        row["peak"] = max(row["peak"], peak)
+        peak = r.get("peak")
+        if peak is not None:
+            row["peak"] = max(row["peak"] or 0, peak)
         row["bytes"] = max(row["bytes"], r["bytes"])
-        if r["bytes"] >= 64 << 10:
+        if peak is not None and r["bytes"] >= 64 << 10:
             row["peak_ratio"] = max(row["peak_ratio"], peak / r["bytes"])
     return out
 
