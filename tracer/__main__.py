@@ -167,6 +167,8 @@ def main(argv=None):
             render_s = render_png(renderer, camera, settings, args.out)
         except OSError as e:     # the disk filled up, or the place changed, while rendering
             raise InputError(f"--out {args.out}: cannot write it ({e.strerror or e}); nothing was written") from None
+        except InputError as e:  # tiles are within every image limit: what is left is the camera's
+            raise InputError(f"--camera {args.camera}: {e}") from None
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

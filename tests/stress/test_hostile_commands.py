@@ -213,3 +213,10 @@ def test_renderer_refuses_a_camera_too_far_and_an_image_too_large(monkeypatch):
     with pytest.raises(InputError, match=r"camera size 2048x2048: needs about 0.19 GiB of memory but 0.10 GiB"):
         r.render(Camera.look_at([0, -3, 0], [0, 0, 0], size=(2048, 2048)), RenderSettings())
     assert r.render(Camera.look_at([0, -3, 0.5], [0, 0, 0.5], size=(64, 64)), RenderSettings()).shape == (64, 64, 4)
+
+
+def test_a_camera_too_far_names_the_option(tuft, tmp_path, capsys):
+    camera = "0,-1e20,0:0,0,0:40"
+    assert main(["render", str(tuft), "--out", str(tmp_path / "x.png"), "--camera", camera]) == 2
+    assert capsys.readouterr().err.startswith(f"error: --camera {camera}: camera: position 1e+20")
+    assert _files(tmp_path) == ["tuft.npz"]
