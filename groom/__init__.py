@@ -13,14 +13,23 @@ On a mesh of your own (here a Y-up .obj facing +Z), give the head's axes in its 
     placement = preset.place_keys(scalp, up=(0, 1, 0), front=(0, 0, 1))
     print(placement.warning() or "every key has its own root")
     result = generate(scalp, placement.keys, placement.params)
+
+Keep the hair out of the head: give the closed head mesh (the bundled scalp lies on
+default_collider(), the bundled head) and read what it did:
+
+    head = load_obj("head.obj")
+    result = generate(scalp, placement.keys, placement.params,
+                      collider=Collider(head.vertices, head.triangles, name="head"))
+    print(result.collision.warning() or f"{result.collision.strands_moved} strands moved out")
 """
 from .scalp import Scalp, default_head, default_scalp, load_obj
 from .keys import KeyStrand, place_key
 from .params import GroomParams
 from .generate import GroomResult, Generator, generate
 from .head import HeadFrame, fit_head_frame
+from .collide import Collider, default_collider
 from .presets import Placement, Preset, list_presets, load_preset, save_preset
 
 __all__ = ["Scalp", "default_head", "default_scalp", "load_obj", "KeyStrand", "place_key", "GroomParams",
-           "GroomResult", "Generator", "generate", "HeadFrame", "fit_head_frame", "Placement", "Preset",
-           "list_presets", "load_preset", "save_preset"]
+           "GroomResult", "Generator", "generate", "HeadFrame", "fit_head_frame", "Collider", "default_collider",
+           "Placement", "Preset", "list_presets", "load_preset", "save_preset"]

@@ -2,13 +2,16 @@
 """Command line: grow a preset hairstyle, or export strands to another format.
 
     python -m groom generate --preset NAME [--scalp MESH.obj [--up X,Y,Z] [--front X,Y,Z]]
+                             [--collider MESH.obj | --collider none]
                              [--count N] [--seed S] --out FILE.npz
     python -m groom export ...   (see `python -m groom export --help`)
 
 Bad input exits 2 with a message naming it; no partial output file is ever written. Keys
-that cannot each find a root of their own on the scalp are named on stderr.
+that cannot each find a root of their own on the scalp, and keys that pass through the
+collider, are named on stderr; so is the progress of work that takes more than a second.
 """
 import argparse
+import os
 import re
 import sys
 import time
@@ -28,6 +31,9 @@ def _parser():
     g.add_argument("--front", metavar="X,Y,Z",
                    help="the direction the face looks, in the mesh's own space, e.g. 0,0,1 for a Y-up .obj "
                         "(default: the preset's, 0,-1,0)")
+    g.add_argument("--collider", metavar="MESH.obj",
+                   help="closed mesh the hair must stay out of, in the scalp's space (the head), or 'none'; "
+                        "default: the bundled head for the bundled scalp, none for a scalp of your own")
     g.add_argument("--count", type=int, help="number of strands (overrides the preset)")
     g.add_argument("--seed", type=int, help="random seed (overrides the preset)")
     g.add_argument("--out", required=True, help="output .npz file (SPEC §0 arrays)")
@@ -63,6 +69,55 @@ def _head_axes(args, params):
     return up, front
 
 
+def _collider(args):
+    """The collider for --collider: a mesh read from the file, none, or by default the
+    bundled head when the scalp is the bundled one."""
+    from .collide import Collider, default_collider
+    if args.collider is None:
+        return None if args.scalp else default_collider()
+    if args.collider.lower() == "none":
+        return None
+    from .scalp import load_obj
+    try:
+        mesh = load_obj(args.collider)
+    except InputError as e:
+        raise InputError(f"--collider: {e}") from None
+    return Collider(mesh.vertices, mesh.triangles, name=os.path.basename(args.collider))
+
+
+# Work that takes longer than this (seconds) shows its progress on stderr.
+PROGRESS_AFTER = 1.0
+
+
+class _Progress:
+    """A progress line on stderr, once the work has taken PROGRESS_AFTER seconds: redrawn in
+    place on a terminal, a line per stage otherwise (a log)."""
+
+    def __init__(self, stream=None):
+        self.stream = stream or sys.stderr
+        self.start = time.perf_counter()
+        self.shown = False
+        self.last = None
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+
+    def __call__(self, fraction, stage):
+        if time.perf_counter() - self.start < PROGRESS_AFTER or stage == self.last:
+            return
+        self.last = stage
+        text = f"{100 * fraction:3.0f}% {stage}"
+        if self.tty:
+            self.stream.write("\r" + text.ljust(48))
+        else:
+            self.stream.write(f"progress: {text}\n")
+        self.stream.flush()
+        self.shown = True
+
+    def close(self):
+        if self.shown and self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
 def generate_main(args):
     from . import default_scalp, generate, load_obj, load_preset
     if not args.out.lower().endswith(".npz"):
@@ -76,6 +131,7 @@ def generate_main(args):
     preset = load_preset(args.preset)
     up, front = _head_axes(args, preset.params)
     scalp = load_obj(args.scalp) if args.scalp else default_scalp()
+    collider = _collider(args)
     start = time.perf_counter()
     placement = preset.place_keys(scalp, up, front)
     warning = placement.warning()
@@ -83,14 +139,23 @@ def generate_main(args):
         print(f"warning: {warning}", file=sys.stderr)
     changes = {k: v for k, v in (("count", args.count), ("seed", args.seed)) if v is not None}
     params = placement.params.replace(**changes) if changes else placement.params
-    result = generate(scalp, placement.keys, params)
+    progress = _Progress()
+    try:
+        result = generate(scalp, placement.keys, params, collider=collider, progress=progress)
+    finally:
+        progress.close()
     elapsed = time.perf_counter() - start
+    inside = result.collision.warning() if result.collision is not None else None
+    if inside:
+        print(f"warning: {inside}", file=sys.stderr)
     s = result.strands
     try:
         s.save_npz(args.out)
     except OSError as e:
         raise InputError(f"--out {args.out!r}: cannot write it ({e})") from e
-    print(f"{preset.name}: {s.num_strands} strands, {s.num_points} points, {s.num_segments} cylinders "
+    moved = ("" if result.collision is None else
+             f", {result.collision.strands_moved} moved out of {result.collision.collider}")
+    print(f"{preset.name}: {s.num_strands} strands, {s.num_points} points, {s.num_segments} cylinders{moved} "
           f"in {elapsed:.3f} s -> {args.out}")
     return 0
 

@@ -207,19 +207,65 @@ class Collider:
         v, t = self.vertices, self.triangles[tri]
         return bary[:, :1] * v[t[:, 0]] + bary[:, 1:2] * v[t[:, 1]] + bary[:, 2:] * v[t[:, 2]]
 
-    def signed_distance(self, points):
-        """Exact signed distance (N,) float64 of points (N,3) (positive outside), by a search
-        of the triangles near each point: for checks and for a few thousand points (generation
-        uses the sampled form). On an open mesh, see the module's notes."""
+    def signed_distance(self, points, chunk=1 << 14):
+        """Exact signed distance (N,) float64 of points (N,3), positive outside (on an open
+        mesh, see the module's notes). Near the surface the candidates are the triangles
+        within `band` of the point's nearest grid node, which hold every triangle within
+        band - sqrt(3)/2 cells of the point; farther points are searched among all triangles
+        (Scalp.closest_points). For checks and reports; generation uses `value`."""
         q = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        if not len(q):
-            return np.zeros(0)
-        tri, bary, near = self._mesh().closest_points(q)
-        d = np.linalg.norm(q - near, axis=1)
-        s = self._signs(q, tri, bary)
+        out = np.empty(len(q))
+        for lo in range(0, len(q), chunk):  # bounded (point, candidate) pairs
+            out[lo:lo + chunk] = self._signed_distance(q[lo:lo + chunk])
+        return out
+
+    def _signed_distance(self, q):
+        start, tris = self._node_triangles()
+        g = np.rint((q - self.origin) / self.cell).astype(np.int64)
+        inside = ((g >= 0) & (g < np.array(self.shape))).all(axis=1)
+        node = np.clip(g, 0, np.array(self.shape) - 1) @ self._strides
+        n_cand = np.where(inside, start[node + 1] - start[node], 0)
+        query = np.repeat(np.arange(len(q)), n_cand)
+        cand = tris[np.repeat(start[node] - (np.cumsum(n_cand) - n_cand), n_cand) + np.arange(int(n_cand.sum()))]
+        v, t = self.vertices, self.triangles
+        bary = _closest_on_triangles(q[query], v[t[cand, 0]], v[t[cand, 1]], v[t[cand, 2]])
+        d2 = ((q[query] - self.surface_points(cand, bary)) ** 2).sum(axis=1)
+        order = np.lexsort((cand, d2, query))
+        first = order[np.r_[True, query[order][1:] != query[order][:-1]]] if len(order) else order
+        tri = np.full(len(q), -1)
+        b = np.zeros((len(q), 3))
+        dist = np.full(len(q), np.inf)
+        tri[query[first]], b[query[first]], dist[query[first]] = cand[first], bary[first], np.sqrt(d2[first])
+        far = dist > self.band - 0.87 * self.cell  # beyond what the node's list surely holds
+        if far.any():
+            tri[far], b[far], near = self._mesh().closest_points(q[far])
+            dist[far] = np.linalg.norm(q[far] - near, axis=1)
+        s = self._signs(q, tri, b)
         if not self.closed:
-            s = np.where((s < 0) & (d > self.band), 1.0, s)
-        return s * d
+            s = np.where((s < 0) & (dist > self.band), 1.0, s)
+        return s * dist
+
+    def _node_triangles(self):
+        """CSR lists (start (nodes + 1,), triangles) of the triangles within band of each
+        node, made on first use (the build keeps only each node's nearest)."""
+        if getattr(self, "_near_lists", None) is None:
+            pairs = []
+            self._sample_exact(np.zeros(3), np.array(self.shape), self.band, pairs)
+            flat = np.concatenate([f for f, _ in pairs])
+            key = np.concatenate([k for _, k in pairs])
+            d = np.sqrt((key >> np.uint64(32)).astype(np.uint32).view(np.float32).astype(np.float64))
+            tri = (key & np.uint64(0xFFFFFFFF)).astype(np.int64)
+            # A point within sqrt(3)/2 cells of the node has its nearest triangle within
+            # sqrt(3) cells plus the node's own nearest distance of the node: the rest can go.
+            nearest = np.full(int(np.prod(self.shape)), np.inf)
+            np.minimum.at(nearest, flat, d)
+            keep = d <= nearest[flat] + 1.75 * self.cell
+            flat, tri = flat[keep], tri[keep]
+            order = np.argsort(flat, kind="stable")
+            start = np.zeros(int(np.prod(self.shape)) + 1, np.int64)
+            np.cumsum(np.bincount(flat, minlength=len(start) - 1), out=start[1:])
+            self._near_lists = (start, tri[order])
+        return self._near_lists
 
     def _mesh(self):
         if getattr(self, "_as_scalp", None) is None:
@@ -277,12 +323,13 @@ class Collider:
         self.cell_lower = np.zeros(self.phi.shape, np.float32)
         self.cell_lower[base] = low - self.cell_error[base]
 
-    def _sample_exact(self, offset, shape, reach):
+    def _sample_exact(self, offset, shape, reach, pairs=None):
         """Signed distance at the nodes origin + (index + offset)·cell of a grid of `shape`,
         exact within `reach` of the surface, NaN elsewhere. For each block of triangles the
         nodes in its box grown by reach are visited (after a cheap test against the
         triangle's plane), blocks on the worker threads; each node keeps its nearest
-        triangle, whose nearest feature then gives the sign."""
+        triangle, whose nearest feature then gives the sign. `pairs`: a list that receives
+        every (node, triangle) within reach, for the exact search (signed_distance)."""
         h = self.cell
         org = self.origin + offset * h
         strides = np.array([shape[1] * shape[2], shape[2], 1], np.int64)
@@ -327,6 +374,8 @@ class Collider:
         best = np.full(n_nodes, np.iinfo(np.uint64).max, np.uint64)
         for flat, key in (visit(tris, dim) for tris, dim in jobs):  # threads only slowed it (measured)
             np.minimum.at(best, flat, key)  # the nearest triangle, the lowest index on a tie
+            if pairs is not None:
+                pairs.append((flat, key))
         best_tri = np.where(best == np.iinfo(np.uint64).max, -1,
                             (best & np.uint64(0xFFFFFFFF)).astype(np.int64))
         found = np.flatnonzero(best_tri >= 0)
