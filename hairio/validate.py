@@ -57,7 +57,7 @@ def to_float32(name, array):
         if bad.any():
             first = np.unravel_index(int(np.argmax(bad)), array.shape)
             raise InputError(f"{name}: {int(bad.sum())} value(s) beyond float32's range (±{FLOAT32_MAX:.4g}), "
-                             f"first {array[first]!r} at index {tuple(int(i) for i in first)}; "
+                             f"first {array[first].item()!r} at index {tuple(int(i) for i in first)}; "
                              f"scale {name} down (or change units) first")
     return out
 
@@ -73,7 +73,7 @@ def to_int32(name, array, lo=None, allow_integral_floats=False):
             whole = finite & (np.floor(np.where(finite, array, 0)) == np.where(finite, array, 0))
             if not whole.all():
                 first = int(np.argmax(~whole.ravel()))
-                raise InputError(f"{name}: value {array.ravel()[first]!r} at index {first} is not a whole number; "
+                raise InputError(f"{name}: value {array.ravel()[first].item()!r} at index {first} is not a whole number; "
                                  f"{name} holds integers")
     elif array.size and array.dtype.kind not in "iu":
         raise InputError(f"{name}: expected integers, got dtype {array.dtype}")
@@ -83,7 +83,7 @@ def to_int32(name, array, lo=None, allow_integral_floats=False):
         if low < floor or high > INT32_MAX:
             value = low if low < floor else high
             first = int(np.argmax(((array < floor) | (array > INT32_MAX)).ravel()))
-            raise InputError(f"{name}: value {value!r} (index {first}) outside {floor}..{INT32_MAX}; "
+            raise InputError(f"{name}: value {value.item()!r} (index {first}) outside {floor}..{INT32_MAX}; "
                              f"{name} must fit a 32-bit integer" + (f" >= {lo}" if lo is not None else ""))
     return array.astype(np.int32)
 
