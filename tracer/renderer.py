@@ -485,10 +485,21 @@ class Renderer:
         key = (w, h, count)
         fbo = self._fbos.get(key)
         if fbo is None:
-            atts = [self.ctx.texture((w, h), 4, dtype="f4")]
-            if count:
+            import moderngl
+            atts = []
+            try:
                 atts.append(self.ctx.texture((w, h), 4, dtype="f4"))
-            fbo = self.ctx.framebuffer(color_attachments=atts)
+                if count:
+                    atts.append(self.ctx.texture((w, h), 4, dtype="f4"))
+                fbo = self.ctx.framebuffer(color_attachments=atts)
+            except moderngl.Error as e:
+                # Drivers have limits of their own below GL_MAX_TEXTURE_SIZE (llvmpipe refuses
+                # a float framebuffer past 2 GiB: 12000² is INCOMPLETE_ATTACHMENT).
+                for t in atts:
+                    t.release()
+                raise InputError(f"camera size {w}x{h}: the GPU driver cannot make a float framebuffer of "
+                                 f"{w * h * 16 / 2**30:.2f} GiB ({e}); render a smaller image, or in tiles "
+                                 "(python -m tracer render does)") from None
             self._fbos[key] = fbo
         return fbo
 

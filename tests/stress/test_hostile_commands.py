@@ -220,3 +220,18 @@ def test_a_camera_too_far_names_the_option(tuft, tmp_path, capsys):
     assert main(["render", str(tuft), "--out", str(tmp_path / "x.png"), "--camera", camera]) == 2
     assert capsys.readouterr().err.startswith(f"error: --camera {camera}: camera: position 1e+20")
     assert _files(tmp_path) == ["tuft.npz"]
+
+
+def test_a_framebuffer_the_driver_refuses_is_an_input_error():
+    """llvmpipe refuses float framebuffers past 2 GiB (12000² is INCOMPLETE_ATTACHMENT, below
+    GL_MAX_TEXTURE_SIZE); whatever the driver does, no moderngl error reaches the caller."""
+    from tracer.renderer import Renderer
+    r = Renderer()
+    r.set_strands(_far_strand(0, 1.0))
+    try:
+        img = r.render(Camera.look_at([0, -3, 0.5], [0, 0, 0.5], size=(12000, 12000)), RenderSettings())
+    except InputError as e:
+        assert "camera size 12000x12000" in str(e) and "tiles" in str(e)
+    else:
+        assert img.shape == (12000, 12000, 4)
+    assert r.render(Camera.look_at([0, -3, 0.5], [0, 0, 0.5], size=(32, 32)), RenderSettings())[..., 3].max() > 0
