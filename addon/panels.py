@@ -78,6 +78,35 @@ class VIEW3D_PT_keystrand_hair_look(_HairPanel, Panel):
             col.prop(s, name)
 
 
+class VIEW3D_PT_keystrand_hair_wisps(_HairPanel, Panel):
+    bl_space_type = 'VIEW_3D'
+    bl_label = "Clumps and Curls"
+    bl_parent_id = "VIEW3D_PT_keystrand_hair"
+
+    def draw(self, context):
+        s = find_scalp(context).keystrand_hair
+        col = self.layout.column()
+        col.use_property_split = True
+        for name in ("clump", "clump_shape", "frizz", "curl", "curl_period"):
+            col.prop(s, name)
+
+
+class VIEW3D_PT_keystrand_hair_collision(_HairPanel, Panel):
+    bl_space_type = 'VIEW_3D'
+    bl_label = "Collision"
+    bl_parent_id = "VIEW3D_PT_keystrand_hair"
+
+    def draw_header(self, context):
+        self.layout.prop(find_scalp(context).keystrand_hair, "collision", text="")
+
+    def draw(self, context):
+        s = find_scalp(context).keystrand_hair
+        col = self.layout.column()
+        col.use_property_split = True
+        col.active = s.collision
+        col.prop(s, "collision_margin")
+
+
 class VIEW3D_PT_keystrand_hair_key(_HairPanel, Panel):
     bl_space_type = 'VIEW_3D'
     bl_label = "Active Key Strand"
@@ -139,4 +168,4 @@ class IMAGE_PT_keystrand_hair_preview(_HairPanel, Panel):
 
 
 CLASSES = (VIEW3D_PT_keystrand_hair, VIEW3D_PT_keystrand_hair_shape, VIEW3D_PT_keystrand_hair_look,
-           VIEW3D_PT_keystrand_hair_key, VIEW3D_PT_keystrand_hair_preview, IMAGE_PT_keystrand_hair_preview)
+           VIEW3D_PT_keystrand_hair_wisps, VIEW3D_PT_keystrand_hair_collision, VIEW3D_PT_keystrand_hair_key, VIEW3D_PT_keystrand_hair_preview, IMAGE_PT_keystrand_hair_preview)

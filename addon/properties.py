@@ -162,6 +162,29 @@ class HairSettings(PropertyGroup):
                                description="Where hairs start to turn see-through, as a fraction of length")
     alpha_tip: FloatProperty(name="Tip Opacity", default=1.0, min=0.0, max=1.0, subtype='FACTOR',
                              description="Opacity at the tip: 1 = solid, lower = softer, wispy tips")
+    clump: FloatProperty(name="Clump", default=0.0, min=0.0, max=1.0, subtype='FACTOR',
+                         description="How tightly the hairs of a wisp gather around their key strand: "
+                                     "loose at the root, tightest at the tip; 0 = no clumping")
+    clump_shape: FloatProperty(name="Clump Shape", default=1.0, min=0.01, max=8.0,
+                               description="How clumping grows along the hair: 1 = evenly from root to "
+                                           "tip, higher = loose for longer and tight only near the tip, "
+                                           "lower = tight soon after the root")
+    frizz: FloatProperty(name="Frizz", default=0.0, min=0.0, soft_max=0.01, precision=4, subtype='DISTANCE',
+                         description="How far each hair wanders off its path toward the tip, in a few "
+                                     "smooth random waves; 0 = none")
+    curl: FloatProperty(name="Curl", default=0.0, min=0.0, soft_max=0.02, precision=4, subtype='DISTANCE',
+                        description="Radius of the corkscrew each hair winds around its path, growing "
+                                    "from the root; 0 = no curl")
+    curl_period: FloatProperty(name="Curl Length", default=0.02, min=1e-5, soft_max=0.1, precision=4,
+                               subtype='DISTANCE',
+                               description="Length of hair per turn of the curl: smaller = tighter curls")
+    collision: BoolProperty(name="Collision", default=True,
+                            description="Keep the hair out of the collider (the head): hairs are combed "
+                                        "out along its surface without stretching. Key strands that pass "
+                                        "through it are reported, never moved")
+    collision_margin: FloatProperty(name="Margin", default=2e-4, min=0.0, soft_max=0.005, precision=5,
+                                    subtype='DISTANCE',
+                                    description="The gap kept between every hair's surface and the collider")
 
     # --- drawing key strands -------------------------------------------------------------
     key_shape: EnumProperty(name="Key Shape", items=KEY_SHAPES, default='STRAIGHT',
@@ -233,7 +256,8 @@ PARAM_FIELDS = ("count", "seed", "sampling_mode", "normal_mode", "up", "front", 
                 "max_length", "tidiness", "theta_max", "n_influence", "neighbour_mode",
                 "intelligence", "resolution_mode", "points_per_strand", "tolerance",
                 "tolerance_units", "radius", "radius_mode", "taper_start", "color",
-                "color_variation", "color_variation_point", "alpha_start", "alpha_tip")
+                "color_variation", "color_variation_point", "alpha_start", "alpha_tip", "clump",
+                "clump_shape", "frizz", "curl", "curl_period", "collision", "collision_margin")
 RENDER_FIELDS = ("preview_size", "preview_samples", "preview_shadows", "preview_shadow_mode",
                  "preview_layers", "preview_shading", "preview_min_pixel_width",
                  "preview_scene_lights", "preview_in_process")

@@ -181,6 +181,8 @@ def test_panels_draw_every_setting_and_button(clean):
     for panel in panels:
         if panel.poll(context):
             fake = type("P", (), {"layout": _Layout(seen)})()
+            if hasattr(panel, "draw_header"):
+                panel.draw_header(fake, context)
             panel.draw(fake, context)
     settings = scalp.keystrand_hair.bl_rna.properties.keys()
     shown = set(seen)
