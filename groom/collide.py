@@ -71,8 +71,23 @@ RAMP_SLOPE = 0.5
 # A segment turns from the one before by at most the strand's sharpest bend or this (cosine
 # of 20°), unless it must turn more to clear the collider.
 _MIN_TURN_COS = float(np.cos(np.radians(20.0)))
-# Attempts to find the least turn that clears a segment before it goes straight out.
+# Attempts at each of the two ways of clearing a segment (see _push_out), and how far past
+# the clearance each aims (of a cell: 2 µm on the bundled head), so the tries converge.
 _PUSH_ITERATIONS = 5
+_OVERSHOOT = 1e-3
+
+
+def _fibonacci_sphere(n):
+    """n unit directions spread evenly over the sphere (a golden-angle spiral)."""
+    k = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * k / n
+    r = np.sqrt(1.0 - z * z)
+    a = np.pi * (3.0 - np.sqrt(5.0)) * k
+    return np.stack([r * np.cos(a), r * np.sin(a), z], 1)
+
+
+# The last resort of _push_out: directions 15° apart.
+_SEARCH_DIRECTIONS = _fibonacci_sphere(200)
 # Samples along each key strand when looking for keys inside the collider, and how deep
 # (of the collider's size: 1 mm on the bundled head) a key may dip before it is reported.
 _KEY_CHECK_SAMPLES = 257
@@ -661,8 +676,8 @@ def keys_inside(collider, tables, roots, radii):
         inside[0] = False
         if inside.any():
             s = np.linspace(0.0, 1.0, len(pts))[inside]
-            deepest = pts[inside][np.argmin(v[inside])]
-            depth = -float(collider.signed_distance(deepest[None])[0])
+            # The sampled distance is clamped past the band: the exact one says how deep.
+            depth = -float(collider.signed_distance(pts[inside]).min())
             found.append(KeyInside(i, max(depth, 0.0), (float(s.min()), float(s.max()))))
     return found
 
@@ -905,11 +920,13 @@ def _perpendicular_toward(a, b, cos_ab):
 
 
 def _push_out(collider, p0, u, length, target, root_value, root, short):
-    """Directions that clear segments of `length` from p0, turned from u toward the outward
-    direction g at p0 (keeping u's side of g) by the least angle found: the cosine to g is
-    raised by each try's shortfall over the length (the end rises by length per unit of it)
-    until clear; straight out along g where five tries do not do it. Returns (directions,
-    how many are still short)."""
+    """Directions that clear segments of `length` from p0. First u is turned toward the
+    outward direction g at p0 (keeping u's side of g) by the least angle found: the cosine
+    to g is raised by each try's shortfall over the length (the end rises by length per unit
+    of it) until clear, at most to g itself. Where that is not enough (a crease, as behind
+    an ear, where the way out is not g), the worse of the segment's end and middle is moved
+    out along its own outward direction and the segment aimed through it, a few times.
+    Returns (directions, how many are still short)."""
     g = collider.outward(p0)
     cos_ug = (u * g).sum(axis=1)
     w = _perpendicular_toward(g, u, cos_ug)
@@ -917,7 +934,7 @@ def _push_out(collider, p0, u, length, target, root_value, root, short):
     out = u.copy()
     todo = np.arange(len(p0))
     for _ in range(_PUSH_ITERATIONS):
-        s[todo] = np.minimum(s[todo] + 1.05 * short[todo] / length[todo] + 1e-9, 1.0)
+        s[todo] = np.minimum(s[todo] + (1.2 * short[todo] + _OVERSHOOT * collider.cell) / length[todo], 1.0)
         st = s[todo, None]
         out[todo] = st * g[todo] + np.sqrt(np.maximum(0.0, 1.0 - st * st)) * w[todo]
         t = todo
@@ -926,11 +943,40 @@ def _push_out(collider, p0, u, length, target, root_value, root, short):
         todo = t[(short[t] > 0) & (s[t] < 1.0)]
         if not todo.size:
             break
-    out[todo] = g[todo]
-    if todo.size:
+    todo = np.flatnonzero(short > 0)
+    for _ in range(_PUSH_ITERATIONS):
+        if not todo.size:
+            break
         t = todo
-        short[t] = _shortfall(collider, p0[t] + length[t, None] * g[t], p0[t] + 0.5 * length[t, None] * g[t],
-                              target[t], root_value[t], root[t])
+        half = 0.5 * length[t, None]
+        end, mid = p0[t] + 2.0 * half * out[t], p0[t] + half * out[t]
+        v = collider.value(np.concatenate([end, mid]))
+        n = len(t)
+        lack_end = _clearance(target[t], root_value[t], end, root[t]) - v[:n]
+        lack_mid = _clearance(target[t], root_value[t], mid, root[t]) - v[n:]
+        by_mid = 2.0 * lack_mid > lack_end
+        at = np.where(by_mid[:, None], mid, end)
+        lack = np.where(by_mid, lack_mid, lack_end)
+        moved_to = at + (1.2 * np.maximum(lack, 0.0) + _OVERSHOOT * collider.cell)[:, None] * collider.outward(at)
+        out[t] = _unit(moved_to - p0[t])
+        short[t] = _shortfall(collider, p0[t] + 2.0 * half * out[t], p0[t] + half * out[t], target[t],
+                              root_value[t], root[t])
+        todo = t[short[t] > 0]
+    if todo.size:
+        # Still short (a strand wedged between an ear and the skull): of a fixed set of
+        # directions, the one nearest u that clears the segment, else the one that falls
+        # least short.
+        t = todo
+        dirs = _SEARCH_DIRECTIONS
+        n, m = len(t), len(dirs)
+        rep = np.repeat(t, m)
+        cand = np.tile(dirs, (n, 1))
+        sh = _shortfall(collider, p0[rep] + length[rep, None] * cand, p0[rep] + 0.5 * length[rep, None] * cand,
+                        target[rep], root_value[rep], root[rep]).reshape(n, m)
+        score = np.where(sh <= 0, 2.0 + u[t] @ dirs.T, -sh)
+        best = np.argmax(score, axis=1)
+        out[t] = dirs[best]
+        short[t] = sh[np.arange(n), best]
     return out, int((short > 0).sum())
 
 
