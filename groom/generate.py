@@ -27,7 +27,7 @@ from .sampling import sample_roots
 from .scalp import Scalp
 from .parallel import MIN_SPLIT, ranges, run_jobs
 from .collide import StrandCollision
-from .shaping import shape_strands, shaping_bound
+from .shaping import clump_arguments, shape_strands, shaping_bound
 from .wisps import check_groups, guide_weights_by_guide, root_groups_for
 
 
@@ -211,11 +211,13 @@ class Generator:
         sel = np.asarray(sel, np.int64)
         rows = np.stack([d["rows"] for d in self._key_data])
         sigma, counts = uniform_sigma(self.frac[sel], np.asarray(cylinders, np.int64))
+        main = self._guides[0, sel]
+        clump = clump_arguments(self.params, main, self._roots[:, sel], np.array([d["root"] for d in self._key_data]))
         pts, _ = evaluate_strands(self._roots[:, sel], self.transforms[:, sel], self._guides[:, sel],
                                   self._weights[:, sel].astype(np.float32), counts, rows, sigma=sigma,
-                                  threads=_threads_for(len(sel)))
-        shape_strands(pts, counts, sigma, None, self.transforms[:, sel], self._guides[0, sel], self.samples.ids[sel],
-                      rows, np.array([d["root"] for d in self._key_data]), self.params, _threads_for(len(sel)))
+                                  threads=_threads_for(len(sel)), clump=clump)
+        shape_strands(pts, counts, sigma, None, self.transforms[:, sel], main, self.samples.ids[sel], rows, self.params,
+                      _threads_for(len(sel)))
         return pts, counts
 
     def _strands(self, sel, guides, weights):
@@ -237,11 +239,13 @@ class Generator:
         args = (pick(self._roots), pick(self.transforms), g, w.astype(np.float32))
         max_cyl = p.points_per_strand - 1
         self._report(0.2, "growing strands")
+        clump = clump_arguments(p, g[0], args[0], np.array([d["root"] for d in kd]))
         if p.resolution_mode == "fixed":
             counts = np.full(len(frac), max_cyl + 1, np.int64)
             along = np.arange(max_cyl + 1) / max_cyl
             jobs, attrs = self._attribute_jobs(ids, counts, along, g, w, base_radius)
-            pts, done = evaluate_strands(*args, counts, rows, frac=frac, also=jobs, threads=_threads_for(len(frac)))
+            pts, done = evaluate_strands(*args, counts, rows, frac=frac, also=jobs, threads=_threads_for(len(frac)),
+                                         clump=clump)
             attrs = attrs or done[0]
             sigma = None
         else:
@@ -249,11 +253,11 @@ class Generator:
             tol = np.maximum(tol, 1e-300)
             bins = shaping_bound(np.stack([d["bound"] for d in kd]), rows, p)
             sigma, counts = adaptive_sigma(frac, g.T, w.T, bins, tol, max_cyl)
-            pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma, threads=_threads_for(len(frac)))
+            pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma, threads=_threads_for(len(frac)), clump=clump)
             attrs = self._attributes(ids, counts, sigma / np.repeat(frac, counts), g, w, base_radius)
         threads = _threads_for(len(frac))
-        self._report(0.6, "clump, frizz and curl")
-        shape_strands(pts, counts, sigma, frac, args[1], g[0], ids, rows, np.array([d["root"] for d in kd]), p, threads)
+        self._report(0.6, "frizz and curl")
+        shape_strands(pts, counts, sigma, frac, args[1], g[0], ids, rows, p, threads)
         if self._collision is not None:
             self._report(0.7, "moving hair out of the collider")
             pts = self._collision.apply(pts, counts, attrs[0], sel, threads)

@@ -137,7 +137,7 @@ def uniform_sigma(frac, cylinders):
 
 
 def evaluate_strands(roots, transforms, guides, weights, counts, rows, sigma=None, frac=None,
-                     chunk_points=1 << 15, threads=None, also=()):
+                     chunk_points=1 << 15, threads=None, also=(), clump=None):
     """Points of strands at curve parameters σ: C_j(σ) = R_j + B_j Σ_g w_jg D_g(σ).
 
     All per-strand inputs are component-major, one contiguous row per component: roots
@@ -155,6 +155,11 @@ def evaluate_strands(roots, transforms, guides, weights, counts, rows, sigma=Non
     run on `threads` threads (default: one per CPU), after the jobs `also` (other work the
     caller wants done meanwhile; their results are returned too). A strand's numbers depend
     only on its own inputs, never on its chunk or thread. Returns (points, [results of also]).
+
+    clump: None or (scale, exponent, towards (3, S) f32) pulls each point a fraction
+    c = scale·σ^exponent of the way to its wisp key (guide 0) carried to that key's root,
+    R_key + B_j D_0(σ) (shaping.py): the blend becomes (1-c)·Σ_g w_g D_g + c·D_0 and the
+    point moves by c·towards, towards = R_key - R_j; per-point weights, no extra gathers.
     """
     n_keys, samples, _ = rows.shape
     table = rows.reshape(n_keys * samples, 8)
@@ -209,6 +214,12 @@ def evaluate_strands(roots, transforms, guides, weights, counts, rows, sigma=Non
         if src is None:
             np.multiply(frac[sl, None], grid, out=pos)  # σ, as uniform_sigma makes it
             src = pos
+        pull = None
+        if clump is not None:
+            scale, exponent, towards = clump
+            pull = (src if exponent == 1.0 else np.power(src, exponent)).astype(np.float32)
+            pull *= np.float32(scale)
+            keep = np.float32(1.0) - pull
         np.multiply(src, samples - 1, out=pos)
         np.copyto(i0, pos, casting="unsafe")  # truncation = floor, σ >= 0
         np.minimum(i0, samples - 2, out=i0)
@@ -218,10 +229,13 @@ def evaluate_strands(roots, transforms, guides, weights, counts, rows, sigma=Non
             np.add(per_strand(first_row[k]), i0, out=idx)
             # mode="clip" (the indices are valid anyway) lets take write into `out` unbuffered.
             table.take(idx, axis=0, out=acc if k == 0 else row, mode="clip")
+            wk = per_strand(weights[k])
+            if pull is not None:
+                wk = wk * keep + pull if k == 0 else wk * keep
             if k == 0:
-                acc *= per_strand(weights[k])[..., None]
+                acc *= wk[..., None]
             else:
-                row *= per_strand(weights[k])[..., None]
+                row *= wk[..., None]
                 acc += row
         # Offsets in the keys' frame: sample + fraction · step, per component.
         for c in range(3):
@@ -236,6 +250,8 @@ def evaluate_strands(roots, transforms, guides, weights, counts, rows, sigma=Non
             e += term
             np.multiply(per_strand(transforms[3 * a + 2]), d[2], out=term)
             e += term
+            if pull is not None:
+                e += pull * per_strand(towards[a])
             np.add(e, per_strand(roots[a]), out=dst[..., a], casting="same_kind")
 
     also = list(also)

@@ -10,7 +10,9 @@ others are computed with it (incremental regeneration stays bit-identical).
 - clump: C'(σ) = C(σ) + c(σ)·(T(σ) - C(σ)), c(σ) = clump·σ^clump_shape, where T is the
   wisp's key carried to the key's own root by the strand's own transform B_j:
   T(σ) = R_key + B_j D_main(σ). Loose at the root (c = 0: the root stays), tight at the tip;
-  strands of one wisp gather toward their key, strands of two wisps part between them.
+  strands of one wisp gather toward their key, strands of two wisps part between them. It
+  is done inside the blend (interpolate.evaluate_strands, `clump_arguments`): a shift of
+  the weights toward the wisp key and a move by c·(R_key - R_j), no extra work per point.
 - frizz: + frizz·a_j·σ²·(u1 sin(2πν1σ + φ1) + u2 sin(2πν2σ + φ2))/2, two random unit
   directions u, 2-4 periods ν along the length, amplitude a_j in [0.3, 1]: stray, wandering
   tips and a straight root.
@@ -33,14 +35,23 @@ _CURL_RAMP = 0.1
 
 
 def active(params):
-    """Whether any shaping is asked for."""
-    return params.clump > 0 or params.frizz > 0 or params.curl > 0
+    """Whether frizz or curl is asked for (clump is part of the blend)."""
+    return params.frizz > 0 or params.curl > 0
+
+
+def clump_arguments(params, main, roots, key_roots):
+    """The `clump` argument of interpolate.evaluate_strands for strands whose wisp keys are
+    `main` (S,) and roots (3, S): None without clump."""
+    if not params.clump > 0:
+        return None
+    towards = (key_roots[main].T - roots).astype(np.float32)
+    return params.clump, params.clump_shape, towards
 
 
 def shaping_bound(bins, rows, params):
     """The curvature bins of interpolate.curvature_bound (K, NB) plus what clump, frizz and
     curl add to |C''(σ)| (bounds, per bin of σ; each taken at the bin's far end)."""
-    if not active(params):
+    if not (active(params) or params.clump > 0):
         return bins
     nb = bins.shape[1]
     s = (np.arange(nb) + 1.0) / nb
@@ -64,13 +75,13 @@ def shaping_bound(bins, rows, params):
     return bins + extra[None, :]
 
 
-def shape_strands(points, counts, sigma, frac, transforms, main, ids, rows, key_roots, params, threads=None,
+def shape_strands(points, counts, sigma, frac, transforms, main, ids, rows, params, threads=None,
                   chunk_points=1 << 15):
-    """Clump, frizz and curl applied in place to `points` (P,3) float32 of strands with
+    """Frizz and curl applied in place to `points` (P,3) float32 of strands with
     `counts` points at curve parameters `sigma` (flat, P) or, when None, equal steps over
     [0, frac_j] (fixed resolution). transforms (9,S) f32 and rows (K,M,8)
     as interpolate.evaluate_strands takes them; main (S,) the wisp key of each strand, ids
-    (S,) its random stream, key_roots (K,3). Chunks of whole strands on `threads` threads."""
+    (S,) its random stream. Chunks of whole strands on `threads` threads."""
     if not active(params) or not len(counts):
         return points
     counts = np.asarray(counts, np.int64)
@@ -82,8 +93,8 @@ def shape_strands(points, counts, sigma, frac, transforms, main, ids, rows, key_
         bounds.append((first, last))
         first = last
     per = _per_strand(params, ids, rows, main)
-    jobs = [lambda b=b: _shape_chunk(points, counts, ends, sigma, frac, transforms, main, rows, key_roots,
-                                     params, per, b) for b in bounds]
+    jobs = [lambda b=b: _shape_chunk(points, counts, ends, sigma, frac, transforms, main, rows, params, per, b)
+            for b in bounds]
     parallel.run_jobs(jobs, threads)
     return points
 
@@ -118,7 +129,7 @@ def _unit_from(u, v):
     return np.stack([r * np.cos(a), r * np.sin(a), z])
 
 
-def _shape_chunk(points, counts, ends, sigma, frac, transforms, main, rows, key_roots, params, per, bound):
+def _shape_chunk(points, counts, ends, sigma, frac, transforms, main, rows, params, per, bound):
     first, last = bound
     start = int(ends[first - 1]) if first else 0
     stop = int(ends[last - 1])
@@ -130,21 +141,15 @@ def _shape_chunk(points, counts, ends, sigma, frac, transforms, main, rows, key_
         s = sigma[start:stop]
     p = points[start:stop].astype(np.float64)
     n_keys, samples, _ = rows.shape
-    need_key = params.clump > 0 or params.curl > 0
-    if need_key:
+    if params.curl > 0:
         pos = s * (samples - 1)
         i0 = np.minimum(pos.astype(np.int64), samples - 2)
-        fr = (pos - i0)[:, None]
         row = rows.reshape(n_keys * samples, 8)[main[strand] * samples + i0].astype(np.float64)
         b = transforms[:, strand].astype(np.float64)
 
         def turn(v):  # B_j v, per point
             return np.stack([b[3 * a] * v[:, 0] + b[3 * a + 1] * v[:, 1] + b[3 * a + 2] * v[:, 2] for a in range(3)], 1)
     out = p.copy()
-    if params.clump > 0:
-        target = key_roots[main[strand]] + turn(row[:, :3] + fr * row[:, 4:7])
-        c = params.clump * s ** params.clump_shape
-        out += c[:, None] * (target - p)
     if params.frizz > 0:
         f = per
         amp = (f["frizz"][strand] * s * s * 0.5)[:, None]
