@@ -713,10 +713,11 @@ class CollisionStats:
         self.largest_move = max(self.largest_move, other.largest_move)
 
 
-def resolve_strands(collider, points, counts, radius, margin, threads=None, dtype=np.float32):
+def resolve_strands(collider, points, counts, radius, margin, threads=None, dtype=np.float32, in_place=False):
     """Strands moved out of the collider (see the module's notes): returns (points (P,3) of
     `dtype`, moved (S,) bool, CollisionStats). points (P,3), counts (S,), radius (P,) per
-    point; margin in scene units. The strands are looked at in ranges on `threads` threads,
+    point; margin in scene units; in_place: move `points` themselves (no copy of them). The
+    strands are looked at in ranges on `threads` threads,
     and those that must move are walked in one part per thread (the walk goes point by point,
     and each part pays its steps' overhead once); each strand's numbers depend only on
     itself, never on its range or part."""
@@ -724,7 +725,7 @@ def resolve_strands(collider, points, counts, radius, margin, threads=None, dtyp
     points, radius = np.asarray(points), np.asarray(radius)
     offsets = np.zeros(len(counts), np.int64)
     np.cumsum(counts[:-1], out=offsets[1:])
-    out = np.array(points, dtype=dtype, copy=True)
+    out = points if in_place else np.array(points, dtype=dtype, copy=True)
     moved = np.zeros(len(counts), bool)
     stats = CollisionStats(strands=len(counts), points=int(counts.sum()))
     if not len(counts):
@@ -819,18 +820,18 @@ def _shortfall(collider, end, mid, target, root_value, root):
 
 def _turn_limits(pts, off, cnt):
     """Per strand (cos, sin) of the largest turn a segment may make from the one before:
-    the strand's sharpest original bend, at least 20°."""
-    rows = _flat_points(off, cnt)
-    seg = pts[rows[1:]] - pts[rows[:-1]]
-    length = np.sqrt((seg ** 2).sum(axis=1))
-    unit = seg / np.where(length > 0, length, 1.0)[:, None]
-    joint = np.ones(len(rows))
-    joint[1:-1] = np.where((length[:-1] > 0) & (length[1:] > 0), (unit[:-1] * unit[1:]).sum(axis=1), 1.0)
-    start = np.cumsum(cnt) - cnt
-    joint[start] = 1.0            # a root is no joint (and the segment before it is another strand's)
-    joint[start + cnt - 1] = 1.0  # nor is a tip
-    cos = np.full(len(off), _MIN_TURN_COS)
-    np.minimum.at(cos, np.repeat(np.arange(len(off)), cnt), joint)
+    the strand's sharpest original bend, at least 20°. pts holds the strands one after
+    another (off, cnt)."""
+    seg = pts[1:] - pts[:-1]
+    l2 = np.einsum("ij,ij->i", seg, seg)
+    dots = np.einsum("ij,ij->i", seg[:-1], seg[1:])
+    both = l2[:-1] * l2[1:]
+    joint = np.ones(len(pts))
+    # joint[k]: the bend at point k, between the segments ending and starting there.
+    joint[1:-1] = np.where(both > 0, dots / np.sqrt(np.where(both > 0, both, 1.0)), 1.0)
+    joint[off] = 1.0            # a root is no joint (the segment before it is another strand's)
+    joint[off + cnt - 1] = 1.0  # nor is a tip
+    cos = np.minimum(np.minimum.reduceat(joint, off), _MIN_TURN_COS)
     return cos, np.sqrt(np.maximum(0.0, 1.0 - cos * cos))
 
 
@@ -1045,7 +1046,8 @@ class StrandCollision:
 
     def apply(self, points, counts, radius, sel=None, threads=None):
         """Points (float32) of strands `sel` (None: all) moved out of the collider."""
-        new, moved, self.last = resolve_strands(self.collider, points, counts, radius, self.margin, threads)
+        new, moved, self.last = resolve_strands(self.collider, points, counts, radius, self.margin, threads,
+                                                in_place=True)
         if sel is None:
             self.moved = moved
         else:
