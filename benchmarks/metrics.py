@@ -3,11 +3,26 @@
 import numpy as np
 
 COVERAGE_ALPHA = 0.5   # a pixel "is hair" when its alpha reaches this
+MIN_HAIR_PIXELS = 10_000   # an image error is measured over at least this many hair pixels
 
 
 def image_error(image, reference, coverage_alpha=COVERAGE_ALPHA):
-    """RMSE and max abs over linear RGBA, and coverage-mask agreement, of `image` against
-    `reference` (both (H,W,4)). Non-finite pixels are counted, never hidden by the mean."""
+    """Error of `image` against `reference` (both (..., 4) linear RGBA: whole images, or the
+    same pixels of both). Hair pixels are the union of both coverage masks (alpha >=
+    coverage_alpha), so a pixel either image misses counts:
+
+      iou          coverage agreement over the union (|A∩B| / |A∪B|); 0 when the union is
+                   empty, so an empty image never scores well
+      rmse_hair    RMSE over the hair pixels' RGBA (nan without any)
+      max_abs      largest difference anywhere
+      hair_pixels  how many pixels the union holds
+      bad_pixels   hair pixels off by more than 2e-3 in some channel
+      nonfinite    pixels of `image` that are not finite (counted, never hidden by a mean)
+      coverage     the fraction of `image` that is hair
+
+    and the old measures, which count background pixels too (an empty image scored high on
+    a mostly empty view): rmse over every pixel, coverage_agree = fraction of pixels whose
+    masks agree."""
     a = np.asarray(image, np.float64)
     b = np.asarray(reference, np.float64)
     if a.shape != b.shape:
@@ -16,15 +31,38 @@ def image_error(image, reference, coverage_alpha=COVERAGE_ALPHA):
     diff = np.where(finite[..., None], a - b, 0.0)
     mask_a = a[..., 3] >= coverage_alpha
     mask_b = b[..., 3] >= coverage_alpha
-    union = int((mask_a | mask_b).sum())
+    union = mask_a | mask_b
+    n_union = int(union.sum())
+    worst = np.abs(diff).max(axis=-1) if diff.size else np.zeros(union.shape)
     return {
-        "rmse": float(np.sqrt(np.mean(diff ** 2))),
-        "max_abs": float(np.abs(diff).max()) if diff.size else 0.0,
-        "coverage_agree": float(np.mean(mask_a == mask_b)),
-        "coverage_iou": float((mask_a & mask_b).sum() / union) if union else 1.0,
+        "iou": float((mask_a & mask_b).sum() / n_union) if n_union else 0.0,
+        "rmse_hair": float(np.sqrt(np.mean(diff[union] ** 2))) if n_union else float("nan"),
+        "max_abs": float(worst.max()) if diff.size else 0.0,
+        "hair_pixels": n_union,
+        "bad_pixels": int((worst[union] > 2e-3).sum()),
         "nonfinite": int((~finite).sum()),
         "coverage": float(mask_a.mean()),
+        "rmse": float(np.sqrt(np.mean(diff ** 2))),
+        "coverage_agree": float(np.mean(mask_a == mask_b)),
     }
+
+
+def whole_image_error(image, reference_of, max_rays=None, seed=0, coverage_alpha=COVERAGE_ALPHA):
+    """image_error of a whole image (H,W,4) against a reference that `reference_of(pixels)`
+    traces: pixels None for every pixel (returns (H,W,4)), else (P,2) int columns x, y
+    (returns (P,4)). With `max_rays` below the pixel count the reference traces a uniform
+    random subset of the image's pixel centres (rays, not a window), the same for every
+    call with one seed. Adds `rays`: how many pixels were compared."""
+    h, w = image.shape[:2]
+    if max_rays is None or max_rays >= w * h:
+        e = image_error(image, reference_of(None), coverage_alpha)
+        e["rays"] = w * h
+        return e
+    flat = np.sort(np.random.default_rng(seed).choice(w * h, int(max_rays), replace=False))
+    pixels = np.stack([flat % w, flat // w], axis=1)
+    e = image_error(np.asarray(image)[pixels[:, 1], pixels[:, 0]], reference_of(pixels), coverage_alpha)
+    e["rays"] = int(max_rays)
+    return e
 
 
 def _pad(points, counts, fill_last=True):

@@ -21,9 +21,12 @@ Choices the SPEC leaves open, made here:
   the two axes exceeds `SHARP_BEND_DEG`, both cylinders end on a plane square to their own
   axis instead (a flat end cap, like a strand end), which stays bounded.
 * Joint planes vs. end caps: the tracer treats a strand as one solid tube. A ray that enters
-  a cylinder through a plane it shares with its neighbour was already inside the strand, so
-  that entry is no new surface; entering through a strand end (or a sharp-bend cap) is.
-  `flags` bit 0 = plane 1 is a cap, bit 1 = plane 2 is a cap.
+  a cylinder through a plane it shares with its neighbour, at a point the neighbour's section
+  covers, was already inside the strand, so that entry is no new surface; elsewhere on that
+  plane (the crescents between the incoming cylinder's ellipse and the outgoing one's circle,
+  SPEC §6) it is, and so is entering through a strand end or a sharp-bend cap. A strand's
+  cylinders are consecutive rows, so the neighbour across plane 1 is the previous row and
+  across plane 2 the next. `flags` bit 0 = plane 1 is a cap, bit 1 = plane 2 is a cap.
 * Past the tip, on the outer side of a bend, a cylinder reaches up to r·tan(angle) beyond
   P_{i+1}; `extension` records that length so the grid can bound it.
 """

@@ -7,6 +7,7 @@ pairs that survive a bounding-sphere test; meant for small images (tests, error 
 import numpy as np
 
 from .cylinders import strands_to_cylinders
+from .ray_bundles import candidate_pairs
 from .settings import RenderSettings
 
 BIG = 1e30
@@ -52,32 +53,19 @@ class _Cyl:
         self.color = c.color.astype(np.float64)
         self.flags = c.flags.astype(np.int64)
         self.ext = c.extension.astype(np.float64)
-        self.mid = 0.5 * (self.top + self.tip)
-        half = 0.5 * np.linalg.norm(self.tip - self.top, axis=1)
-        # Bounding sphere radius around `mid`, without the radius (added per use).
-        self.reach = half + self.ext
+        # The solid lies within the radius of the axis from top to `far`, the tip moved on
+        # by the extension (how far plane 2 reaches past it).
+        axis = self.tip - self.top
+        self.far = self.tip + axis * (self.ext / np.linalg.norm(axis, axis=1))[:, None]
 
     def __len__(self):
         return len(self.top)
 
 
-def _candidates(cyl, o, d, rmax, tmin_any=-np.inf):
-    """Pairs (ray, cylinder) whose ray line passes within the cylinder's bounding sphere."""
-    rb = cyl.reach + rmax
-    pairs_r, pairs_c = [], []
-    step = max(1, 4_000_000 // max(1, len(cyl)))
-    for a in range(0, len(o), step):
-        oo, dd = o[a:a + step], d[a:a + step]
-        cd = dd @ cyl.mid.T - np.einsum("ij,ij->i", oo, dd)[:, None]     # (c - o)·d
-        cc = (np.einsum("ij,ij->i", cyl.mid, cyl.mid)[None, :] - 2 * (oo @ cyl.mid.T)
-              + np.einsum("ij,ij->i", oo, oo)[:, None])                    # |c - o|²
-        near = (cc - cd * cd <= (rb * rb)[None, :] * (1 + 1e-9) + 1e-300) & (cd >= -rb[None, :] + tmin_any)
-        r, c = np.nonzero(near)
-        pairs_r.append(r + a)
-        pairs_c.append(c)
-    if not pairs_r:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    return np.concatenate(pairs_r), np.concatenate(pairs_c)
+def _candidates(cyl, o, d, rmax, target=None):
+    """Pairs (ray, cylinder) that may meet (all that do: ray_bundles); `rmax` the radius
+    each cylinder may be widened to; `target` where all the rays end (a point light)."""
+    return candidate_pairs(o, d, cyl.top, cyl.far, rmax, target)
 
 
 def intersect(cyl, ids, o, d, widen_per_t=0.0, widen_const=0.0, min_px=False, cap=1.0):
@@ -90,6 +78,7 @@ def intersect(cyl, ids, o, d, widen_per_t=0.0, widen_const=0.0, min_px=False, ca
     w = o + tc[:, None] * d - A
     r = cyl.radius[ids].copy()
     ascale = np.ones(len(ids))
+    want = None
     if min_px:
         want = widen_const + widen_per_t * np.abs(tc)
         rw = np.clip(want, r, r * cap)
@@ -122,17 +111,29 @@ def intersect(cyl, ids, o, d, widen_per_t=0.0, widen_const=0.0, min_px=False, ca
         tout = np.where(d2 > 0, np.minimum(tout, t2), tout)
         miss |= (d2 == 0) & (w2 < 0)
     miss |= tin > tout
+    # An entry through a shared plane is no surface where the neighbour's section (points
+    # within its radius of its axis: the next cylinder's axis is n2, the previous one's runs
+    # into A) covers it; elsewhere it is one of the exposed crescents of SPEC §6.
     flags = cyl.flags[ids]
-    miss |= (surf == 1) & ((flags & 1) == 0)
-    miss |= (surf == 2) & ((flags & 2) == 0)
+    shared = ((surf == 1) & ((flags & 1) == 0)) | ((surf == 2) & ((flags & 2) == 0))
+    nb = ids + np.where(shared, np.where(surf == 2, 1, -1), 0)
+    with np.errstate(invalid="ignore"):
+        q = w + np.where(shared, tin, 0.0)[:, None] * d - np.where((surf == 2)[:, None], ax, 0.0)
+    na = np.where((surf == 2)[:, None], n2, A - cyl.top[nb])
+    rn = cyl.radius[nb]
+    if want is not None:
+        rn = np.clip(want, rn, rn * cap)
+    qa, aa = dot(q, na), dot(na, na)
+    miss |= shared & (dot(q, q) * aa - qa * qa < rn * rn * aa)
     t = np.where(miss, np.inf, tc + tin)
     return t, surf, ascale
 
 
-def _shadow(cyl, p, L, tmax, own, tmin, settings):
-    """Transmittance toward the light for every point (the shader's shadow_ray)."""
+def _shadow(cyl, p, L, tmax, own, tmin, settings, target=None):
+    """Transmittance toward the light for every point (the shader's shadow_ray); `target`
+    the point light's position."""
     trans = np.ones(len(p))
-    rr, cc = _candidates(cyl, p, L, cyl.radius)
+    rr, cc = _candidates(cyl, p, L, cyl.radius, target)
     keep = cc != own[rr]
     rr, cc = rr[keep], cc[keep]
     if not len(rr):
@@ -177,7 +178,8 @@ def _shade(cyl, ids, surf, o, d, t, settings):
             dist = np.full(len(p), BIG)
         lit = np.ones(len(p))
         if settings.shadows:
-            lit = _shadow(cyl, p, np.ascontiguousarray(L), dist, ids, 1e-3 * cyl.radius[ids], settings)
+            lit = _shadow(cyl, p, np.ascontiguousarray(L), dist, ids, 1e-3 * cyl.radius[ids], settings,
+                          vec[:3] if vec[3] > 0.5 else None)
         if settings.shading == "kajiya-kay":
             tl, tv = dot(T, L), dot(T, d)
             sl = np.sqrt(np.maximum(0, 1 - tl * tl))
@@ -193,14 +195,36 @@ def _shade(cyl, ids, surf, o, d, t, settings):
     return out
 
 
-def reference_render(strands, camera, settings=None, cylinders=None):
-    """(H, W, 4) float64 premultiplied linear RGBA, row 0 = top; the GPU tracer's model."""
+def pixel_samples(camera, spp_n, pixels=None):
+    """Sample positions (P·spp_n², 2) of the whole image (pixels None: P = W·H, row by row)
+    or of the pixels (P,2) int columns x, y; the same samples as the GPU's for those pixels."""
+    w, h = camera.size
+    pos = sample_positions(w, h, spp_n)
+    if pixels is None:
+        return pos.reshape(-1, 2)
+    px = np.asarray(pixels, np.int64)
+    if px.ndim != 2 or px.shape[1] != 2 or (px < 0).any() or (px[:, 0] >= w).any() or (px[:, 1] >= h).any():
+        raise ValueError(f"pixels: expected (P, 2) integer x, y inside {w}x{h}, got shape {px.shape}")
+    return pos[px[:, 1], px[:, 0]].reshape(-1, 2)
+
+
+def finish_pixels(rgba, camera, spp_n, pixels=None):
+    """Per-sample RGBA (P·spp_n², 4) -> the image (H, W, 4), or (P, 4) for `pixels`."""
+    w, h = camera.size
+    shape = (h, w) if pixels is None else (len(pixels),)
+    return rgba.reshape(shape + (spp_n * spp_n, 4)).mean(axis=-2)
+
+
+def reference_render(strands, camera, settings=None, cylinders=None, pixels=None):
+    """(H, W, 4) float64 premultiplied linear RGBA, row 0 = top; the GPU tracer's model.
+    `pixels` (P,2) int x, y: only those pixels, (P, 4) (whole-image figures on a subset of
+    rays when every ray costs too much)."""
     settings = settings or RenderSettings()
     settings.check()
     cyl = _Cyl(cylinders if cylinders is not None else strands_to_cylinders(strands))
     w, h = camera.size
     n = settings.spp_n
-    pos = sample_positions(w, h, n).reshape(-1, 2)
+    pos = pixel_samples(camera, n, pixels)
     o, d = camera.rays(pos[:, 0], pos[:, 1])
     nray = len(o)
     C = np.zeros((nray, 3))
@@ -240,4 +264,4 @@ def reference_render(strands, camera, settings=None, cylinders=None):
             T[r_k] *= 1 - alpha
     bg = np.asarray(settings.premultiplied_background(), np.float64)
     rgba = np.concatenate([C + T[:, None] * bg[:3], (1 - T + T * bg[3])[:, None]], axis=1)
-    return rgba.reshape(h, w, n * n, 4).mean(axis=2)
+    return finish_pixels(rgba, camera, n, pixels)

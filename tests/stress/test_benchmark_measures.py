@@ -41,6 +41,41 @@ def test_image_error_counts_coverage_and_nonfinite_pixels():
     assert e["max_abs"] == pytest.approx(1.0)
 
 
+def test_an_empty_image_scores_iou_zero_against_hair():
+    ref = np.zeros((100, 100, 4))
+    ref[40:44, :, 3] = 1.0                  # 4 % of the view is hair
+    empty = np.zeros_like(ref)
+    e = image_error(empty, ref)
+    assert e["iou"] == 0.0 and e["hair_pixels"] == 400
+    assert e["rmse_hair"] == pytest.approx(0.5)       # alpha off by 1 in one channel of four
+    assert e["coverage_agree"] == pytest.approx(0.96)  # the old measure: background counted
+    assert image_error(empty, empty)["iou"] == 0.0     # nothing to agree about scores nothing
+
+
+def test_iou_is_agreement_over_the_union_of_both_masks():
+    ref = np.zeros((10, 10, 4))
+    ref[:4, :, 3] = 1.0                     # 40 pixels
+    img = np.zeros_like(ref)
+    img[2:6, :, 3] = 1.0                    # 40 pixels, 20 shared
+    assert image_error(img, ref)["iou"] == pytest.approx(20 / 60)
+
+
+def test_whole_image_error_on_a_ray_subset_sees_the_whole_view():
+    from benchmarks.metrics import whole_image_error
+    ref = np.zeros((64, 64, 4))
+    ref[:, 48:, 3] = 1.0                    # hair only at the right edge
+    img = np.zeros_like(ref)
+    calls = []
+
+    def reference_of(pixels):
+        calls.append(pixels)
+        return ref if pixels is None else ref[pixels[:, 1], pixels[:, 0]]
+    e = whole_image_error(img, reference_of, max_rays=1000)
+    assert e["rays"] == 1000 and calls[0][:, 0].max() >= 48    # not a window in one corner
+    assert e["iou"] == 0.0 and e["hair_pixels"] > 150
+    assert whole_image_error(ref, reference_of)["iou"] == 1.0
+
+
 def test_measure_takes_at_least_five_runs_after_a_warm_up():
     calls = []
     t, _ = measure(lambda: calls.append(1), runs=2)

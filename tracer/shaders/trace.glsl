@@ -64,7 +64,11 @@ uint hash32(uint x) {
 // the two half-spaces of its planes. Returns the entry distance along the ray (or -1), the
 // surface it enters through (0 side, 1 plane 1, 2 plane 2), and the alpha scale of the
 // minimum pixel width. An entry through a plane shared with the neighbouring cylinder is no
-// surface: the ray was inside the strand already.
+// surface where the neighbour's section covers the entry point (the ray was inside the
+// strand already), and a surface elsewhere: at a bend of θ one section is an ellipse of
+// semi-axes r and r/cos θ, the other a circle of radius r, and the crescents between them
+// are exposed (SPEC §6). Rejecting every shared-plane entry left holes of width
+// r(1/cos θ - 1) on the outside of every bend.
 float hit_cylinder_ab(int id, vec4 A4, vec4 B4, vec3 o, vec3 d, float widen_per_t, float widen_const,
                       out int surf, out float ascale, out float alpha) {
     // No cheaper pre-test (bounding sphere, distance to the axis line) pays off: cells are
@@ -119,8 +123,21 @@ float hit_cylinder_ab(int id, vec4 A4, vec4 B4, vec3 o, vec3 d, float widen_per_
     else if (w2 < 0.0) return -1.0;
     if (tin > tout) return -1.0;
     int flags = int(N4.w + 0.5);
-    if (surf == 1 && (flags & 1) == 0) return -1.0;
-    if (surf == 2 && (flags & 2) == 0) return -1.0;
+    // The neighbour across a shared plane is the next or the previous cylinder (a strand's
+    // cylinders are consecutive); its section there is the set of points within its radius
+    // of its axis: the next cylinder's axis is N2, the previous one's runs into A. A cap
+    // (or the side) has no neighbour: nb = id, and the test below cannot reject.
+    bool shared = (surf == 1 && (flags & 1) == 0) || (surf == 2 && (flags & 2) == 0);
+    int nb = shared ? (surf == 2 ? id + 1 : id - 1) : id;
+    vec4 P4 = cyl(nb, TOP);
+    vec3 q = w + tin * d - (surf == 2 ? ax : vec3(0.0));     // entry point - the plane's point
+    vec3 na = surf == 2 ? N4.xyz : A - P4.xyz;
+    float rn = P4.w;
+#if MIN_PX
+    rn = clamp(want, rn, rn * mpw_cap);     // widened as this cylinder was, for this ray
+#endif
+    float qa = dot(q, na), aa = dot(na, na);
+    if (shared && dot(q, q) * aa - qa * qa < rn * rn * aa) return -1.0;
     return tc + tin;
 }
 
