@@ -200,6 +200,16 @@ class HairSettings(PropertyGroup):
                               description="Root radius of the hair around this key; 0 = the scalp's radius")
     key_group: IntProperty(name="Part Group", default=0, min=0,
                            description="Hairs only follow keys of their own group (use it for partings)")
+    symmetry: EnumProperty(
+        name="Symmetry", default='X',
+        items=(('NONE', "Off", "Draw Key Strand makes one key; paired keys are no longer kept mirrored"),
+               ('X', "X", "Left-right across the head (its Up and Front): a drawn key gets its mirror "
+                          "image, and each of a pair follows when the other is edited"),
+               ('Y', "Y", "Front-back across the head"),
+               ('Z', "Z", "Up-down across the head's centre")),
+        description="Which plane of the head key strands are mirrored across when drawn, and kept mirrored")
+    mirror_key: PointerProperty(type=bpy.types.Object, name="Mirror Key",
+                                description="The key strand this one is kept the mirror image of")
 
     # --- preview render (the tracer) -----------------------------------------------------
     preview_size: IntProperty(name="Width", default=512, min=16, soft_max=2048,
