@@ -208,8 +208,6 @@ class HairSettings(PropertyGroup):
                ('Y', "Y", "Front-back across the head"),
                ('Z', "Z", "Up-down across the head's centre")),
         description="Which plane of the head key strands are mirrored across when drawn, and kept mirrored")
-    mirror_key: PointerProperty(type=bpy.types.Object, name="Mirror Key",
-                                description="The key strand this one is kept the mirror image of")
 
     # --- preview render (the tracer) -----------------------------------------------------
     preview_size: IntProperty(name="Width", default=512, min=16, soft_max=2048,
