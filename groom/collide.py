@@ -88,6 +88,8 @@ def _fibonacci_sphere(n):
 
 # The last resort of _push_out: directions 15° apart.
 _SEARCH_DIRECTIONS = _fibonacci_sphere(200)
+# Strands walked together at most (see resolve_strands).
+_WALK_PART = 32768
 # Samples along each key strand when looking for keys inside the collider, and how deep
 # (of the collider's size: 1 mm on the bundled head) a key may dip before it is reported.
 _KEY_CHECK_SAMPLES = 257
@@ -717,10 +719,11 @@ def resolve_strands(collider, points, counts, radius, margin, threads=None, dtyp
     """Strands moved out of the collider (see the module's notes): returns (points (P,3) of
     `dtype`, moved (S,) bool, CollisionStats). points (P,3), counts (S,), radius (P,) per
     point; margin in scene units; in_place: move `points` themselves (no copy of them). The
-    strands are looked at in ranges on `threads` threads,
-    and those that must move are walked in one part per thread (the walk goes point by point,
-    and each part pays its steps' overhead once); each strand's numbers depend only on
-    itself, never on its range or part."""
+    strands are looked at in ranges on `threads` threads, and those that must move are
+    walked in one part per thread, or parts of _WALK_PART strands when there are more (the
+    walk goes point by point, and each part pays its steps' overhead once; the bound keeps
+    its arrays to some 100 MB); each strand's numbers depend only on itself, never on its
+    range or part."""
     counts = np.asarray(counts, np.int64)
     points, radius = np.asarray(points), np.asarray(radius)
     offsets = np.zeros(len(counts), np.int64)
@@ -738,7 +741,8 @@ def resolve_strands(collider, points, counts, radius, margin, threads=None, dtyp
     stats.points_inside_before = sum(f[3] for f in found)
     if not strands.size:
         return out, moved, stats
-    parts = np.array_split(np.arange(len(strands)), min(len(strands), threads or cpu_threads()))
+    n_parts = max(min(len(strands), threads or cpu_threads()), -(-len(strands) // _WALK_PART))
+    parts = np.array_split(np.arange(len(strands)), n_parts)
     walked = run_jobs([partial(_walk_strands, collider, points, offsets, counts, radius, margin, strands[p], k0[p],
                                root_value[p]) for p in parts if len(p)], threads)
     for part, (rows, new, changed, unresolved, largest) in zip([p for p in parts if len(p)], walked):
