@@ -4,8 +4,8 @@
 `Strands` is the one container every package passes around; `read_strands` and
 `write_strands` pick a format by file extension.
 """
-from .strands import Strands
+from .strands import Guides, Strands
 from .validate import InputError, check_finite
 from .atomic import atomic_write
 
-__all__ = ["Strands", "InputError", "check_finite", "atomic_write"]
+__all__ = ["Strands", "Guides", "InputError", "check_finite", "atomic_write"]

@@ -35,6 +35,29 @@ def atomic_write(path, mode="wb"):
         raise
 
 
+@contextlib.contextmanager
+def atomic_path(path):
+    """Yield a temporary file name beside `path`, with the same extension (for libraries that
+    choose the format by it and write by name); rename it onto `path` on success. On any
+    exception the temporary file is removed and `path` is untouched."""
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise FileNotFoundError(f"output folder {folder!r} does not exist; create it first")
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=os.path.basename(path), dir=folder)
+    os.close(fd)
+    try:
+        yield tmp
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
 def check_destination(path, what=None, expected_bytes=0):
     """InputError before any work when `path` cannot be written: it is a folder, its folder
     is missing or refuses a new file (tried with a real temporary file, as atomic_write

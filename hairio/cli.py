@@ -6,9 +6,12 @@
         [--root-uv UV.npy] [--scale S] [--axis AXIS] [--no-flip-v] [--pad-strands]
         [--shuffle-seed N] [--units U]
 
-INPUT is any strand file we read (.npz, .hair, .tfx, .data). The .hair/.tfx/.npz/.data writers
-are numpy; abc and usd run Blender's exporters (bpy) in a subprocess, so this module never
-imports bpy. Bad input prints one line naming the problem, exits 2 and writes nothing.
+INPUT is any strand file we read (.npz, .hair, .tfx, .data, .abc, .usd). The .hair/.tfx/.npz/.data
+writers are numpy; .abc is written with the Alembic library (alembic3d) and .usd with Pixar's
+(usd-core), both as Unreal's groom schema with the guides and weights the strands carry. Where
+that library is missing and Blender's Python module is here, Blender's exporter runs instead,
+in a subprocess (this module never imports bpy), and writes geometry and widths only. Bad input
+prints one line naming the problem, exits 2 and writes nothing.
 Also runnable as `python -m hairio.cli export ...` or `python -m hairio.cli ...`.
 """
 import argparse
@@ -26,6 +29,7 @@ from .npyfile import read_npy
 from .validate import InputError
 
 NUMPY_FORMATS = ("hair", "tfx", "npz", "data")
+# Grooms: our own writers (alembic3d, pxr), Blender's exporters where the library is missing.
 BLENDER_FORMATS = ("abc", "usd")
 EXTENSIONS = {".hair": "hair", ".tfx": "tfx", ".npz": "npz", ".data": "data", ".abc": "abc",
               ".usd": "usd", ".usda": "usd", ".usdc": "usd"}
@@ -44,16 +48,28 @@ def export_file(input_path, out, format=None, vertices_per_strand=32, pinned=2, 
 
     out = os.fspath(out)
     format, scale, axis = _check_request(out, format, scale, axis, guides is not None)
-    if format in BLENDER_FORMATS:
+    if format in BLENDER_FORMATS and not _groom_library(format):
         return _export_with_blender(input_path, out, format, scale, axis, root_uv)
     strands = read_strands(input_path)
-    # Root UVs only mean something to TressFX files.
-    uv = _load_root_uv(root_uv, strands.num_strands) if format == "tfx" else None
+    # Root UVs mean something to TressFX files and grooms; the others have no place for them.
+    uv = _load_root_uv(root_uv, strands.num_strands) if format in ("tfx",) + BLENDER_FORMATS else None
     return export_strands(strands, out, format, vertices_per_strand, pinned, pin_tip,
                           guides=None if guides is None else read_strands(guides), root_uv=uv,
                           scale=scale, axis=axis, flip_v=flip_v, pad_strands=pad_strands,
                           shuffle_seed=shuffle_seed, units=units, guides_out=guides_out,
                           source=os.path.basename(os.fspath(input_path)))
+
+
+def _groom_library(format):
+    """Whether the library that writes `format` (abc: alembic3d, usd: pxr) imports here."""
+    from .formats import alembic, usd
+    try:
+        (alembic.alembic_modules if format == "abc" else usd.pxr_modules)()
+    except InputError:
+        if importlib.util.find_spec("bpy") is None:
+            raise
+        return False
+    return True
 
 
 def _check_request(out, format, scale, axis, with_guides=False):
@@ -67,7 +83,8 @@ def _check_request(out, format, scale, axis, with_guides=False):
     if format not in NUMPY_FORMATS + BLENDER_FORMATS:
         raise InputError(f"--format {format}: choose one of {', '.join(NUMPY_FORMATS + BLENDER_FORMATS)}")
     if with_guides and format != "tfx":
-        raise InputError("--guides: separate guide files are a TressFX convention; use it with --format tfx")
+        raise InputError("--guides: separate guide files are a TressFX convention; use it with --format tfx "
+                         "(.abc and .usd take the guides the strands carry, from groom generate)")
     # Before the work: a folder, a missing or unwritable place would fail only at the end.
     check_destination(out, f"--out {out}")
     scale = float(scale)
@@ -83,20 +100,22 @@ def _check_request(out, format, scale, axis, with_guides=False):
 def export_strands(strands, out, format=None, vertices_per_strand=32, pinned=2, pin_tip=False,
                    guides=None, root_uv=None, scale=1.0, axis=None, flip_v=True, pad_strands=False,
                    shuffle_seed=None, units=None, guides_out=None, source=None):
-    """Write hairio.Strands to `out` in a numpy format (hair, tfx, npz, data); returns the
-    list of files written. What `export_file` runs once it has read its input, and what
+    """Write hairio.Strands to `out` (hair, tfx, npz, data, abc, usd); returns the list of
+    files written. What `export_file` runs once it has read its input, and what
     Blender's Export runs on the hair it holds, so both write the same files.
     guides: key strands (tfx); root_uv: (S, 2) array or None (tfx: a spherical projection
-    then); source: where the strands came from (the npz sidecar). Raises InputError."""
-    from .formats import (AXES, convert_strands, spherical_root_uv, write_hair, write_npz,
-                          write_tfx, write_tfx_pair, write_usc)
+    then; abc/usd: the groom's groom_root_uv); source: where the strands came from (the npz
+    sidecar). Raises InputError."""
+    from .formats import (AXES, convert_strands, spherical_root_uv, write_abc, write_hair, write_npz,
+                          write_tfx, write_tfx_pair, write_usc, write_usd)
     from .formats.tressfx import guides_path_for
 
     out = os.fspath(out)
     format, scale, axis = _check_request(out, format, scale, axis, guides is not None)
     if format in BLENDER_FORMATS:
-        raise InputError(f"--format {format}: written by Blender's exporter; use export_file, "
-                         "or the addon's export_blender.export_hair inside Blender")
+        if root_uv is not None:
+            strands = strands.with_guides(strands.guides, root_uv)
+        return (write_abc if format == "abc" else write_usd)(out, strands, axis=axis, scale=scale)
     axis = "none" if axis is None else axis
     if axis not in AXES:
         raise InputError(f"--axis {axis}: choose one of {', '.join(AXES)}")
@@ -162,7 +181,7 @@ def _export_with_blender(input_path, out, format, scale, axis, root_uv):
 
 def build_parser(prog="groom export"):
     ap = argparse.ArgumentParser(prog=prog, description="Export strands for game engines and DCC tools.")
-    ap.add_argument("input", help="strands: .npz (SPEC §0), .hair, .tfx or .data")
+    ap.add_argument("input", help="strands: .npz (SPEC §0), .hair, .tfx, .data, .abc or .usd")
     ap.add_argument("--out", required=True, help="output file")
     ap.add_argument("--format", choices=NUMPY_FORMATS + BLENDER_FORMATS,
                     help="default: from the --out extension")

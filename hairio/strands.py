@@ -6,26 +6,73 @@ import numpy as np
 
 from .atomic import atomic_write
 from .npyfile import read_npz
-from .validate import InputError, as_array, check_shape, to_float32, to_int32
+from .validate import InputError, as_array, check_finite, check_shape, to_float32, to_int32
 
 NPZ_NAMES = ("points", "counts", "radius", "color", "alpha", "wisp")
+# Optional arrays a groom carries beside the strands (docs/ARCHITECTURE.md, "Guides"):
+# its key strands, each strand's three guides and their weights, and the roots' UVs.
+GUIDE_NPZ_NAMES = ("key_points", "key_counts", "key_radius", "key_color", "key_group",
+                   "guides", "guide_weights", "root_uv")
+
+
+@dataclass(frozen=True, eq=False)
+class Guides:
+    """How a groom's strands follow its key strands: keys (a Strands of K curves, point 0
+    the root), group (K,) i32 the parting group of each key, index (S,3) i32 the main key
+    and two neighbours of every strand, weights (S,3) f32 their interpolation weights
+    (summing to 1; a missing neighbour repeats the main key with weight 0)."""
+    keys: "Strands"
+    group: np.ndarray
+    index: np.ndarray
+    weights: np.ndarray
+
+    @classmethod
+    def from_arrays(cls, keys, index, weights, group=None, num_strands=None):
+        if not isinstance(keys, Strands):
+            raise InputError(f"keys: expected hairio.Strands, got {type(keys).__name__}")
+        n_k = keys.num_strands
+        if n_k == 0:
+            raise InputError("keys: no key strands; guides need at least one")
+        group = np.zeros(n_k, np.int32) if group is None else group
+        group = to_int32("key_group", check_shape("key_group", as_array("key_group", group), (n_k,)),
+                         allow_integral_floats=True)
+        index = to_int32("guides", check_shape("guides", as_array("guides", index), (num_strands, 3)),
+                         allow_integral_floats=True)
+        if index.size and (index.min() < 0 or index.max() >= n_k):
+            raise InputError(f"guides: key indices must lie in [0, {n_k}) for {n_k} key strands, "
+                             f"got [{int(index.min())}, {int(index.max())}]")
+        weights = to_float32("guide_weights",
+                             check_shape("guide_weights", as_array("guide_weights", weights), (len(index), 3)))
+        if weights.size and weights.min() < 0:
+            raise InputError("guide_weights: negative values; weights must be >= 0")
+        return cls(keys, group, index, weights)
+
+    def arrays(self):
+        k = self.keys
+        return {"key_points": k.points, "key_counts": k.counts, "key_radius": k.radius,
+                "key_color": k.color, "key_group": self.group, "guides": self.index,
+                "guide_weights": self.weights}
 
 
 @dataclass(frozen=True, eq=False)
 class Strands:
     """points (P,3) f32, counts (S,) i32, radius (P,) f32, color (P,3) f32 linear RGB,
-    alpha (P,) f32, wisp (S,) i32. Point 0 of each strand is its root."""
+    alpha (P,) f32, wisp (S,) i32. Point 0 of each strand is its root. Optional: guides
+    (a Guides: the key strands and each strand's guides and weights) and root_uv (S,2) f32."""
     points: np.ndarray
     counts: np.ndarray
     radius: np.ndarray
     color: np.ndarray
     alpha: np.ndarray
     wisp: np.ndarray
+    guides: "Guides" = None
+    root_uv: np.ndarray = None
 
     @classmethod
     def from_arrays(cls, points, counts, radius=None, color=None, alpha=None, wisp=None,
-                    default_radius=1e-4, default_color=(0.3, 0.2, 0.1)):
+                    default_radius=1e-4, default_color=(0.3, 0.2, 0.1), guides=None, root_uv=None):
         """Validate and convert; missing per-point arrays get defaults (radius, color, alpha 1).
+        guides: a Guides or None; root_uv: (S, 2) or None.
 
         Every conversion is checked, so nothing is stored other than what was passed:
         floats beyond float32's range, counts beyond int32 and fractional or NaN wisp ids
@@ -54,7 +101,19 @@ class Strands:
             raise InputError("radius: negative values; radii must be >= 0")
         if n_p and (alpha.min() < 0 or alpha.max() > 1):
             raise InputError("alpha: values outside [0, 1]; clamp them first")
-        return cls(points, counts, radius, np.ascontiguousarray(color), alpha, wisp)
+        if guides is not None and not isinstance(guides, Guides):
+            raise InputError(f"guides: expected hairio.Guides, got {type(guides).__name__}")
+        if guides is not None and len(guides.index) != n_s:
+            raise InputError(f"guides: {len(guides.index)} rows for {n_s} strands; one row per strand")
+        if root_uv is not None:
+            root_uv = check_finite("root_uv", to_float32(
+                "root_uv", check_shape("root_uv", as_array("root_uv", root_uv), (n_s, 2))))
+        return cls(points, counts, radius, np.ascontiguousarray(color), alpha, wisp, guides, root_uv)
+
+    def with_guides(self, guides=None, root_uv=None):
+        """A copy carrying `guides` (a Guides) and `root_uv` (S, 2), each checked."""
+        return Strands.from_arrays(self.points, self.counts, self.radius, self.color, self.alpha,
+                                   self.wisp, guides=guides, root_uv=root_uv)
 
     @classmethod
     def empty(cls):
@@ -90,7 +149,13 @@ class Strands:
         return self.points.min(axis=0), self.points.max(axis=0)
 
     def arrays(self):
-        return {name: getattr(self, name) for name in NPZ_NAMES}
+        """The arrays a .npz holds: SPEC §0's, then the optional guide arrays present."""
+        out = {name: getattr(self, name) for name in NPZ_NAMES}
+        if self.guides is not None:
+            out.update(self.guides.arrays())
+        if self.root_uv is not None:
+            out["root_uv"] = self.root_uv
+        return out
 
     def save_npz(self, path):
         with atomic_write(path) as f:
@@ -100,8 +165,28 @@ class Strands:
     def load_npz(cls, path):
         """Strands from a .npz of the SPEC §0 arrays (`save_npz`); every size in the archive
         is checked before memory is taken (hairio.npyfile)."""
-        arrays = read_npz(path, NPZ_NAMES, required=("points", "counts"))
+        arrays = read_npz(path, NPZ_NAMES + GUIDE_NPZ_NAMES, required=("points", "counts"))
         try:
-            return cls.from_arrays(**arrays)
+            return cls.from_arrays(**_guides_from(arrays))
         except InputError as e:
             raise InputError(f"{path}: {e}") from None
+
+
+def _guides_from(arrays):
+    """from_arrays' arguments from a .npz's arrays: the key_* and guide arrays become a Guides,
+    all of them or none (a partial set is refused by name)."""
+    guide_names = GUIDE_NPZ_NAMES[:-1]
+    present = [n for n in guide_names if n in arrays]
+    out = {n: arrays[n] for n in NPZ_NAMES + ("root_uv",) if n in arrays}
+    if not present:
+        return out
+    needed = ("key_points", "key_counts", "guides", "guide_weights")
+    missing = [n for n in needed if n not in arrays]
+    if missing:
+        raise InputError(f"guide arrays {present} without {missing}; save all of them or none")
+    keys = Strands.from_arrays(arrays["key_points"], arrays["key_counts"], arrays.get("key_radius"),
+                               arrays.get("key_color"))
+    n_s = len(as_array("counts", arrays["counts"]))
+    out["guides"] = Guides.from_arrays(keys, arrays["guides"], arrays["guide_weights"],
+                                       arrays.get("key_group"), num_strands=n_s)
+    return out

@@ -7,7 +7,7 @@ moves and negates coordinates); the scale multiplies points and radii.
 """
 import numpy as np
 
-from ..strands import Strands
+from ..strands import Guides, Strands
 from ..validate import InputError
 
 # Rows: where each target axis takes its value from, as (source axis, sign).
@@ -38,9 +38,28 @@ def convert_points(points, axis="none", scale=1.0):
 
 
 def convert_strands(strands, axis="none", scale=1.0):
-    """A copy of `strands` in the `axis` frame with points and radii times `scale`."""
+    """A copy of `strands` in the `axis` frame with points and radii times `scale` (its key
+    strands too; guides, weights and root UVs are kept)."""
     if axis == "none" and float(scale) == 1.0:
         return strands
     points = convert_points(strands.points, axis, scale)
     radius = strands.radius * np.float32(scale)
-    return Strands.from_arrays(points, strands.counts, radius, strands.color, strands.alpha, strands.wisp)
+    guides = strands.guides
+    if guides is not None:
+        guides = Guides(convert_strands(guides.keys, axis, scale), guides.group, guides.index, guides.weights)
+    return Strands.from_arrays(points, strands.counts, radius, strands.color, strands.alpha, strands.wisp,
+                               guides=guides, root_uv=strands.root_uv)
+
+
+def unconvert_points(points, axis="none", scale=1.0):
+    """The inverse of convert_points: `points` in the `axis` frame, times 1/`scale`, back in
+    Blender's frame; float32. Exact for scale 1 (the permutation only moves and negates)."""
+    scale = float(scale)
+    if axis not in AXES:
+        raise InputError(f"axis: unknown {axis!r}; choose one of {', '.join(AXES)}")
+    points = np.asarray(points)
+    out = np.empty(points.shape, np.float32)
+    for dst, (src, sign) in enumerate(AXES[axis]):
+        # float64 before the division, so x * s rounded to float32 and divided by s gives x back.
+        out[..., src] = points[..., dst] * sign if scale == 1.0 else points[..., dst].astype(np.float64) * (sign / float(scale))
+    return out

@@ -11,7 +11,7 @@ import os
 import numpy as np
 
 from ..atomic import atomic_write
-from ..strands import NPZ_NAMES, Strands
+from ..strands import Strands
 from ..validate import InputError
 from ._common import TOOL_NAME, TOOL_VERSION, check_strands
 
@@ -24,7 +24,7 @@ def sidecar(strands, units="m", up="Z", front="-Y", source=None, extra=None, han
     """The sidecar's content as a dict (JSON-ready)."""
     meta = {
         "format": "keystrand-hair strands npz",
-        "arrays": list(NPZ_NAMES),
+        "arrays": list(strands.arrays()),
         "units": units,
         "axes": {"up": up, "front": front, "handedness": handedness},
         "counts": {"strands": int(strands.num_strands), "points": int(strands.num_points),
