@@ -4,7 +4,7 @@ without a mesh of one's own (3D Viewport > Add > Hair Head, and the Hair panel).
 
 The scalp is a child of the head with an identity parent inverse: its coordinates are the
 head's, so the scalp lies on the head wherever the head is moved, and `scalp.parent` is the
-head. The scalp is drawn as a wire and left out of renders: it coincides with the head's
+head, which is also the scalp's Collider. The scalp is drawn as a wire and left out of renders: it coincides with the head's
 surface, and two coincident faces flicker in the viewport.
 """
 import numpy as np
@@ -76,6 +76,8 @@ class HAIR_OT_add_head(Operator, AddObjectHelper):
                 # so they turn with it when the head is turned or tilted.
                 settings.head_axes = 'LOCAL'
                 settings.up, settings.front = CANONICAL_UP, CANONICAL_FRONT
+                # The hair stays out of the whole head, not only off the scalp cap.
+                settings.collider = head
                 # Selecting can fail (a collection outside the view layer): inside the
                 # transaction, before the other objects are deselected.
                 scalp.select_set(True)

@@ -31,10 +31,25 @@ def read_inputs(scalp, depsgraph=None):
     return scene_data.read_scalp(scalp, depsgraph), scene_data.read_keys(scalp)
 
 
-def build_generator(scalp_data, keys, settings, count=None):
-    """A groom.Generator and its first GroomResult."""
+def read_collider(scalp, depsgraph=None, scalp_data=None):
+    """The groom.Collider of the scalp's Collider object in the scalp's space, named after
+    the object, or None when Collision is off. Made once per mesh and place (groom caches
+    it: building one takes a second or two), so Generate pressed again reuses it; groom
+    widens it for the hair's clearance as it does for the command line, so both grow the
+    same hair."""
+    from groom.collide import collider_for
+    mesh = scene_data.read_collider(scalp, depsgraph, scalp_data)
+    if mesh is None:
+        return None
+    vertices, triangles, name = mesh
+    return collider_for(vertices, triangles, name)
+
+
+def build_generator(scalp_data, keys, settings, count=None, collider=None, progress=None):
+    """A groom.Generator and its first GroomResult; collider: a groom.Collider (read_collider)
+    or None; progress: groom's progress callback or None."""
     from groom import Generator
-    gen = Generator(scalp_data, keys, groom_params(settings, count))
+    gen = Generator(scalp_data, keys, groom_params(settings, count), collider=collider, progress=progress)
     return gen, gen.generate()
 
 
@@ -65,8 +80,9 @@ def write_hair(scalp, strands, root_uv=None):
     return hair
 
 
-def generate(scalp, depsgraph=None, count=None):
-    """Full generation for a scalp object. Returns (hair object, GroomResult, timings dict).
+def generate(scalp, depsgraph=None, count=None, progress=None):
+    """Full generation for a scalp object, kept out of its collider. Returns (hair object,
+    GroomResult, timings dict); progress: groom's progress callback or None.
 
     Reads and computes everything before the first write, so an error (SceneError,
     hairio.InputError) leaves the file untouched; the writes are one transaction, so an
@@ -77,7 +93,12 @@ def generate(scalp, depsgraph=None, count=None):
     t0 = time.perf_counter()
     scalp_data, keys = read_inputs(scalp, depsgraph)
     t1 = time.perf_counter()
-    gen, result = build_generator(scalp_data, keys, settings, count)
+    if progress is not None and settings.collision:
+        progress(0.0, "preparing the collider")
+    collider = read_collider(scalp, depsgraph, scalp_data)
+    t_collider = time.perf_counter()
+    gen, result = build_generator(scalp_data, keys, settings, count, collider, progress)
+    gen.progress = None  # the live updates that reuse it report nothing
     t2 = time.perf_counter()
     with transaction() as tx:
         tx.keep_settings(scalp)
@@ -85,5 +106,6 @@ def generate(scalp, depsgraph=None, count=None):
             settings.role = 'SCALP'
         hair = write_hair(scalp, result.strands, result.root_uv)
     t3 = time.perf_counter()
-    live.remember(scalp, scalp_data, keys, gen, result)
-    return hair, result, {"read_s": t1 - t0, "groom_s": t2 - t1, "write_s": t3 - t2, "total_s": t3 - t0}
+    live.remember(scalp, scalp_data, keys, gen, result, collider)
+    return hair, result, {"read_s": t1 - t0, "collider_s": t_collider - t1, "groom_s": t2 - t_collider,
+                          "write_s": t3 - t2, "total_s": t3 - t0}

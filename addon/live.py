@@ -8,6 +8,12 @@ once edits have stopped for SETTLE_S, the full-count generator catches up on a w
 thread, again only for the keys that changed (groom.Generator.update_keys), and the
 result is written when it is done. The timer's next interval grows with the time the last
 update took, so the viewport stays responsive on 100,000 strands.
+
+Besides the keys, two things decide the hair and change without a key edit: the head's axes
+in the mesh (with Head Axes 'Scene', turning the scalp object turns them) and where the
+collider is relative to the scalp. Both are compared on every scene update, and a change
+regrows the hair (the collider is then read again). The scalp's mesh and the collider's
+mesh themselves are read by Generate.
 """
 import threading
 import time
@@ -15,8 +21,9 @@ import time
 import bpy
 from bpy.app.handlers import persistent
 
-from . import scene_data
+from . import head, scene_data
 from .properties import groom_params
+from .scene_data import SceneError
 
 SETTLE_S = 0.4
 MIN_INTERVAL_S = 0.05
@@ -25,16 +32,21 @@ MIN_INTERVAL_S = 0.05
 class ScalpState:
     """The cached generators of one scalp (keyed by the scalp object's session_uid)."""
 
-    def __init__(self, scalp_data, keys, full):
+    def __init__(self, scalp_data, keys, full, collider, scene_sig):
         self.scalp_data = scalp_data
+        self.collider = collider               # groom.Collider or None (Collision off)
+        self.collider_version = 0              # counts the colliders read since Generate
+        self.scene_sig = scene_sig             # scene_signature() the hair was last grown with
         self.full = full                       # groom.Generator at the full count
         self.full_result = None                # its last GroomResult
         self.full_sig = scene_data.keys_signature(keys)
+        self.full_version = 0                  # collider_version `full` was built with
         self.view = None                       # groom.Generator at the viewport count
         self.view_sig = None
+        self.view_version = 0
         self.dragging = False
         self.last_edit = 0.0
-        self.catchup = None                    # (thread, result box, key signature) while running
+        self.catchup = None                    # (thread, result box, key signature, collider version)
 
 
 _states = {}
@@ -43,9 +55,20 @@ _timer_on = False
 _last_cost = 0.0
 
 
-def remember(scalp, scalp_data, keys, generator, result):
-    """Called after a full Generate: cache its generator for live updates."""
-    state = ScalpState(scalp_data, keys, generator)
+def scene_signature(scalp):
+    """The hair's inputs other than the keys that can change without a key edit: the head's
+    axes in the mesh (None when they cannot be read) and collider_signature."""
+    try:
+        axes = head.scalp_axes(scalp)
+    except SceneError:
+        axes = None
+    return axes, scene_data.collider_signature(scalp)
+
+
+def remember(scalp, scalp_data, keys, generator, result, collider=None):
+    """Called after a full Generate: cache its generator (grown with `collider`) for live
+    updates."""
+    state = ScalpState(scalp_data, keys, generator, collider, scene_signature(scalp))
     state.full_result = result
     _states[scalp.session_uid] = state
 
@@ -75,15 +98,15 @@ def _changed(sig, old):
     return [i for i, (a, b) in enumerate(zip(sig, old)) if a.shape != b.shape or not (a == b).all()]
 
 
-def _update(gen, sig, old_sig, keys, scalp_data, params):
+def _update(gen, sig, old_sig, keys, scalp_data, params, collider, stale=False):
     """(generator, GroomResult or None when nothing changed). Pure groom work: no bpy, so
-    it may run on a worker thread."""
+    it may run on a worker thread. stale: the collider changed since `gen` was built."""
     from groom import Generator
     changed = _changed(sig, old_sig)
-    if gen is not None and gen.params.to_dict() != params.to_dict():
-        gen = None  # settings changed since the generator was built: start over with them
+    if gen is not None and (stale or gen.params.to_dict() != params.to_dict()):
+        gen = None  # settings, axes or collider changed since it was built: start over with them
     if changed is None or gen is None:
-        gen = Generator(scalp_data, keys, params)
+        gen = Generator(scalp_data, keys, params, collider=collider)
         return gen, gen.generate()
     if not changed:
         return gen, None
@@ -113,19 +136,22 @@ def process(now=None, settle=False):
         sig = scene_data.keys_signature(keys)
         view_count = min(settings.viewport_count, settings.count)
         try:
+            _refresh_scene(scalp, state)
             if view_count >= settings.count:
                 if state.catchup is not None:
                     _pending.add(uid)  # the full generator is busy: come back next tick
                     continue
                 state.full, result = _update(state.full, sig, state.full_sig, keys, state.scalp_data,
-                                             groom_params(settings))
-                state.full_sig = sig
+                                             groom_params(settings), state.collider,
+                                             state.full_version != state.collider_version)
+                state.full_sig, state.full_version = sig, state.collider_version
                 if result is not None:
                     state.full_result = result
             else:
                 state.view, result = _update(state.view, sig, state.view_sig, keys, state.scalp_data,
-                                             groom_params(settings, view_count))
-                state.view_sig = sig
+                                             groom_params(settings, view_count), state.collider,
+                                             state.view_version != state.collider_version)
+                state.view_sig, state.view_version = sig, state.collider_version
                 if result is not None:
                     state.dragging = True
         except Exception as e:  # bad parameters mid-edit: keep the last good hair
@@ -145,6 +171,19 @@ def process(now=None, settle=False):
     return written
 
 
+def _refresh_scene(scalp, state):
+    """Note the scene_signature the hair is about to be grown with; the collider is read
+    again when its signature changed (the generators built with the old one then start
+    over: see collider_version)."""
+    from . import hair
+    axes, collider_sig = scene_signature(scalp)
+    if collider_sig != state.scene_sig[1]:
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        state.collider = hair.read_collider(scalp, depsgraph, state.scalp_data)
+        state.collider_version += 1
+    state.scene_sig = (axes, collider_sig)
+
+
 def _start_catch_up(uid, state):
     """Bring the full-count hair up to date with the keys after an edit, on a worker thread
     (groom is numpy and mostly releases the GIL), so the UI keeps running meanwhile. The scene
@@ -162,22 +201,25 @@ def _start_catch_up(uid, state):
         return
     sig = scene_data.keys_signature(keys)
     box = {}
+    collider, version = state.collider, state.collider_version
+    stale = state.full_version != version
 
     def work():
         try:
-            box["gen"], box["result"] = _update(state.full, sig, state.full_sig, keys, state.scalp_data, params)
+            box["gen"], box["result"] = _update(state.full, sig, state.full_sig, keys, state.scalp_data, params,
+                                                collider, stale)
         except Exception as e:  # reported on the main thread
             box["error"] = e
 
     thread = threading.Thread(target=work, name="keystrand-hair-catch-up", daemon=True)
-    state.catchup = (thread, box, sig)
+    state.catchup = (thread, box, sig, version)
     thread.start()
 
 
 def _finish_catch_up(uid, state, wait=False):
     """Write the catch-up's result once its thread is done; returns 1 when hair was written."""
     from . import hair
-    thread, box, sig = state.catchup
+    thread, box, sig, version = state.catchup
     if wait:
         thread.join()
     if thread.is_alive():
@@ -186,7 +228,7 @@ def _finish_catch_up(uid, state, wait=False):
     if "error" in box:
         print(f"Key-strand hair: live update skipped ({box['error']})")
         return 0
-    state.full, state.full_sig = box["gen"], sig
+    state.full, state.full_sig, state.full_version = box["gen"], sig, version
     # None: keys are back where they were; the view generator changed the hair object,
     # so the last full-count hair goes back.
     result = box["result"] if box["result"] is not None else state.full_result
@@ -211,14 +253,17 @@ def _tick():
 
 
 def _key_scalps(depsgraph):
-    """Scalps whose key strands changed; also notes edited hair for the preview."""
+    """Scalps whose key strands or scene_signature changed; also notes edited hair for the
+    preview."""
     from . import preview
     uids = set()
+    objects_changed = False
     for update in depsgraph.updates:
         ident = update.id.original if update.id is not None else None
         if isinstance(ident, bpy.types.Curves):
             preview.bump(ident)  # sculpted or edited hair: the next preview re-uploads
         elif isinstance(ident, bpy.types.Object):
+            objects_changed = True
             s = ident.keystrand_hair
             if s.role == 'KEY' and s.scalp is not None:
                 uids.add(s.scalp.session_uid)
@@ -226,6 +271,12 @@ def _key_scalps(depsgraph):
             for obj in bpy.data.objects:
                 if obj.data == ident and obj.keystrand_hair.role == 'KEY' and obj.keystrand_hair.scalp:
                     uids.add(obj.keystrand_hair.scalp.session_uid)
+    if objects_changed:
+        # A scalp turned (its axes with Head Axes 'Scene'), a collider moved or another chosen.
+        for uid, state in _states.items():
+            scalp = _scalp_by_uid(uid)
+            if scalp is not None and scene_signature(scalp) != state.scene_sig:
+                uids.add(uid)
     return uids
 
 

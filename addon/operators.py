@@ -206,11 +206,13 @@ class HAIR_OT_generate(Operator):
 
     def execute(self, context):
         from .hair import generate
+        from .progress import BlenderProgress
         scalp = _scalp_or_report(self, context)
         if scalp is None:
             return {'CANCELLED'}
         try:
-            hair, result, t = generate(scalp, context.evaluated_depsgraph_get())
+            with BlenderProgress(context.window_manager, context.workspace, "Generating hair") as progress:
+                hair, result, t = generate(scalp, context.evaluated_depsgraph_get(), progress=progress)
         except _errors() as e:
             self.report({'ERROR'}, str(e))
             return {'CANCELLED'}
@@ -218,8 +220,15 @@ class HAIR_OT_generate(Operator):
             _report_internal_error(self, e)
             return {'CANCELLED'}
         s = result.strands
-        self.report({'INFO'}, f"Generated {s.num_strands:,} strands ({s.num_points:,} points) in "
-                              f"{t['total_s']:.2f} s (model {t['groom_s']:.2f} s)")
+        collision = result.collision
+        moved = "" if collision is None else f", {collision.strands_moved:,} moved out of {collision.collider!r}"
+        self.report({'INFO'}, f"Generated {s.num_strands:,} strands ({s.num_points:,} points{moved}) in "
+                              f"{t['total_s']:.2f} s (model {t['collider_s'] + t['groom_s']:.2f} s)")
+        warning = collision.warning() if collision is not None else None
+        if warning is not None:
+            names = [k.name for k in scene_data.key_objects(scalp)]
+            which = ", ".join(f"key {k.key} is {names[k.key]!r}" for k in collision.keys_inside)
+            self.report({'WARNING'}, f"{warning} ({which})")
         return {'FINISHED'}
 
 

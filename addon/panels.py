@@ -104,6 +104,7 @@ class VIEW3D_PT_keystrand_hair_collision(_HairPanel, Panel):
         col = self.layout.column()
         col.use_property_split = True
         col.active = s.collision
+        col.prop(s, "collider")
         col.prop(s, "collision_margin")
 
 

@@ -55,6 +55,10 @@ def _set_head_axes(self, value):
     self["head_axes"] = value
 
 
+def _is_mesh(self, obj):
+    return obj.type == 'MESH'
+
+
 def _live_update(self, context):
     # Switching live update off drops the cached generators, so no stale copy lingers.
     from . import live
@@ -182,6 +186,9 @@ class HairSettings(PropertyGroup):
                             description="Keep the hair out of the collider (the head): hairs are combed "
                                         "out along its surface without stretching. Key strands that pass "
                                         "through it are reported, never moved")
+    collider: PointerProperty(type=bpy.types.Object, name="Collider", poll=_is_mesh,
+                              description="The mesh the hair stays out of, usually the head the scalp "
+                                          "lies on; empty = the scalp itself (Add Head sets its head)")
     collision_margin: FloatProperty(name="Margin", default=2e-4, min=0.0, soft_max=0.005, precision=5,
                                     subtype='DISTANCE',
                                     description="The gap kept between every hair's surface and the collider")

@@ -5,6 +5,8 @@ Everything is read in the scalp object's local space (the space groom works in a
 generated hair is stored in): mesh arrays come out with `foreach_get`, key strands are
 carried into scalp space by one 4x4 matrix each.
 """
+import contextlib
+
 import numpy as np
 import bpy
 
@@ -49,6 +51,44 @@ def _matrix(m):
     return np.array(m, dtype=np.float64).reshape(4, 4)
 
 
+def _to_scalp_space(obj, scalp):
+    """The 4x4 carrying `obj`'s coordinates into the scalp's; SceneError when the scalp is
+    flattened (its matrix has no inverse, so nothing can be placed in its space)."""
+    m = _matrix(scalp.matrix_world)
+    size = float(np.abs(m[:3, :3]).max())
+    if not size > 0 or abs(np.linalg.det(m[:3, :3])) <= 1e-12 * size ** 3:
+        raise SceneError(f"Scalp {scalp.name!r} has a zero scale on some axis: give it a non-zero scale")
+    return np.linalg.solve(m, _matrix(obj.matrix_world))
+
+
+def _is_identity(m):
+    return np.allclose(m, np.eye(4), rtol=0.0, atol=1e-9)
+
+
+@contextlib.contextmanager
+def _mesh_of(obj, depsgraph=None):
+    """The object's mesh, with modifiers applied when a depsgraph is given (a temporary
+    mesh, freed on leaving)."""
+    if depsgraph is None:
+        yield obj.data
+        return
+    source = obj.evaluated_get(depsgraph)
+    try:
+        yield source.to_mesh()
+    finally:
+        source.to_mesh_clear()
+
+
+def _mesh_geometry(mesh):
+    """(vertices (V,3) float64, triangles (T,3) int64) of a mesh."""
+    mesh.calc_loop_triangles()
+    vertices = np.empty(len(mesh.vertices) * 3, np.float64)
+    mesh.vertices.foreach_get("co", vertices)
+    triangles = np.empty(len(mesh.loop_triangles) * 3, np.int32)
+    mesh.loop_triangles.foreach_get("vertices", triangles)
+    return vertices.reshape(-1, 3), triangles.reshape(-1, 3).astype(np.int64)
+
+
 def read_scalp(obj, depsgraph=None):
     """groom.Scalp of a mesh object, in its local space, with modifiers applied when a
     depsgraph is given. Optional point attributes: float `hair_density` (root density
@@ -56,20 +96,11 @@ def read_scalp(obj, depsgraph=None):
     from groom import Scalp
     if obj is None or obj.type != 'MESH':
         raise SceneError("Select a scalp mesh (or one of its key strands) first")
-    evaluated = depsgraph is not None
-    source = obj.evaluated_get(depsgraph) if evaluated else obj
-    mesh = source.to_mesh() if evaluated else obj.data
-    try:
-        n_v = len(mesh.vertices)
-        mesh.calc_loop_triangles()
-        n_t = len(mesh.loop_triangles)
-        if n_t == 0:
+    with _mesh_of(obj, depsgraph) as mesh:
+        vertices, triangles = _mesh_geometry(mesh)
+        if len(triangles) == 0:
             raise SceneError(f"Scalp {obj.name!r} has no faces: hair grows from faces, "
                              "so give the mesh a surface (e.g. fill it or use a sphere)")
-        vertices = np.empty(n_v * 3, np.float64)
-        mesh.vertices.foreach_get("co", vertices)
-        triangles = np.empty(n_t * 3, np.int32)
-        mesh.loop_triangles.foreach_get("vertices", triangles)
         uv = None
         if mesh.uv_layers.active is not None and len(mesh.loops):
             loop_uv = np.empty(len(mesh.loops) * 2, np.float64)
@@ -77,15 +108,58 @@ def read_scalp(obj, depsgraph=None):
             loop_vertex = np.empty(len(mesh.loops), np.int32)
             mesh.loops.foreach_get("vertex_index", loop_vertex)
             # Per-vertex UV: a vertex on a seam takes one of its loops' UVs.
-            uv = np.zeros((n_v, 2))
+            uv = np.zeros((len(vertices), 2))
             uv[loop_vertex] = loop_uv.reshape(-1, 2)
         density = _point_attribute(mesh, "hair_density", 'FLOAT', np.float64)
         groups = _point_attribute(mesh, "hair_group", 'INT', np.int32)
-    finally:
-        if evaluated:
-            source.to_mesh_clear()
-    return Scalp(vertices.reshape(-1, 3), triangles.reshape(-1, 3).astype(np.int64),
-                 density=density, uv=uv, groups=groups)
+    return Scalp(vertices, triangles, density=density, uv=uv, groups=groups)
+
+
+def collider_object(scalp):
+    """The object a scalp's hair stays out of: its Collider setting, or the scalp itself."""
+    chosen = scalp.keystrand_hair.collider
+    return scalp if chosen is None else chosen
+
+
+def collider_signature(scalp):
+    """What decides the collider read_collider reads, save the mesh's contents (an edited
+    head takes a Generate): Collision, the object, its mesh and its place relative to the
+    scalp. None when Collision is off."""
+    if not scalp.keystrand_hair.collision:
+        return None
+    obj = collider_object(scalp)
+    try:
+        # Rounded (and -0 made 0): a head moved with its scalp keeps its place but for the last bits.
+        place = (np.round(_to_scalp_space(obj, scalp), 9) + 0.0).tobytes()
+    except SceneError:
+        place = None
+    data = obj.data.session_uid if obj.data is not None else None
+    return obj.session_uid, data, place
+
+
+def read_collider(scalp, depsgraph=None, scalp_data=None):
+    """(vertices (V,3), triangles (T,3), name) of the scalp's collider in the scalp's own
+    space (where groom works), modifiers applied when a depsgraph is given; None when
+    Collision is off. scalp_data: the scalp's groom.Scalp when already read (a scalp that is
+    its own collider is then not read twice). Raises SceneError for a collider that is not
+    a mesh; groom judges its faces."""
+    if not scalp.keystrand_hair.collision:
+        return None
+    obj = collider_object(scalp)
+    if obj.type != 'MESH':
+        raise SceneError(f"Collider {obj.name!r} of scalp {scalp.name!r} is a {obj.type.lower()}, not a "
+                         "mesh: choose the head mesh as Collider, or clear it to use the scalp itself")
+    if obj == scalp:
+        if scalp_data is None:
+            scalp_data = read_scalp(scalp, depsgraph)
+        return scalp_data.vertices, scalp_data.triangles, obj.name
+    to_scalp = _to_scalp_space(obj, scalp)
+    with _mesh_of(obj, depsgraph) as mesh:
+        vertices, triangles = _mesh_geometry(mesh)
+    if not _is_identity(to_scalp):
+        # A scalp parented to its head as Add Head makes it has the head's coordinates: kept exactly.
+        vertices = vertices @ to_scalp[:3, :3].T + to_scalp[:3, 3]
+    return vertices, triangles, obj.name
 
 
 def _point_attribute(mesh, name, data_type, dtype):
@@ -126,8 +200,8 @@ def key_control_points(key_obj, scalp):
         spline.points.foreach_get("co", co)
         local = co.reshape(n, 4)[:, :3]
         kind = "bezier"
-    to_scalp = np.linalg.inv(_matrix(scalp.matrix_world)) @ _matrix(key_obj.matrix_world)
-    if np.allclose(to_scalp, np.eye(4), rtol=0.0, atol=1e-9):
+    to_scalp = _to_scalp_space(key_obj, scalp)
+    if _is_identity(to_scalp):
         # A key parented as Add Key Strand does it: its coordinates are the scalp's, exactly
         # (the round trip through the inverse would add float noise to every point).
         return local, kind

@@ -128,8 +128,10 @@ def test_generate_writes_the_curves_groom_computes(clean):
     material = hair.data.materials[0]
     attribute_nodes = [n for n in material.node_tree.nodes if n.type == 'ATTRIBUTE']
     assert [n.attribute_name for n in attribute_nodes] == ["strand_rgba"], "the material does not show the hair colour"
-    expected = generate(read_scalp_arrays(scalp), [read_key(k) for k in keys],
-                        params_of(scalp)).strands
+    surface = read_scalp_arrays(scalp)
+    # With no Collider set, the scalp itself is the collider.
+    expected = generate(surface, [read_key(k) for k in keys], params_of(scalp),
+                        collider=(surface.vertices, surface.triangles)).strands
     assert params_of(scalp).tidiness == pytest.approx(0.7) and params_of(scalp).count == 1500
     got = curves_arrays(hair)
     assert len(got["counts"]) == 1500 == expected.num_strands
@@ -198,16 +200,17 @@ def test_live_update_regrows_only_the_edited_keys_wisps(clean):
     during = curves_arrays(s.hair_object)
     new_keys = [read_key(k) for k in keys]
     scalp_arrays = read_scalp_arrays(scalp)
-    expected_view = generate(scalp_arrays, new_keys, params).strands
+    own = (scalp_arrays.vertices, scalp_arrays.triangles)  # the scalp is its own collider
+    expected_view = generate(scalp_arrays, new_keys, params, collider=own).strands
     np.testing.assert_array_equal(during["position"], expected_view.points)
     # Once the edit settles, the full count comes back, equal to a full regeneration.
     assert live.process(settle=True) == 1
     after = curves_arrays(s.hair_object)
-    expected = generate(scalp_arrays, new_keys, params_of(scalp)).strands
+    expected = generate(scalp_arrays, new_keys, params_of(scalp), collider=own).strands
     np.testing.assert_array_equal(after["counts"], expected.counts)
     np.testing.assert_array_equal(after["position"], expected.points)
     # Strands that no key-1 weight touches kept their points.
-    touched = np.isin(generate(scalp_arrays, new_keys, params_of(scalp)).guides, [1]).any(axis=1)
+    touched = np.isin(generate(scalp_arrays, new_keys, params_of(scalp), collider=own).guides, [1]).any(axis=1)
     off_b = np.concatenate([[0], np.cumsum(before["counts"])])
     off_a = np.concatenate([[0], np.cumsum(after["counts"])])
     for i in np.flatnonzero(~touched)[:50]:
@@ -234,8 +237,9 @@ def test_render_preview_fills_the_image_with_the_tracer_s_pixels(clean):
     pixels = np.empty(w * h * 4, np.float32)
     image.pixels.foreach_get(pixels)
     got = pixels.reshape(h, w, 4)[::-1]
-    strands = generate(read_scalp_arrays(scalp), [read_key(k) for k in keys],
-                       params_of(scalp)).strands
+    surface = read_scalp_arrays(scalp)
+    strands = generate(surface, [read_key(k) for k in keys], params_of(scalp),
+                       collider=(surface.vertices, surface.triangles)).strands
     camera = Camera.from_blender(np.array(cam.matrix_world), (w, h), lens=cam.data.lens,
                                  sensor_width=cam.data.sensor_width, sensor_height=cam.data.sensor_height,
                                  sensor_fit=cam.data.sensor_fit)
@@ -415,7 +419,9 @@ def test_live_catch_up_runs_off_the_main_thread_and_uses_current_settings(clean)
     assert state.catchup is None or "keystrand-hair-catch-up" in names
     live.process(settle=True)
     assert state.catchup is None
-    expected = generate(read_scalp_arrays(scalp), [read_key(k) for k in keys], params_of(scalp)).strands
+    surface = read_scalp_arrays(scalp)
+    expected = generate(surface, [read_key(k) for k in keys], params_of(scalp),
+                        collider=(surface.vertices, surface.triangles)).strands
     got = curves_arrays(s.hair_object)
     np.testing.assert_array_equal(got["counts"], expected.counts)
     np.testing.assert_array_equal(got["position"], expected.points)
