@@ -407,3 +407,23 @@ def generate(scalp, keys, params=None, collider=None, progress=None):
     (GroomParams; defaults when None), kept out of `collider`, telling `progress` how far it
     is (see Generator). Returns a GroomResult."""
     return Generator(scalp, keys, params or GroomParams(), collider=collider, progress=progress).generate()
+
+
+def strands_with_guides(result, keys, params=None, points_per_key=32):
+    """result.strands carrying its guides (hairio.Guides: the key strands sampled at
+    `points_per_key` equal arc-length steps, their radius and colour, their parting groups,
+    and each strand's main key, two neighbours and weights, as interpolated) and its root
+    UVs: what the .npz, .abc and .usd files carry so an engine's simulation drives every
+    strand through the same keys and weights."""
+    from hairio import Guides
+    from .keys import arc_length_tables
+    params = params or GroomParams()
+    keys = list(keys.values()) if isinstance(keys, dict) else list(keys)
+    n = max(2, int(points_per_key))
+    tables = arc_length_tables(keys, n)
+    points = np.concatenate([k.points[0] + table for k, (table, _) in zip(keys, tables)])
+    radius = np.repeat([params.radius if k.root_radius is None else k.root_radius for k in keys], n)
+    color = np.repeat([params.color if k.color is None else k.color for k in keys], n, axis=0)
+    key_strands = Strands.from_arrays(points, np.full(len(keys), n, np.int32), radius, color)
+    guides = Guides.from_arrays(key_strands, result.guides, result.guide_weights, [k.group for k in keys])
+    return result.strands.with_guides(guides, result.root_uv)
