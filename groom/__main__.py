@@ -36,7 +36,7 @@ def _parser():
                         "default: the bundled head for the bundled scalp, none for a scalp of your own")
     g.add_argument("--count", type=int, help="number of strands (overrides the preset)")
     g.add_argument("--seed", type=int, help="random seed (overrides the preset)")
-    g.add_argument("--out", required=True, help="output .npz file (SPEC §0 arrays)")
+    g.add_argument("--out", required=True, help="output .npz file (SPEC §0 arrays, the key strands, guides and weights)")
     sub.add_parser("export", help="convert strands between formats", add_help=False)
     sub.add_parser("list", help="list the bundled presets")
     return p
@@ -148,7 +148,10 @@ def generate_main(args):
     inside = result.collision.warning() if result.collision is not None else None
     if inside:
         print(f"warning: {inside}", file=sys.stderr)
-    s = result.strands
+    from .generate import strands_with_guides
+    # The key strands, guides and weights travel in the .npz, so `export` can hand them to an
+    # engine's simulation later.
+    s = strands_with_guides(result, placement.keys, params)
     try:
         s.save_npz(args.out)
     except OSError as e:
