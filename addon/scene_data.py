@@ -16,7 +16,9 @@ class SceneError(Exception):
 
 
 def find_scalp(context):
-    """The scalp the user means: the active mesh, or the scalp of the active key strand or hair."""
+    """The scalp the user means: the scalp of the active key strand or hair; the active mesh's
+    own scalp when it is a head carrying one (Add Head's head, active after a click in the
+    viewport: the scalp on it is drawn as a wire and hard to pick); else the active mesh."""
     obj = context.active_object if context is not None else None
     if obj is None:
         return None
@@ -24,9 +26,14 @@ def find_scalp(context):
     if role in ('KEY', 'HAIR'):
         scalp = obj.keystrand_hair.scalp
         return scalp if scalp is not None and scalp.type == 'MESH' else None
-    if obj.type == 'MESH':
-        return obj
-    return None
+    if obj.type != 'MESH':
+        return None
+    if role != 'SCALP':
+        scalps = sorted((c for c in obj.children if c.type == 'MESH' and c.keystrand_hair.role == 'SCALP'),
+                        key=lambda c: c.name)
+        if scalps:
+            return scalps[0]
+    return obj
 
 
 def key_objects(scalp):

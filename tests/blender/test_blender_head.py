@@ -152,6 +152,32 @@ def test_failed_add_head_leaves_nothing_behind(clean, monkeypatch):
     assert other.select_get() and bpy.context.view_layer.objects.active == other
 
 
+def test_the_head_stands_for_its_scalp_when_it_is_the_active_object(clean):
+    """A click on Add Head's head makes the head active (the scalp on it is a wire): the
+    panel and the operators then work on the scalp, not on the head."""
+    find_scalp = ext_module(clean, "scene_data").find_scalp
+    head, scalp = add_head()
+    activate(head)
+    assert find_scalp(bpy.context) == scalp
+    assert bpy.ops.hair.load_preset(preset="wavy") == {'FINISHED'}
+    scalp.keystrand_hair.count = 200
+    activate(head)
+    assert bpy.ops.hair.generate() == {'FINISHED'}
+    assert scalp.keystrand_hair.hair_object is not None and head.keystrand_hair.hair_object is None
+    assert head.keystrand_hair.role == 'NONE'
+    # The scalp itself, a mesh with no scalp on it, and one whose child is not a scalp: themselves.
+    activate(scalp)
+    assert find_scalp(bpy.context) == scalp
+    plain, child = make_scalp("Plain"), make_scalp("Child")
+    child.parent = plain
+    activate(plain)
+    assert find_scalp(bpy.context) == plain
+    child.keystrand_hair.role = 'SCALP'
+    assert find_scalp(bpy.context) == child
+    plain.keystrand_hair.role = 'SCALP'  # a scalp on a scalp: the active one is meant
+    assert find_scalp(bpy.context) == plain
+
+
 def test_add_head_is_in_the_add_menu_and_in_the_panel_without_a_scalp(clean):
     ours = lambda f: getattr(f, "__module__", "").startswith(clean.__name__)  # noqa: E731
     assert [f for f in bpy.types.VIEW3D_MT_add._dyn_ui_initialize() if ours(f)]
