@@ -1,0 +1,341 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Drawing key strands by stroke, their mirror, the comb and the wisp overlay, driven
+headless through the operators' stroke properties (world points, as a script gives them) and
+checked against arrays read here from the scene and groom.stroke's own measures."""
+import importlib
+import time
+import types
+
+import numpy as np
+import pytest
+import bpy
+
+from blender_scene import activate, make_scalp, scene_snapshot
+
+PIXEL = 5e-4          # world size of a pixel at the root, given to the operator
+TOLERANCE_PX = 2.0
+
+
+def ext_module(extension, name):
+    return importlib.import_module(f"{extension.__name__}.addon.{name}")
+
+
+def hanging_stroke(root=(0.1, 0.0, 0.0), n=80, side=1.0, jitter_y=0.0):
+    """A strand drawn from `root` on the sphere's side: out, then down with a wave. The y
+    jitter puts points off the drawing plane; the operator must project them onto it."""
+    s = np.linspace(0.0, 1.0, n)
+    p = np.stack([side * (0.05 * np.sin(np.pi * s) + 0.01 * s), np.zeros_like(s),
+                  -0.18 * s + 0.01 * np.sin(6 * s)], 1) + np.asarray(root)
+    p[1:, 1] += jitter_y * np.sin(17 * s[1:])
+    return p
+
+
+def stroke_arg(points):
+    """The stroke property's value (Blender wants every field of each element, as for its own
+    stroke operators)."""
+    return [{"name": "", "location": tuple(map(float, p)), "mouse": (0.0, 0.0)} for p in points]
+
+
+def draw(points, **kwargs):
+    args = dict(stroke=stroke_arg(points), pixel_size=PIXEL, tolerance=TOLERANCE_PX)
+    args.update(kwargs)
+    return bpy.ops.hair.draw_key_strand(**args)
+
+
+def key_objects():
+    return sorted((o for o in bpy.data.objects if o.type == 'CURVE'), key=lambda o: o.name)
+
+
+def control_points(obj):
+    """groom's cubic layout of a Bézier key object's spline, read here."""
+    bp = obj.data.splines[0].bezier_points
+    co = np.array([p.co for p in bp], float)
+    left = np.array([p.handle_left for p in bp], float)
+    right = np.array([p.handle_right for p in bp], float)
+    rows = [co[0]]
+    for i in range(1, len(co)):
+        rows += [right[i - 1], left[i], co[i]]
+    return np.array(rows)
+
+
+def scalp_arrays(obj):
+    from groom import Scalp
+    mesh = obj.data
+    mesh.calc_loop_triangles()
+    v = np.empty(len(mesh.vertices) * 3)
+    mesh.vertices.foreach_get("co", v)
+    t = np.empty(len(mesh.loop_triangles) * 3, np.int64)
+    mesh.loop_triangles.foreach_get("vertices", t)
+    return Scalp(v.reshape(-1, 3), t.reshape(-1, 3))
+
+
+def length_of(control):
+    from groom.stroke import sample_cubic
+    return float(np.linalg.norm(np.diff(sample_cubic(control, 4000), axis=0), axis=1).sum())
+
+
+@pytest.fixture()
+def scalp(clean):
+    obj = make_scalp()
+    obj.keystrand_hair.symmetry = 'NONE'
+    return obj
+
+
+def test_a_stroke_makes_one_key_rooted_on_the_scalp_leaving_along_its_normal(scalp):
+    from groom.stroke import curve_deviation, distance_to_polyline, sample_cubic
+    points = hanging_stroke(jitter_y=0.03)
+    assert draw(points) == {'FINISHED'}
+    (key,) = key_objects()
+    assert key.keystrand_hair.role == 'KEY' and key.keystrand_hair.scalp == scalp and key.parent == scalp
+    assert key.data.splines[0].type == 'BEZIER'
+    c = control_points(key)
+    surface = scalp_arrays(scalp)
+    tri, bary, nearest = surface.closest_points(c[:1])
+    assert np.linalg.norm(nearest[0] - c[0]) < 1e-6, "the root is not on the scalp"
+    normal = surface.normals_at(tri, bary)[0]
+    leave = (c[1] - c[0]) / np.linalg.norm(c[1] - c[0])
+    np.testing.assert_allclose(leave, normal, atol=1e-5)
+    # The stroke's projection: the plane through the root facing the default (front) view.
+    projected = points.copy()
+    projected[:, 1] = c[0, 1]
+    projected[0] = c[0]
+    tolerance = TOLERANCE_PX * PIXEL
+    assert curve_deviation(c, projected).max() <= tolerance * (1 + 1e-4)
+    assert distance_to_polyline(sample_cubic(c, 256), projected).max() <= 1.05 * tolerance
+    assert 1 <= (len(c) - 1) // 3 <= 8, "a key of a few segments"
+    assert bpy.context.view_layer.objects.active == key
+
+
+def test_the_tolerance_is_in_pixels_of_the_view(scalp):
+    points = hanging_stroke()
+    draw(points, pixel_size=PIXEL / 8)
+    fine = control_points(key_objects()[0])
+    draw(points, pixel_size=PIXEL * 8)
+    coarse = control_points(key_objects()[1])
+    assert len(coarse) < len(fine)
+
+
+def test_a_stroke_over_the_scalp_lies_on_the_shell(scalp):
+    """Seen from above, a stroke across the top of the head lands offset above its surface."""
+    from groom.stroke import sample_cubic
+    x = np.linspace(0.0, 0.07, 50)
+    points = np.stack([x, np.zeros_like(x), np.full_like(x, 0.3)], 1)
+    points[0] = (0.0, 0.0, 0.1)
+    offset = 0.01
+    assert draw(points, surface='SHELL', shell_offset=offset, view_direction=(0.0, 0.0, -1.0)) == {'FINISHED'}
+    c = control_points(key_objects()[0])
+    along = sample_cubic(c, 64)
+    far = along[np.linalg.norm(along[:, :2], axis=1) > 0.03]  # past the rise from the root
+    assert len(far) > 10
+    # The sphere of radius 0.1 is a mesh of flat faces: within its facets' depth of the shell.
+    np.testing.assert_allclose(np.linalg.norm(far, axis=1), 0.1 + offset, atol=2.5e-3)
+
+
+def test_mirror_makes_the_mirrored_key_and_keeps_the_pair_mirrored(scalp):
+    scalp.keystrand_hair.symmetry = 'X'
+    assert draw(hanging_stroke()) == {'FINISHED'}
+    a, b = key_objects()
+    assert a.keystrand_mirror == b and b.keystrand_mirror == a
+    flip = np.array([-1.0, 1.0, 1.0])  # the sphere's head frame: centred, Up +Z, Front -Y
+    np.testing.assert_allclose(control_points(b), control_points(a) * flip, atol=1e-6)
+    # Edit one (its tip, as in edit mode): the other follows on the next update.
+    for edited, other in ((a, b), (b, a)):
+        tip = edited.data.splines[0].bezier_points[-1]
+        tip.co.y += 0.03
+        tip.handle_left.y += 0.03
+        tip.handle_right.y += 0.03
+        edited.data.update_tag()
+        activate(edited)
+        bpy.context.view_layer.update()
+        np.testing.assert_allclose(control_points(other), control_points(edited) * flip, atol=1e-6)
+    # Settled: further updates rewrite nothing.
+    before = [control_points(k) for k in (a, b)]
+    bpy.context.view_layer.update()
+    bpy.context.view_layer.update()
+    for k, c in zip((a, b), before):
+        np.testing.assert_array_equal(control_points(k), c)
+
+
+def test_a_key_drawn_on_the_mirror_plane_gets_no_twin(scalp):
+    scalp.keystrand_hair.symmetry = 'X'
+    points = hanging_stroke(root=(0.0, -0.1, 0.0))
+    points[:, 0] = 0.0  # down the middle of the face
+    assert draw(points, view_direction=(1.0, 0.0, 0.0)) == {'FINISHED'}
+    assert len(key_objects()) == 1
+
+
+def test_a_failed_stroke_leaves_the_scene_as_it_was(scalp):
+    before = scene_snapshot()
+    with pytest.raises(RuntimeError, match="drag away from the root"):
+        draw(np.zeros((4, 3)) + (0.1, 0.0, 0.0))
+    assert scene_snapshot() == before
+    with pytest.raises(RuntimeError, match="empty"):
+        bpy.ops.hair.draw_key_strand(stroke=[])
+    assert scene_snapshot() == before
+    with pytest.raises(RuntimeError, match="3D viewport"):
+        bpy.ops.hair.draw_key_strand(stroke=[{"name": "", "location": (0, 0, 0), "mouse": m}
+                                                               for m in ((10, 10), (40, 40))], stroke_space='SCREEN')
+    assert scene_snapshot() == before
+
+
+def test_a_failure_midway_removes_the_key_already_made(scalp, monkeypatch):
+    mirror = ext_module(scalp_extension(), "mirror")
+    scalp.keystrand_hair.symmetry = 'X'
+    before = scene_snapshot()
+
+    def broken(a, b):
+        raise RuntimeError("injected")
+    monkeypatch.setattr(mirror, "pair", broken)
+    with pytest.raises(RuntimeError, match="Internal error in Draw Key Strand"):
+        draw(hanging_stroke())
+    assert scene_snapshot() == before
+
+
+def scalp_extension():
+    import sys
+    return sys.modules[next(m for m in sys.modules if m.endswith(".keystrand_hair") and m.startswith("bl_ext."))]
+
+
+def test_dragging_makes_nothing_until_release(scalp):
+    """The modal tool's press and drag (StrokeFit, PreviewLines) write nothing to the file, so
+    Esc, which only stops them, leaves the scene as it was."""
+    draw_key = ext_module(scalp_extension(), "draw_key")
+    stroke_input = ext_module(scalp_extension(), "stroke_input")
+    before = scene_snapshot()
+    op = types.SimpleNamespace(tolerance=TOLERANCE_PX, surface='SHELL', shell_offset=0.01, pixel_size=PIXEL,
+                               view_direction=(0.0, 1.0, 0.0), view_perspective=True, view_eye=(0.0, -1.0, 0.0))
+    points = hanging_stroke()
+    fit = draw_key.StrokeFit(op, bpy.context, scalp, points[0])
+    preview = stroke_input.PreviewLines()
+    for p in points[1:]:
+        fit.add(p[None])
+    control = fit.fit()
+    preview.set(control, fit.mirror_of(control))
+    preview.remove()
+    assert (len(control) - 1) % 3 == 0
+    assert scene_snapshot() == before
+
+
+def test_undo_removes_the_drawn_keys(scalp):
+    """Draw Key Strand is an undo step (its UNDO option); a background Blender pushes no steps
+    for operators, so the test pushes them where the UI would, before and after the press."""
+    scalp.keystrand_hair.symmetry = 'X'
+    assert 'UNDO' in bpy.types.HAIR_OT_draw_key_strand.bl_options
+    bpy.ops.ed.undo_push(message="before drawing")
+    assert draw(hanging_stroke()) == {'FINISHED'}
+    bpy.ops.ed.undo_push(message="Draw Key Strand")
+    assert len(key_objects()) == 2
+    bpy.ops.ed.undo()
+    assert key_objects() == []
+    assert [o.name for o in bpy.data.objects] == ["Scalp"]
+    bpy.ops.ed.redo()
+    a, b = key_objects()
+    assert a.keystrand_mirror == b and b.keystrand_mirror == a
+
+
+def test_comb_bends_the_key_and_keeps_its_length(scalp):
+    from groom import KeyStrand
+    scalp.keystrand_hair.symmetry = 'X'
+    draw(hanging_stroke())
+    key, twin = key_objects()
+    before = control_points(key)
+    mid = KeyStrand(before, kind="cubic").evaluate([0.6])[0]
+    path = mid + np.linspace(0.0, 1.0, 12)[:, None] * np.array([0.04, 0.0, 0.0])
+    activate(key)
+    assert bpy.ops.hair.comb_key(stroke=stroke_arg(path), radius=40.0, pixel_size=PIXEL) == {'FINISHED'}
+    after = control_points(key)
+    assert np.abs(after - before).max() > 0.01, "the comb did not bend the key"
+    assert abs(length_of(after) - length_of(before)) < 1e-5 * length_of(before)
+    np.testing.assert_array_equal(after[0], before[0])
+    leave = lambda c: (c[1] - c[0]) / np.linalg.norm(c[1] - c[0])  # noqa: E731
+    np.testing.assert_allclose(leave(after), leave(before), atol=1e-6)
+    np.testing.assert_allclose(control_points(twin), after * [-1.0, 1.0, 1.0], atol=1e-6)
+
+
+def test_a_comb_that_misses_changes_nothing(scalp):
+    draw(hanging_stroke())
+    (key,) = key_objects()
+    activate(key)
+    before = scene_snapshot()
+    far = np.array([[0.5, 0.5, 0.5], [0.6, 0.5, 0.5]])
+    assert bpy.ops.hair.comb_key(stroke=stroke_arg(far), pixel_size=PIXEL) == {'CANCELLED'}
+    assert scene_snapshot() == before
+
+
+def test_the_overlay_colours_each_wisp_and_highlights_the_active_key_s(scalp):
+    overlay = ext_module(scalp_extension(), "overlay_wisps")
+    for root, side in (((0.1, 0.0, 0.0), 1.0), ((-0.1, 0.0, 0.0), -1.0), ((0.0, 0.0, 0.1), 1.0)):
+        activate(scalp)
+        draw(hanging_stroke(root=root, side=side), view_direction=(0.0, 1.0, 0.0))
+    keys = key_objects()
+    activate(scalp)
+    scalp.keystrand_hair.count = 600
+    assert bpy.ops.hair.generate() == {'FINISHED'}
+    hair = scalp.keystrand_hair.hair_object
+    wisp = np.empty(len(hair.data.curves), np.int32)
+    hair.data.attributes["wisp"].data.foreach_get("value", wisp)
+    assert set(wisp.tolist()) == {0, 1, 2}
+    colors = overlay.strand_colors(wisp, len(keys))
+    for w in range(3):  # one colour per wisp, a different one for each
+        mine = colors[wisp == w]
+        assert (mine == mine[0]).all()
+        for other in range(w):
+            assert np.abs(mine[0, :3] - colors[wisp == other][0, :3]).max() > 0.1
+    lit = overlay.strand_colors(wisp, len(keys), active=1)
+    assert (lit[wisp == 1, 3] == 1.0).all() and (lit[wisp != 1, 3] < 0.5).all()
+    brightness = lit[:, :3].sum(axis=1)
+    assert brightness[wisp == 1].min() > brightness[wisp != 1].max()
+    # Strands of a key deleted since Generate are grey.
+    grey = overlay.strand_colors(wisp, 2)
+    assert np.allclose(grey[wisp == 2], overlay.LOST)
+    # Lines: one per segment, none across strands.
+    counts = np.array([3, 1, 4])
+    np.testing.assert_array_equal(overlay.segment_indices(counts), [[0, 1], [1, 2], [4, 5], [5, 6], [6, 7]])
+    bpy.context.window_manager.keystrand_show_wisps = True  # background: no GPU drawing, no handler
+    assert overlay._handle is None
+    bpy.context.window_manager.keystrand_show_wisps = False
+
+
+def test_the_shortcut_is_registered_and_removed_with_the_extension(extension, ext_enable):
+    enable, disable = ext_enable
+
+    def entries():
+        kc = bpy.context.window_manager.keyconfigs.addon
+        km = kc.keymaps.get("Object Mode")
+        return [] if km is None else [k for k in km.keymap_items if k.idname == "hair.draw_key_strand"]
+    (item,) = entries()
+    assert (item.type, item.shift, item.alt, item.ctrl) == ('D', True, True, False)
+    disable()
+    try:
+        assert entries() == []
+        assert not hasattr(bpy.types.Object, "keystrand_mirror")
+        assert not hasattr(bpy.types.WindowManager, "keystrand_show_wisps")
+    finally:
+        enable()
+    assert len(entries()) == 1
+
+
+def test_release_to_regrown_hair_at_the_viewport_count(scalp, capsys):
+    """The figure: from release (the operator's execute) to the hair regrown around the new
+    key at the viewport count (live update)."""
+    live = ext_module(scalp_extension(), "live")
+    s = scalp.keystrand_hair
+    draw(hanging_stroke(root=(-0.1, 0.0, 0.0), side=-1.0))
+    activate(scalp)
+    s.count, s.viewport_count = 20000, 2000
+    assert bpy.ops.hair.generate() == {'FINISHED'}
+    activate(scalp)
+    t0 = time.perf_counter()
+    assert draw(hanging_stroke()) == {'FINISHED'}
+    t1 = time.perf_counter()
+    bpy.context.view_layer.update()
+    assert live.process(settle=False) == 1
+    t2 = time.perf_counter()
+    hair = s.hair_object
+    assert len(hair.data.curves) == 2000
+    wisp = np.empty(2000, np.int32)
+    hair.data.attributes["wisp"].data.foreach_get("value", wisp)
+    assert set(wisp.tolist()) == {0, 1}, "the new key has no wisp yet"
+    with capsys.disabled():
+        print(f"\n[figure] release -> key {1e3 * (t1 - t0):.0f} ms, -> hair regrown at 2,000 strands "
+              f"{1e3 * (t2 - t0):.0f} ms (of 20,000)")
