@@ -8,9 +8,9 @@ moderngl load inside the operators.
 """
 import bpy
 
-from . import add_head, live, operators, panels, preview, properties
+from . import add_head, draw_tools, live, operators, panels, preview, properties
 
-classes = properties.CLASSES + operators.CLASSES + add_head.CLASSES + panels.CLASSES
+classes = properties.CLASSES + operators.CLASSES + add_head.CLASSES + draw_tools.CLASSES + panels.CLASSES
 
 
 def register():
@@ -18,6 +18,7 @@ def register():
         bpy.utils.register_class(cls)
     properties.register_properties()
     live.register_handlers()
+    draw_tools.register()
     bpy.types.TOPBAR_MT_file_export.append(operators.menu_export)
     bpy.types.VIEW3D_MT_add.append(add_head.menu_add)
 
@@ -25,6 +26,7 @@ def register():
 def unregister():
     bpy.types.VIEW3D_MT_add.remove(add_head.menu_add)
     bpy.types.TOPBAR_MT_file_export.remove(operators.menu_export)
+    draw_tools.unregister()
     live.unregister_handlers()
     preview.close()
     properties.unregister_properties()
