@@ -2,6 +2,7 @@
 """Panels: a "Hair" tab in the 3D Viewport sidebar (N) and in the Image Editor sidebar."""
 from bpy.types import Panel
 
+from . import draw_tools
 from .scene_data import find_scalp, key_objects
 
 
@@ -39,6 +40,7 @@ class VIEW3D_PT_keystrand_hair(_HairPanel, Panel):
         col.prop(s, "key_shape")
         col.prop(s, "key_length")
         col.operator("hair.add_key_strand", icon='CURVE_BEZCURVE')
+        draw_tools.draw_buttons(col, context, s)
         layout.label(text=f"{len(key_objects(scalp))} key strands")
         layout.separator()
         col = layout.column(align=True)
