@@ -12,8 +12,7 @@ import bpy
 from bpy.types import Operator
 from bpy_extras.object_utils import AddObjectHelper, add_object_align_init
 
-from .operators import _report_internal_error
-from .transaction import transaction
+from .transaction import report_internal_error, transaction
 
 HEAD_NAME = "Hair Head"
 SCALP_NAME = "Hair Scalp"
@@ -82,7 +81,7 @@ class HAIR_OT_add_head(Operator, AddObjectHelper):
                 # transaction, before the other objects are deselected.
                 scalp.select_set(True)
         except Exception as e:
-            _report_internal_error(self, e)
+            report_internal_error(self, e)
             return {'CANCELLED'}
         for obj in context.selected_objects:
             if obj != scalp:

@@ -12,7 +12,6 @@ extension costs nothing.
 import os
 import pathlib
 import time
-import traceback
 
 import bpy
 from bpy.props import EnumProperty, FloatVectorProperty, BoolProperty, StringProperty
@@ -21,7 +20,7 @@ from bpy_extras.io_utils import ExportHelper
 
 from . import scene_data
 from .scene_data import SceneError, find_scalp
-from .transaction import transaction
+from .transaction import report_internal_error, transaction
 
 EXPORT_FORMATS = (
     ('npz', "NumPy arrays (.npz)", "Strand arrays (points, counts, radius, color, alpha, wisp)"),
@@ -36,15 +35,6 @@ def _errors():
     """The exception types that mean 'the user can fix this': reported, never raised."""
     from hairio import InputError
     return (SceneError, InputError)
-
-
-def _report_internal_error(op, error):
-    """Report an error that is not the user's (a bug): the press was undone, the console has
-    the traceback for the bug report."""
-    traceback.print_exception(error)
-    op.report({'ERROR'}, f"Internal error in {op.bl_label} ({type(error).__name__}: {error}); "
-                         "nothing was changed. Please report this, with the traceback printed "
-                         "in Blender's system console")
 
 
 def _scalp_or_report(op, context):
@@ -184,7 +174,7 @@ class HAIR_OT_add_key_strand(Operator):
             self.report({'ERROR'}, str(e))
             return {'CANCELLED'}
         except Exception as e:
-            _report_internal_error(self, e)
+            report_internal_error(self, e)
             return {'CANCELLED'}
         for obj in context.selected_objects:
             obj.select_set(False)
@@ -217,7 +207,7 @@ class HAIR_OT_generate(Operator):
             self.report({'ERROR'}, str(e))
             return {'CANCELLED'}
         except Exception as e:
-            _report_internal_error(self, e)
+            report_internal_error(self, e)
             return {'CANCELLED'}
         s = result.strands
         collision = result.collision
@@ -271,7 +261,7 @@ class HAIR_OT_render_preview(Operator):
                                    "press Render Preview again to start a new renderer")
             return {'CANCELLED'}
         except Exception as e:
-            _report_internal_error(self, e)
+            report_internal_error(self, e)
             return {'CANCELLED'}
         h, w = pixels.shape[:2]
         self.report({'INFO'}, f"Rendered {w}x{h} in {time.perf_counter() - t0:.2f} s")
@@ -328,7 +318,7 @@ class HAIR_OT_load_preset(Operator):
             self.report({'ERROR'}, str(e))
             return {'CANCELLED'}
         except Exception as e:
-            _report_internal_error(self, e)
+            report_internal_error(self, e)
             return {'CANCELLED'}
         self.report({'INFO'}, f"Loaded preset {preset.name!r}: {len(keys)} key strands")
         warning = placement.warning()
@@ -378,7 +368,7 @@ class HAIR_OT_save_preset(Operator, ExportHelper):
             self.report({'ERROR'}, f"Cannot write {self.filepath}: {e}")
             return {'CANCELLED'}
         except Exception as e:
-            _report_internal_error(self, e)
+            report_internal_error(self, e)
             return {'CANCELLED'}
         self.report({'INFO'}, f"Saved preset {self.filepath}")
         return {'FINISHED'}
@@ -465,7 +455,7 @@ class HAIR_OT_export(Operator, ExportHelper):
             self.report({'ERROR'}, f"Cannot write {path}: {e}")
             return {'CANCELLED'}
         except Exception as e:
-            _report_internal_error(self, e)
+            report_internal_error(self, e)
             return {'CANCELLED'}
         self.report({'INFO'}, f"Exported {path}")
         return {'FINISHED'}

@@ -9,10 +9,11 @@ is removed and everything it changed is put back, so the file is exactly as it w
         ... write ...
 
 An exception inside the block rolls back and propagates; the caller decides how to report
-it. Datablocks made inside the block need no bookkeeping: every ID that was not in the file
-when the block began is removed on rollback. A `transaction()` opened inside another joins
-it, so a writer such as hair.write_hair is all or nothing alone (live update) and as a part
-of an operator's larger change alike.
+it: a bad input as the user's to fix, anything else through `report_internal_error`.
+Datablocks made inside the block need no bookkeeping: every ID that was not in the file when
+the block began is removed on rollback. A `transaction()` opened inside another joins it, so
+a writer such as hair.write_hair is all or nothing alone (live update) and as a part of an
+operator's larger change alike.
 """
 import contextlib
 import traceback
@@ -133,6 +134,16 @@ class Transaction:
                 if uid not in self._before and uid not in self._survivors]
         if made:
             bpy.data.batch_remove(made)
+
+
+def report_internal_error(op, error):
+    """Report on operator `op` an error that is not the user's (a bug) after its press was
+    rolled back: the message says nothing was changed, the console has the traceback for the
+    bug report."""
+    traceback.print_exception(error)
+    op.report({'ERROR'}, f"Internal error in {op.bl_label} ({type(error).__name__}: {error}); "
+                         "nothing was changed. Please report this, with the traceback printed "
+                         "in Blender's system console")
 
 
 @contextlib.contextmanager
