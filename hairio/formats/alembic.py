@@ -186,7 +186,10 @@ def _recorded_options(AbcGeom, params):
 
 
 def _array(values, dtype, width=None):
-    a = np.array(memoryview(values), dtype=dtype)
+    try:
+        a = np.array(memoryview(values), dtype=dtype)
+    except TypeError:           # the int8/int16 arrays have no buffer: element by element
+        a = np.array([values[i] for i in range(len(values))], dtype=dtype)
     return a.reshape(-1, width) if width else a.reshape(-1)
 
 
