@@ -75,11 +75,16 @@ def _extension(sec, cfg):
 
 def _export(sec, cfg):
     try:
+        from hairio import InputError
         from hairio.formats import write_strands, read_strands, resampling_errors
     except ImportError as e:
         sec.not_measured("export figures", f"hairio.formats is not importable ({e})")
         return
-    strands = groom_scene("wavy", cfg.int_strands, resolution="fixed", points=32)[3].strands
+    from groom.generate import strands_with_guides
+    _, keys, params, result = groom_scene("wavy", cfg.int_strands, resolution="fixed", points=32)
+    strands = result.strands
+    # The grooms carry the key strands, guides and weights, as `groom generate` writes them.
+    with_guides = strands_with_guides(result, keys, params)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         jobs = [("npz", {}), ("hair", {}), ("tfx", {"vertices_per_strand": 32}), ("data", {})]
@@ -91,6 +96,15 @@ def _export(sec, cfg):
                              f"{os.path.getsize(path) / 2**20:.1f} MiB"])
             except TooSlow as e:
                 rows.append([f".{ext}", f"not measured: {e}", ""])
+        for ext, opts in (("abc", {"scale": 100.0}), ("usd", {"scale": 100.0})):
+            path = os.path.join(tmp, f"groom.{ext}")
+            lib = "alembic3d" if ext == "abc" else "usd-core"
+            try:
+                t, _ = measure(lambda: write_strands(path, with_guides, **opts), runs=cfg.runs, budget=left(sec, 0.35))
+                rows.append([f".{ext} ({lib}, Unreal groom with guides)", str(t),
+                             f"{os.path.getsize(path) / 2**20:.1f} MiB"])
+            except (InputError, TooSlow) as e:
+                rows.append([f".{ext} ({lib})", f"not measured: {e}", ""])
         obj = None
         for ext in ("abc", "usd"):
             path = os.path.join(tmp, f"groom.{ext}")
@@ -110,7 +124,8 @@ def _export(sec, cfg):
             except Exception as e:  # noqa: BLE001
                 rows.append([f".{ext}", f"not measured: {type(e).__name__}: {e}", ""])
         sec.summary.append(f"export {strands.num_strands:,} strands: " + ", ".join(
-            f"{r[0].split()[0]} {r[1]} / {r[2]}" for r in rows if not r[1].startswith("not measured")))
+            f"{r[0].split()[0]}{' (Blender)' if 'Blender' in r[0] else ''} {r[1]} / {r[2]}"
+            for r in rows if not r[1].startswith("not measured")))
         sec.table(["format", "write time (median)", "file size"], rows,
                   caption=f"Export of {strands.num_strands:,} strands × 32 points (issue 5).")
         # .tfx resampling error: the writer's own figure, and ours from the file read back.
