@@ -267,12 +267,15 @@ def _key_scalps(depsgraph):
             s = ident.keystrand_hair
             if s.role == 'KEY' and s.scalp is not None:
                 uids.add(s.scalp.session_uid)
+            elif s.role == 'SCALP':
+                # Moved, turned or its settings changed: process() tells what that changes.
+                uids.add(ident.session_uid)
         elif isinstance(ident, bpy.types.Curve):
             for obj in bpy.data.objects:
                 if obj.data == ident and obj.keystrand_hair.role == 'KEY' and obj.keystrand_hair.scalp:
                     uids.add(obj.keystrand_hair.scalp.session_uid)
     if objects_changed:
-        # A scalp turned (its axes with Head Axes 'Scene'), a collider moved or another chosen.
+        # A collider moved (or a scalp's parent, turning its axes with Head Axes 'Scene').
         for uid, state in _states.items():
             scalp = _scalp_by_uid(uid)
             if scalp is not None and scene_signature(scalp) != state.scene_sig:

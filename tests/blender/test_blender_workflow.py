@@ -425,3 +425,73 @@ def test_live_catch_up_runs_off_the_main_thread_and_uses_current_settings(clean)
     got = curves_arrays(s.hair_object)
     np.testing.assert_array_equal(got["counts"], expected.counts)
     np.testing.assert_array_equal(got["position"], expected.points)
+
+
+@pytest.mark.parametrize("parented", [True, False], ids=["keys-parented", "keys-apart"])
+def test_live_update_regrows_when_turning_the_scalp_turns_its_scene_axes(clean, parented):
+    """Head Axes 'Scene': the head's up and front are fixed in the scene, so turning the scalp
+    turns them in its mesh and the hair must fall anew, as Generate pressed again grows it;
+    moving the scalp, or turning one whose axes are the mesh's, changes nothing that is grown.
+    Keys apart from the scalp (unparented, left in the scene) see no update of their own."""
+    head = ext_module(clean, "head")
+    live = ext_module(clean, "live")
+    scalp = make_scalp()
+    keys = add_keys(scalp)
+    if not parented:
+        for key in keys:
+            world = key.matrix_world.copy()
+            key.parent = None
+            key.matrix_world = world
+    s = scalp.keystrand_hair
+    s.count = s.viewport_count = 500
+    assert bpy.ops.hair.generate() == {'FINISHED'}
+    before = curves_arrays(s.hair_object)
+    bpy.context.view_layer.update()
+    live.process(settle=True)  # the scene's first evaluation since the keys were made
+    if parented:
+        scalp.location = (0.2, 0.0, 0.3)
+        bpy.context.view_layer.update()
+        assert live.process(settle=True) == 0, "moving the scalp moves its axes nowhere"
+    scalp.rotation_euler = (0.6, 0.0, 0.2)
+    bpy.context.view_layer.update()
+    assert not np.allclose(head.scalp_axes(scalp)[0], (0.0, 0.0, 1.0), atol=0.1)
+    assert live.process(settle=True) == 1
+    after = curves_arrays(s.hair_object)
+    activate(scalp)
+    assert bpy.ops.hair.generate() == {'FINISHED'}
+    pressed = curves_arrays(s.hair_object)
+    np.testing.assert_array_equal(after["counts"], pressed["counts"])
+    np.testing.assert_array_equal(after["position"], pressed["position"])
+    assert after["position"].shape != before["position"].shape or np.abs(after["position"] - before["position"]).max() > 1e-3
+    if parented:
+        # Axes in the mesh turn with it: nothing to regrow. (Switching rewrites Up and Front
+        # in the mesh, rounded to the setting's float32: that may regrow, once.)
+        s.head_axes = 'LOCAL'
+        bpy.context.view_layer.update()
+        live.process(settle=True)
+        scalp.rotation_euler = (0.0, 0.5, 0.0)
+        bpy.context.view_layer.update()
+        assert live.process(settle=True) == 0
+
+
+def test_live_update_reads_the_collider_again_when_it_moves(clean):
+    from test_blender_collision import add_falling_keys, depths, make_cap, make_head_for
+    live = ext_module(clean, "live")
+    cap = make_cap()
+    head = make_head_for(cap)
+    add_falling_keys(cap)
+    s = cap.keystrand_hair
+    s.collider = head
+    s.count = s.viewport_count = 400
+    assert bpy.ops.hair.generate() == {'FINISHED'}
+    bpy.context.view_layer.update()
+    assert live.process(settle=True) == 0  # the scene's first evaluation since the keys were made
+    head.location.x += 0.0015  # a slip of 1.5 mm: the hair now cuts into the head's far side
+    bpy.context.view_layer.update()
+    state = next(iter(live._states.values()))
+    assert live.process(settle=True) == 1 and state.collider_version == 1
+    d, _, allowed = depths(s.hair_object, head)
+    assert not (d < allowed).any(), d.min()
+    # Nothing moved since: nothing read or grown again.
+    bpy.context.view_layer.update()
+    assert live.process(settle=True) == 0 and state.collider_version == 1
