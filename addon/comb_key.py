@@ -89,9 +89,9 @@ class HAIR_OT_comb_key(stroke_input.StrokeView, Operator):
     # --- the modal tool -----------------------------------------------------------------
 
     def invoke(self, context, event):
-        region, _ = stroke_input.region_view(context)
-        if context.area is None or context.area.type != 'VIEW_3D' or region is None:
-            return self.execute(context)
+        self._view = stroke_input.ViewUnderMouse(context)
+        if self._view.area is None:
+            return self.execute(context)  # a script: the stroke is given
         self._scalp = find_scalp(context)
         self._state = None
         self._saved = None
@@ -104,18 +104,17 @@ class HAIR_OT_comb_key(stroke_input.StrokeView, Operator):
         if event.type in {'ESC', 'RIGHTMOUSE'} and event.value == 'PRESS':
             self._cancel(context)
             return {'CANCELLED'}
-        coord = (event.mouse_region_x, event.mouse_region_y)
         if self._state is None:
             if event.type == 'LEFTMOUSE' and event.value == 'PRESS':
-                return self._press(context, coord)
+                return self._press(context, event)
             if event.type in {'MIDDLEMOUSE', 'WHEELUPMOUSE', 'WHEELDOWNMOUSE', 'TRACKPADPAN', 'TRACKPADZOOM'}:
                 return {'PASS_THROUGH'}
             return {'RUNNING_MODAL'}
         if event.type in {'MOUSEMOVE', 'INBETWEEN_MOUSEMOVE'}:
-            self._drag(context, coord)
+            self._drag(self._view.coord(event))
             return {'RUNNING_MODAL'}
         if event.type == 'LEFTMOUSE' and event.value == 'RELEASE':
-            self._drag(context, coord)
+            self._drag(self._view.coord(event))
             context.workspace.status_text_set(None)
             stroke_input.set_stroke(self, self._path)
             self.key = self._state.key.name
@@ -126,7 +125,7 @@ class HAIR_OT_comb_key(stroke_input.StrokeView, Operator):
         """(key object, world point of its curve nearest the mouse) within the brush, or None."""
         from bpy_extras import view3d_utils
         from groom.stroke import sample_cubic
-        region, rv3d = stroke_input.region_view(context)
+        region, rv3d = self._view.region, self._view.rv3d
         best = None
         active = _key_of(context)
         for obj in scene_data.key_objects(self._scalp):  # a handful of keys
@@ -142,21 +141,22 @@ class HAIR_OT_comb_key(stroke_input.StrokeView, Operator):
                     continue
                 d = float(np.hypot(at.x - coord[0], at.y - coord[1]))
                 # The active key wins ties within the brush: it is the one being worked on.
-                rank = (d > self.radius, obj != active, d)
+                rank = (obj != active, d)
                 if d <= self.radius and (best is None or rank < best[0]):
                     best = (rank, obj, p)
         return None if best is None else best[1:]
 
-    def _press(self, context, coord):
-        found = self._nearest_key(context, coord)
+    def _press(self, context, event):
+        view = self._view
+        found = self._nearest_key(context, view.coord(event)) if view.pick(event) else None
         if found is None:
             self.report({'WARNING'}, "Press near a key strand (within the comb's radius) to comb it")
             return {'RUNNING_MODAL'}
         key, depth = found
-        region, rv3d = stroke_input.region_view(context)
-        stroke_input.capture_view(self, region, rv3d, depth)
+        stroke_input.capture_view(self, view.region, view.rv3d, depth)
         try:
-            self._state = CombState(self, key, stroke_input.screen_to_world(region, rv3d, [coord], depth)[0])
+            start = stroke_input.screen_to_world(view.region, view.rv3d, [view.coord(event)], depth)[0]
+            self._state = CombState(self, key, start)
         except _errors() as e:
             self.report({'ERROR'}, str(e))
             context.workspace.status_text_set(None)
@@ -164,12 +164,11 @@ class HAIR_OT_comb_key(stroke_input.StrokeView, Operator):
         partner = mirror.partner_of(key)
         self._saved = [(obj, key_points.snapshot(obj)) for obj in (key, partner) if obj is not None]
         self._depth = depth
-        self._path = [stroke_input.to_world(self._state.scalp, self._state.last[None])[0]]
+        self._path = [start]
         return {'RUNNING_MODAL'}
 
-    def _drag(self, context, coord):
-        region, rv3d = stroke_input.region_view(context)
-        world = stroke_input.screen_to_world(region, rv3d, [coord], self._depth)[0]
+    def _drag(self, coord):
+        world = stroke_input.screen_to_world(self._view.region, self._view.rv3d, [coord], self._depth)[0]
         if np.array_equal(world, self._path[-1]):
             return
         self._path.append(world)

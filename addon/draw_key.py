@@ -115,9 +115,9 @@ class HAIR_OT_draw_key_strand(stroke_input.StrokeView, Operator):
     # --- the modal tool -----------------------------------------------------------------
 
     def invoke(self, context, event):
-        region, rv3d = stroke_input.region_view(context)
-        if context.area is None or context.area.type != 'VIEW_3D' or region is None:
-            return self.execute(context)
+        self._view = stroke_input.ViewUnderMouse(context)
+        if self._view.area is None:
+            return self.execute(context)  # a script: the stroke is given
         self._scalp = find_scalp(context)
         self._fit = None
         self._world, self._mouse = [], []
@@ -131,65 +131,64 @@ class HAIR_OT_draw_key_strand(stroke_input.StrokeView, Operator):
     def _end(self, context):
         self._preview.remove()
         context.workspace.status_text_set(None)
-        if context.area is not None:
-            context.area.tag_redraw()
+        self._view.redraw()
 
     def modal(self, context, event):
         if event.type in {'ESC', 'RIGHTMOUSE'} and event.value == 'PRESS':
             self._end(context)
             return {'CANCELLED'}
-        coord = (event.mouse_region_x, event.mouse_region_y)
         if self._fit is None:
             if event.type == 'LEFTMOUSE' and event.value == 'PRESS':
-                return self._press(context, coord)
+                return self._press(context, event)
             if event.type in {'MIDDLEMOUSE', 'WHEELUPMOUSE', 'WHEELDOWNMOUSE', 'TRACKPADPAN', 'TRACKPADZOOM'}:
                 return {'PASS_THROUGH'}  # look around before drawing
             return {'RUNNING_MODAL'}
         if event.type in {'MOUSEMOVE', 'INBETWEEN_MOUSEMOVE'}:
-            self._drag(context, coord)
+            self._drag(self._view.coord(event))
             return {'RUNNING_MODAL'}
         if event.type == 'LEFTMOUSE' and event.value == 'RELEASE':
-            self._drag(context, coord, preview=False)
+            self._drag(self._view.coord(event), preview=False)
             self._end(context)
             stroke_input.set_stroke(self, self._world, self._mouse)
             return self.execute(context)
         return {'RUNNING_MODAL'}
 
-    def _press(self, context, coord):
-        hit = stroke_input.ray_cast_scalp(context, self._scalp, coord)
+    def _press(self, context, event):
+        view = self._view
+        hit = None
+        if view.pick(event):
+            hit = stroke_input.ray_cast_scalp(context, view.region, view.rv3d, self._scalp, view.coord(event))
         if hit is None:
             self.report({'WARNING'}, "Press on the scalp mesh where the strand should grow")
             return {'RUNNING_MODAL'}
-        region, rv3d = stroke_input.region_view(context)
-        stroke_input.capture_view(self, region, rv3d, hit)
+        stroke_input.capture_view(self, view.region, view.rv3d, hit)
         try:
             self._fit = StrokeFit(self, context, self._scalp, hit)
         except _errors() as e:
             self._end(context)
             self.report({'ERROR'}, str(e))
             return {'CANCELLED'}
-        self._world, self._mouse = [self._fit.root_world], [coord]
+        self._world, self._mouse = [self._fit.root_world], [view.coord(event)]
         return {'RUNNING_MODAL'}
 
-    def _drag(self, context, coord, preview=True):
+    def _drag(self, coord, preview=True):
         last = self._mouse[-1]
         if (coord[0] - last[0]) ** 2 + (coord[1] - last[1]) ** 2 < 1.0:
             return
-        region, rv3d = stroke_input.region_view(context)
-        world = stroke_input.screen_to_world(region, rv3d, [coord], self._fit.root_world)
-        self._world.append(world[0])
-        self._mouse.append(coord)
+        world = stroke_input.screen_to_world(self._view.region, self._view.rv3d, [coord], self._fit.root_world)
         try:
             self._fit.add(world)
         except _errors():
-            return  # a point the surface cannot take (behind the eye): left out of the preview
+            return  # a point the surface cannot take (at a perspective eye): left out
+        self._world.append(world[0])
+        self._mouse.append(coord)
         now = time.monotonic()
         if not preview or now - self._last_preview < PREVIEW_INTERVAL_S:
             return
         self._last_preview = now
-        self._show_preview(context)
+        self._show_preview()
 
-    def _show_preview(self, context):
+    def _show_preview(self):
         from groom.stroke import sample_cubic
         try:
             control = self._fit.fit()
@@ -198,7 +197,7 @@ class HAIR_OT_draw_key_strand(stroke_input.StrokeView, Operator):
         strips = [control, self._fit.mirror_of(control)]
         self._preview.set(*[stroke_input.to_world(self._scalp, sample_cubic(c, 16)) for c in strips
                             if c is not None])
-        context.area.tag_redraw()
+        self._view.redraw()
 
     # --- the work ------------------------------------------------------------------------
 
@@ -252,10 +251,10 @@ class HAIR_OT_draw_key_strand(stroke_input.StrokeView, Operator):
         points = stroke_input.stroke_points(self, context)
         if self.stroke_space == 'WORLD':
             return points
-        hit = stroke_input.ray_cast_scalp(context, scalp, tuple(points[0]))
+        region, rv3d = stroke_input.region_view(context)
+        hit = stroke_input.ray_cast_scalp(context, region, rv3d, scalp, tuple(points[0]))
         if hit is None:
             raise SceneError("The stroke's first point is not over the scalp: start the stroke on the scalp")
-        region, rv3d = stroke_input.region_view(context)
         stroke_input.capture_view(self, region, rv3d, hit)
         world = stroke_input.screen_to_world(region, rv3d, points, hit)
         world[0] = hit

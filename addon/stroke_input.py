@@ -62,11 +62,41 @@ def _matrix(m):
 
 
 def region_view(context):
-    """(region, region_3d) of the 3D viewport the operator runs in, or (None, None)."""
-    region, rv3d = context.region, getattr(context, "region_data", None)
-    if region is None or rv3d is None or not isinstance(rv3d, bpy.types.RegionView3D):
+    """(region, region_3d) of the 3D viewport's main region the operator runs in (a script
+    with a viewport's context), or (None, None)."""
+    area, region = context.area, context.region
+    if area is None or area.type != 'VIEW_3D' or region is None or region.type != 'WINDOW':
         return None, None
-    return region, rv3d
+    return region, region.data
+
+
+class ViewUnderMouse:
+    """The 3D viewport region a modal tool draws in, found under the mouse when it starts.
+
+    A tool started from the Hair tab's button runs in the sidebar's region, whose coordinates
+    and view are not the viewport's; so regions and mouse positions are taken from the area's
+    own main regions (the one under the mouse, in a quad view) and the window coordinates."""
+
+    def __init__(self, context):
+        self.area = context.area if context.area is not None and context.area.type == 'VIEW_3D' else None
+        self.region = self.rv3d = None
+
+    def pick(self, event):
+        """The main region under the mouse becomes the tool's; False when there is none."""
+        for region in (self.area.regions if self.area is not None else ()):
+            if region.type == 'WINDOW' and region.x <= event.mouse_x < region.x + region.width \
+                    and region.y <= event.mouse_y < region.y + region.height:
+                self.region, self.rv3d = region, region.data
+                return True
+        return False
+
+    def coord(self, event):
+        """The mouse in the tool's region's pixels."""
+        return (float(event.mouse_x - self.region.x), float(event.mouse_y - self.region.y))
+
+    def redraw(self):
+        if self.area is not None:
+            self.area.tag_redraw()
 
 
 def capture_view(op, region, rv3d, root_world):
@@ -116,8 +146,7 @@ def stroke_points(op, context):
         flat = np.empty(n * 3, np.float64)
         op.stroke.foreach_get("location", flat)
         return flat.reshape(n, 3)
-    region, rv3d = region_view(context)
-    if region is None:
+    if region_view(context)[0] is None:
         raise SceneError("A screen stroke needs the 3D viewport it was drawn in; "
                          "give world locations (stroke_space 'WORLD') instead")
     flat = np.empty(n * 2, np.float64)
@@ -169,11 +198,10 @@ def direction_to_local(obj, direction):
     return d / np.linalg.norm(d)
 
 
-def ray_cast_scalp(context, scalp, coord):
+def ray_cast_scalp(context, region, rv3d, scalp, coord):
     """The world point of the scalp under region pixel `coord`, or None (as Add Key Strand
     finds it: the evaluated mesh, in its own space)."""
     from bpy_extras import view3d_utils
-    region, rv3d = region_view(context)
     if scalp is None or region is None:
         return None
     origin = view3d_utils.region_2d_to_origin_3d(region, rv3d, coord)

@@ -339,3 +339,189 @@ def test_release_to_regrown_hair_at_the_viewport_count(scalp, capsys):
     with capsys.disabled():
         print(f"\n[figure] release -> key {1e3 * (t1 - t0):.0f} ms, -> hair regrown at 2,000 strands "
               f"{1e3 * (t2 - t0):.0f} ms (of 20,000)")
+
+
+# --- the modal tools, driven by events -------------------------------------------------
+# A background Blender has no window to send events to, so the tools' modal handlers are
+# called here with events and a context made for them: a 3D viewport (a perspective view
+# from the front) whose main region sits beside the sidebar the tool was started from.
+
+class _StrokePoint:
+    """A stroke element: its vectors held in float32, as Blender's properties hold them."""
+
+    def __init__(self):
+        self.name, self.location, self.mouse = "", (0.0, 0.0, 0.0), (0.0, 0.0)
+
+    def __setattr__(self, name, value):
+        object.__setattr__(self, name, value if name == "name" else tuple(np.float32(value).tolist()))
+
+
+class _Stroke(list):
+    """Stands in for the operator's stroke collection."""
+
+    def add(self):
+        self.append(_StrokePoint())
+        return self[-1]
+
+    def foreach_get(self, name, out):
+        out[:] = np.ravel([tuple(getattr(item, name)) for item in self])
+
+
+def _viewport(eye=(0.05, -0.6, 0.02), target=(0.05, 0.0, -0.08), size=(800, 600), fov_y=0.8):
+    from mathutils import Matrix, Vector
+    eye, target = Vector(eye), Vector(target)
+    z = (eye - target).normalized()
+    x = Vector((0.0, 0.0, 1.0)).cross(z).normalized()
+    y = z.cross(x)
+    camera = Matrix(((x[0], y[0], z[0], eye[0]), (x[1], y[1], z[1], eye[1]),
+                     (x[2], y[2], z[2], eye[2]), (0.0, 0.0, 0.0, 1.0)))
+    view = camera.inverted()
+    f, aspect, near, far = 1.0 / np.tan(fov_y / 2), size[0] / size[1], 0.01, 100.0
+    window = Matrix(((f / aspect, 0, 0, 0), (0, f, 0, 0),
+                     (0, 0, (far + near) / (near - far), 2 * far * near / (near - far)), (0, 0, -1, 0)))
+    rv3d = types.SimpleNamespace(view_matrix=view, perspective_matrix=window @ view, is_perspective=True,
+                                 view_perspective='PERSP', view_rotation=camera.to_quaternion())
+    main = types.SimpleNamespace(type='WINDOW', x=40, y=30, width=size[0], height=size[1], data=rv3d)
+    sidebar = types.SimpleNamespace(type='UI', x=40 + size[0], y=30, width=300, height=size[1], data=None)
+    area = types.SimpleNamespace(type='VIEW_3D', regions=[sidebar, main], tag_redraw=lambda: None)
+    return area, main, sidebar
+
+
+class _Context:
+    """bpy.context with a viewport area and the sidebar as the region (a button's context)."""
+
+    def __init__(self, area, sidebar):
+        self.area, self.region, self.region_data = area, sidebar, None
+        self.window_manager = types.SimpleNamespace(modal_handler_add=lambda op: None)
+        self.workspace = types.SimpleNamespace(status_text_set=lambda text: None)
+
+    def __getattr__(self, name):
+        return getattr(bpy.context, name)
+
+
+def _operator(cls, **props):
+    """An instance standing in for `cls`: its methods, its properties as plain values."""
+    ours = cls.__module__.rpartition(".")[0]
+    methods = {k: v for c in reversed(cls.__mro__) for k, v in vars(c).items()
+               if isinstance(v, types.FunctionType) and v.__module__.startswith(ours)}
+    op = type("Fake" + cls.__name__, (), methods)()
+    op.bl_label = cls.bl_label
+    op.reports = []
+    op.report = lambda kind, message: op.reports.append((kind, message))
+    op.stroke = _Stroke()
+    module, name = cls.bl_idname.split(".")
+    for name, prop in getattr(getattr(bpy.ops, module), name).get_rna_type().properties.items():
+        if prop.type not in ('POINTER', 'COLLECTION'):
+            default = prop.default_array if getattr(prop, "is_array", False) else prop.default
+            setattr(op, name, tuple(default) if getattr(prop, "is_array", False) else default)
+    for name, value in props.items():
+        setattr(op, name, value)
+    return op
+
+
+def _event(kind, value, region, coord):
+    return types.SimpleNamespace(type=kind, value=value, mouse_x=region.x + coord[0], mouse_y=region.y + coord[1])
+
+
+def _pixel(region, world):
+    from bpy_extras import view3d_utils
+    return tuple(view3d_utils.location_3d_to_region_2d(region, region.data, world))
+
+
+def _drag_events(op, context, region, pixels, finish=('LEFTMOUSE', 'RELEASE')):
+    result = op.modal(context, _event('LEFTMOUSE', 'PRESS', region, pixels[0]))
+    for p in pixels[1:]:
+        result = op.modal(context, _event('MOUSEMOVE', 'NOTHING', region, p))
+    return op.modal(context, _event(*finish, region, pixels[-1]))
+
+
+def _screen_stroke(region, n=60):
+    """Mouse positions of a hanging strand drawn from a point of the sphere facing the view."""
+    root = np.array([0.06, -0.079, 0.02])
+    root = 0.1 * root / np.linalg.norm(root)
+    return [_pixel(region, p) for p in hanging_stroke(root=root, n=n)]
+
+
+def test_the_modal_tool_draws_the_key_under_the_mouse_within_the_tolerance_in_pixels(scalp):
+    from groom.stroke import distance_to_polyline, sample_cubic
+    draw_key = ext_module(scalp_extension(), "draw_key")
+    area, main, sidebar = _viewport()
+    context = _Context(area, sidebar)
+    op = _operator(bpy.types.HAIR_OT_draw_key_strand)
+    pixels = _screen_stroke(main)
+    assert draw_key.HAIR_OT_draw_key_strand.invoke(op, context, None) == {'RUNNING_MODAL'}
+    assert _drag_events(op, context, main, pixels) == {'FINISHED'}, op.reports
+    (key,) = key_objects()
+    c = control_points(key)
+    assert abs(np.linalg.norm(c[0]) - 0.1) < 2e-3, "the root is not on the sphere"
+    np.testing.assert_allclose(_pixel(main, c[0]), pixels[0], atol=0.05)  # under the press
+    on_screen = np.array([_pixel(main, p) for p in sample_cubic(c, 64)])
+    mouse = np.array(pixels)
+    to_curve = distance_to_polyline(np.c_[mouse, np.zeros(len(mouse))], np.c_[on_screen, np.zeros(len(on_screen))])
+    assert to_curve.max() <= op.tolerance * 1.01, to_curve.max()
+    assert op.pixel_size > 0 and op.view_perspective
+    # The stroke and the view it left in the operator's properties make the same key again
+    # (a redo, or a script) without a viewport.
+    assert len(op.stroke) == len(pixels)
+    assert draw([item.location for item in op.stroke], pixel_size=op.pixel_size, view_direction=op.view_direction,
+                view_eye=op.view_eye, view_perspective=True) == {'FINISHED'}
+    np.testing.assert_array_equal(control_points(key_objects()[1]), c)
+
+
+def test_esc_while_dragging_leaves_nothing(scalp):
+    draw_key = ext_module(scalp_extension(), "draw_key")
+    scalp.keystrand_hair.symmetry = 'X'
+    area, main, sidebar = _viewport()
+    context = _Context(area, sidebar)
+    before = scene_snapshot()
+    op = _operator(bpy.types.HAIR_OT_draw_key_strand)
+    draw_key.HAIR_OT_draw_key_strand.invoke(op, context, None)
+    assert _drag_events(op, context, main, _screen_stroke(main), finish=('ESC', 'PRESS')) == {'CANCELLED'}
+    assert op._preview.strips == [] and op._preview._handle is None
+    assert scene_snapshot() == before
+
+
+def test_a_press_off_the_scalp_waits_for_one_on_it(scalp):
+    draw_key = ext_module(scalp_extension(), "draw_key")
+    area, main, sidebar = _viewport()
+    context = _Context(area, sidebar)
+    op = _operator(bpy.types.HAIR_OT_draw_key_strand)
+    draw_key.HAIR_OT_draw_key_strand.invoke(op, context, None)
+    assert op.modal(context, _event('LEFTMOUSE', 'PRESS', main, (5.0, 5.0))) == {'RUNNING_MODAL'}
+    assert op.reports and op.reports[-1][0] == {'WARNING'}
+    assert _drag_events(op, context, main, _screen_stroke(main)) == {'FINISHED'}
+    assert len(key_objects()) == 1
+
+
+def _comb_drag(scalp, finish):
+    comb_key = ext_module(scalp_extension(), "comb_key")
+    from groom import KeyStrand
+    scalp.keystrand_hair.symmetry = 'X'
+    area, main, sidebar = _viewport()
+    draw(hanging_stroke(root=0.1 * np.array([0.6, -0.79, 0.2]) / np.linalg.norm([0.6, -0.79, 0.2])),
+         view_direction=(0.0, 1.0, 0.0))
+    key, twin = key_objects()
+    activate(key)
+    before = control_points(key), scene_snapshot()
+    mid = _pixel(main, KeyStrand(before[0], kind="cubic").evaluate([0.6])[0])
+    pixels = [(mid[0] + dx, mid[1]) for dx in np.linspace(0.0, 50.0, 26)]
+    context = _Context(area, sidebar)
+    op = _operator(bpy.types.HAIR_OT_comb_key)
+    comb_key.HAIR_OT_comb_key.invoke(op, context, None)
+    return _drag_events(op, context, main, pixels, finish=finish), key, twin, before, op
+
+
+def test_the_modal_comb_bends_the_key_under_the_mouse_and_keeps_its_length(scalp):
+    result, key, twin, (before, _), op = _comb_drag(scalp, ('LEFTMOUSE', 'RELEASE'))
+    assert result == {'FINISHED'}, op.reports
+    after = control_points(key)
+    assert np.abs(after - before).max() > 0.005
+    assert abs(length_of(after) - length_of(before)) < 1e-5 * length_of(before)
+    np.testing.assert_allclose(control_points(twin), after * [-1.0, 1.0, 1.0], atol=1e-6)
+    assert op.key == key.name and len(op.stroke) == 26
+
+
+def test_esc_while_combing_puts_the_key_and_its_twin_back(scalp):
+    result, key, twin, (_, snapshot), op = _comb_drag(scalp, ('ESC', 'PRESS'))
+    assert result == {'CANCELLED'}
+    assert scene_snapshot() == snapshot
