@@ -16,9 +16,12 @@ from bpy.props import BoolProperty
 # any few of them) differ clearly whatever their number.
 GOLDEN = 0.6180339887498949
 SATURATION, VALUE = 0.65, 0.95
-# With a key active, the other wisps fade toward grey and half transparent, its own is drawn
-# opaque and lightened toward white.
-DIM_MIX, DIM_ALPHA = 0.6, 0.35
+# With a key active, its wisp is drawn opaque and lightened toward white, the others darkened
+# toward a dim grey and see-through. Darkened, not only see-through: where hundreds of hairs
+# overlap, their alphas add up to opaque and a faded wisp drawn that way showed as bright as
+# the active one (measured on 3,000 hairs: the active wisp 1.1 times as bright as the
+# brightest faded one; darkened, 2.4 times).
+DIM_MIX, DIM_GREY, DIM_ALPHA = 0.7, 0.15, 0.35
 HIGHLIGHT_MIX = 0.35
 LOST = (0.5, 0.5, 0.5, 0.5)   # a hair whose key no longer exists (deleted since Generate)
 
@@ -51,9 +54,8 @@ def strand_colors(wisp, n_keys, active=None):
     out[valid] = palette[wisp[valid]]
     if active is not None and 0 <= active < n_keys:
         mine = wisp == active
-        grey = out[:, :3].mean(axis=1, keepdims=True)
         others = ~mine & valid
-        out[others, :3] = (1 - DIM_MIX) * out[others, :3] + DIM_MIX * grey[others]
+        out[others, :3] = (1 - DIM_MIX) * out[others, :3] + DIM_MIX * DIM_GREY
         out[others, 3] = DIM_ALPHA
         out[mine, :3] = (1 - HIGHLIGHT_MIX) * out[mine, :3] + HIGHLIGHT_MIX
         out[mine, 3] = 1.0
@@ -87,10 +89,40 @@ def _hair_key(hair):
     return (hair.data.session_uid, preview._revisions.get(hair.data.session_uid, 0), len(hair.data.points))
 
 
-def _draw():
+def draw_hair(hair, n_keys, active, viewport_size):
+    """Draw a hair object's strands in wisp colours into the current GPU frame buffer (its
+    view and projection set by the caller: the viewport's, in the draw handler)."""
     import gpu
     from gpu_extras.batch import batch_for_shader
     from . import blender_curves
+    key = _hair_key(hair)
+    cached = _cache.get("strands")
+    if cached is None or cached[0] != key:
+        cached = _cache["strands"] = (key, blender_curves.curves_to_strands(hair))
+        _cache.pop("batch", None)
+    strands = cached[1]
+    if strands.num_strands == 0:
+        return
+    shader = gpu.shader.from_builtin('POLYLINE_FLAT_COLOR')
+    made = _cache.get("batch")
+    if made is None or made[:3] != (key, active, n_keys):
+        colors = point_colors(strands.counts, strand_colors(strands.wisp, n_keys, active))
+        batch = batch_for_shader(shader, 'LINES', {"pos": strands.points, "color": colors},
+                                 indices=segment_indices(strands.counts))
+        made = _cache["batch"] = (key, active, n_keys, batch)
+    gpu.state.blend_set('ALPHA')
+    gpu.state.depth_test_set('LESS_EQUAL')
+    with gpu.matrix.push_pop():
+        gpu.matrix.multiply_matrix(hair.matrix_world)
+        shader.bind()
+        shader.uniform_float("viewportSize", tuple(viewport_size))
+        shader.uniform_float("lineWidth", 1.5)
+        made[3].draw(shader)
+    gpu.state.depth_test_set('NONE')
+    gpu.state.blend_set('NONE')
+
+
+def _draw():
     from .hair import existing_hair
     from .scene_data import find_scalp, key_objects
     context = bpy.context
@@ -100,36 +132,10 @@ def _draw():
     hair = existing_hair(scalp) if scalp is not None else None
     if hair is None or not hair.visible_get():
         return
-    key = _hair_key(hair)
-    cached = _cache.get("strands")
-    if cached is None or cached[0] != key:
-        cached = _cache["strands"] = (key, blender_curves.curves_to_strands(hair))
-        _cache.pop("batch", None)
-    strands = cached[1]
-    if strands.num_strands == 0:
-        return
     keys = key_objects(scalp)
     obj = context.active_object
-    active = keys.index(obj) if obj in keys else None
-    shader = gpu.shader.from_builtin('POLYLINE_FLAT_COLOR')
-    made = _cache.get("batch")
-    if made is None or made[:3] != (key, active, len(keys)):
-        colors = point_colors(strands.counts, strand_colors(strands.wisp, len(keys), active))
-        batch = batch_for_shader(shader, 'LINES', {"pos": strands.points, "color": colors},
-                                 indices=segment_indices(strands.counts))
-        made = _cache["batch"] = (key, active, len(keys), batch)
-    region = context.region
-    gpu.state.blend_set('ALPHA')
-    gpu.state.depth_test_set('LESS_EQUAL')
-    gpu.matrix.push()
-    gpu.matrix.multiply_matrix(hair.matrix_world)
-    shader.bind()
-    shader.uniform_float("viewportSize", (region.width, region.height))
-    shader.uniform_float("lineWidth", 1.5)
-    made[3].draw(shader)
-    gpu.matrix.pop()
-    gpu.state.depth_test_set('NONE')
-    gpu.state.blend_set('NONE')
+    draw_hair(hair, len(keys), keys.index(obj) if obj in keys else None,
+              (context.region.width, context.region.height))
 
 
 def _redraw_views():

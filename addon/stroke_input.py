@@ -212,6 +212,24 @@ def ray_cast_scalp(context, region, rv3d, scalp, coord):
     return np.array(scalp.matrix_world @ loc, np.float64) if ok else None
 
 
+def draw_strips(strips, color, viewport_size, width=2.0):
+    """World polylines in one colour into the current GPU frame buffer (the view set by the
+    caller)."""
+    import gpu
+    from gpu_extras.batch import batch_for_shader
+    if not strips:
+        return
+    shader = gpu.shader.from_builtin('POLYLINE_UNIFORM_COLOR')
+    gpu.state.blend_set('ALPHA')
+    shader.bind()
+    shader.uniform_float("viewportSize", tuple(viewport_size))
+    shader.uniform_float("lineWidth", width)
+    shader.uniform_float("color", color)
+    for strip in strips:
+        batch_for_shader(shader, 'LINE_STRIP', {"pos": strip}).draw(shader)
+    gpu.state.blend_set('NONE')
+
+
 class PreviewLines:
     """Lines drawn over the 3D viewport while a tool drags (a gpu draw handler). In
     background mode (no GPU drawing) it keeps the lines and draws nothing."""
@@ -227,20 +245,8 @@ class PreviewLines:
         self.strips = [np.asarray(s, np.float32) for s in strips if s is not None and len(s) >= 2]
 
     def _draw(self):
-        import gpu
-        from gpu_extras.batch import batch_for_shader
-        if not self.strips:
-            return
-        shader = gpu.shader.from_builtin('POLYLINE_UNIFORM_COLOR')
         region = bpy.context.region
-        gpu.state.blend_set('ALPHA')
-        shader.bind()
-        shader.uniform_float("viewportSize", (region.width, region.height))
-        shader.uniform_float("lineWidth", 2.0)
-        shader.uniform_float("color", self.color)
-        for strip in self.strips:
-            batch_for_shader(shader, 'LINE_STRIP', {"pos": strip}).draw(shader)
-        gpu.state.blend_set('NONE')
+        draw_strips(self.strips, self.color, (region.width, region.height))
 
     def remove(self):
         if self._handle is not None:

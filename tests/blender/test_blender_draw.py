@@ -525,3 +525,96 @@ def test_esc_while_combing_puts_the_key_and_its_twin_back(scalp):
     result, key, twin, (_, snapshot), op = _comb_drag(scalp, ('ESC', 'PRESS'))
     assert result == {'CANCELLED'}
     assert scene_snapshot() == snapshot
+
+
+# --- what the GPU draws ----------------------------------------------------------------
+
+_GPU_SCRIPT = r"""
+import importlib, json, os, bpy, bmesh, gpu
+import numpy as np
+from mathutils import Matrix, Vector
+bpy.context.preferences.extensions.repos.new(name="t", module="t", custom_directory=os.path.join(os.environ["BLENDER_USER_RESOURCES"], "r"), source='USER')
+assert bpy.ops.extensions.package_install_files(filepath=ZIP, repo="t", enable_on_install=True) == {'FINISHED'}
+overlay = importlib.import_module("bl_ext.t.keystrand_hair.addon.overlay_wisps")
+stroke_input = importlib.import_module("bl_ext.t.keystrand_hair.addon.stroke_input")
+for o in list(bpy.data.objects):
+    bpy.data.objects.remove(o)
+mesh = bpy.data.meshes.new("Scalp"); bm = bmesh.new(); bmesh.ops.create_uvsphere(bm, u_segments=24, v_segments=12, radius=0.1)
+bm.to_mesh(mesh); bm.free()
+scalp = bpy.data.objects.new("Scalp", mesh); bpy.context.scene.collection.objects.link(scalp)
+scalp.keystrand_hair.symmetry = 'NONE'
+for root, side in STROKES:
+    bpy.context.view_layer.objects.active = scalp
+    s = np.linspace(0.0, 1.0, 60)
+    p = np.stack([side * (0.05 * np.sin(np.pi * s) + 0.01 * s), np.zeros_like(s), -0.18 * s], 1) + np.asarray(root)
+    assert bpy.ops.hair.draw_key_strand(stroke=[{"name": "", "location": tuple(q), "mouse": (0.0, 0.0)} for q in p],
+                                        pixel_size=5e-4) == {'FINISHED'}
+bpy.context.view_layer.objects.active = scalp
+scalp.keystrand_hair.count = 3000
+assert bpy.ops.hair.generate() == {'FINISHED'}
+hair = scalp.keystrand_hair.hair_object
+gpu.init()
+W, H = 160, 160
+eye, target = Vector((0.0, -0.7, -0.05)), Vector((0.0, 0.0, -0.05))
+z = (eye - target).normalized(); x = Vector((0.0, 0.0, 1.0)).cross(z).normalized(); y = z.cross(x)
+camera = Matrix(((x[0], y[0], z[0], eye[0]), (x[1], y[1], z[1], eye[1]), (x[2], y[2], z[2], eye[2]), (0, 0, 0, 1)))
+f, near, far = 1.0 / np.tan(0.35), 0.01, 100.0
+proj = Matrix(((f, 0, 0, 0), (0, f, 0, 0), (0, 0, (far + near) / (near - far), 2 * far * near / (near - far)), (0, 0, -1, 0)))
+off = gpu.types.GPUOffScreen(W, H)
+
+def render(draw):
+    with off.bind():
+        fb = gpu.state.active_framebuffer_get()
+        fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+        gpu.matrix.load_matrix(camera.inverted())
+        gpu.matrix.load_projection_matrix(proj)
+        draw()
+        return np.array(fb.read_color(0, 0, W, H, 4, 0, 'FLOAT').to_list(), np.float32).reshape(-1, 4)
+
+out = {"backend": gpu.platform.backend_type_get()}
+for active in (None, 1):
+    pixels = render(lambda: overlay.draw_hair(hair, 3, active, (W, H)))
+    drawn = pixels[pixels[:, 3] > 0.2]
+    expected = overlay.strand_colors(np.arange(3), 3, active)
+    # Each drawn pixel's nearest wisp colour (premultiplied by nothing: blending onto black).
+    rgb = drawn[:, :3] / np.maximum(drawn[:, 3:], 1e-6)
+    nearest = np.argmin(np.abs(rgb[:, None, :] - expected[None, :, :3]).max(axis=2), axis=1)
+    close = np.abs(rgb - expected[nearest, :3]).max(axis=1) < 0.06
+    out[str(active)] = {"drawn": int(len(drawn)), "close": float(close.mean()),
+                        "per_wisp": np.bincount(nearest[close], minlength=3).tolist(),
+                        "shown": [float(drawn[nearest == w, :3].sum(axis=1).mean()) if (nearest == w).any() else 0.0
+                                  for w in range(3)]}
+line = np.array([[-0.05, 0.0, -0.05], [0.05, 0.0, -0.05]], np.float32)
+pixels = render(lambda: stroke_input.draw_strips([line], (1.0, 0.5, 0.0, 1.0), (W, H)))
+out["strip"] = int((pixels[:, 3] > 0.5).sum())
+print("RESULT", json.dumps(out))
+"""
+
+
+@pytest.mark.skipif(not hasattr(__import__("gpu"), "init"),
+                    reason="this Blender cannot draw without a window (its gpu module has no init())")
+def test_the_overlay_and_the_preview_draw_their_colours(extension_zip, tmp_path):
+    """In a fresh process with the GPU started for background use: the overlay draws the hair,
+    each wisp in its own colour, the active key's opaque and the others faded; the stroke
+    preview draws its line."""
+    import json
+    import os
+    import subprocess
+    import sys
+    strokes = [((0.1, 0.0, 0.0), 1.0), ((-0.1, 0.0, 0.0), -1.0), ((0.0, -0.1, 0.0), 1.0)]
+    code = f"ZIP = {str(extension_zip[0])!r}\nSTROKES = {strokes!r}\n" + _GPU_SCRIPT
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"), PYTHONPATH="")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300,
+                          cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout.split("RESULT ", 1)[1])
+    plain, lit = out["None"], out["1"]
+    assert plain["drawn"] > 200, out
+    assert plain["close"] > 0.9, out  # the pixels are the wisps' colours
+    assert min(plain["per_wisp"]) > 20, out  # every wisp is seen
+    assert lit["close"] > 0.9, out
+    # The active key's hairs stand out: brighter on screen than the faded others.
+    assert lit["shown"][1] > 1.5 * max(lit["shown"][0], lit["shown"][2]), out
+    print(f"\n[figure] overlay brightness, active wisp / brightest faded one: "
+          f"{lit['shown'][1] / max(lit['shown'][0], lit['shown'][2]):.2f}")
+    assert out["strip"] > 50, out
