@@ -48,8 +48,10 @@ class GroomParams:
     color, color_variation, color_variation_point   base RGB when a key has none; each channel
                      + U(-1,1)·variation per strand and + U(-1,1)·variation_point per point
     alpha_start, alpha_tip   alpha 1 up to fraction alpha_start, then linear to alpha_tip
-    parting          None or {'point': (3,), 'normal': (3,)}: roots on the normal's side are
-                     group 1, the others group 0 (used when the scalp has no groups)
+    parting          None or {'point': (3,), 'normal': (3,)[, 'end': (3,)]}: roots on the
+                     normal's side are group 1, the others group 0 (used when the scalp has no
+                     groups); with 'end', only roots in front of it (toward `front`) are parted,
+                     so a side parting can stop at the crown instead of running down the back
     clump, clump_shape   wisps: each strand is pulled toward its wisp's key by clump·σ^clump_shape
                      of the way (σ the fraction of the key's length: 0 at the root, loose, up to
                      clump at the tip, tight); clump 0 = no pull
@@ -134,10 +136,15 @@ class GroomParams:
         self.alpha_start = _float("alpha_start", self.alpha_start, 0.0, 1.0)
         self.alpha_tip = _float("alpha_tip", self.alpha_tip, 0.0, 1.0)
         if self.parting is not None:
-            if not isinstance(self.parting, dict) or set(self.parting) != {"point", "normal"}:
-                raise InputError("parting: expected null or {'point': [x, y, z], 'normal': [x, y, z]}")
-            self.parting = {"point": _vec("parting point", self.parting["point"]),
-                            "normal": _vec("parting normal", self.parting["normal"], nonzero=True)}
+            if (not isinstance(self.parting, dict) or not {"point", "normal"} <= set(self.parting)
+                    or not set(self.parting) <= {"point", "normal", "end"}):
+                raise InputError("parting: expected null or {'point': [x, y, z], 'normal': [x, y, z]} with an "
+                                 "optional 'end': [x, y, z]")
+            parting = {"point": _vec("parting point", self.parting["point"]),
+                       "normal": _vec("parting normal", self.parting["normal"], nonzero=True)}
+            if "end" in self.parting:
+                parting["end"] = _vec("parting end", self.parting["end"])
+            self.parting = parting
 
     def to_dict(self):
         d = dataclasses.asdict(self)

@@ -127,9 +127,11 @@ class Preset:
         off_scalp = sorted(set(missed) | set(np.flatnonzero(far).tolist()))
         params = p.replace(up=tuple(up), front=tuple(front))
         if p.parting is not None:
-            params = params.replace(parting={
-                "point": tuple(frame.to_scalp(p.parting["point"])),
-                "normal": tuple(frame.normal_to_scalp(p.parting["normal"]))})
+            parting = {"point": tuple(frame.to_scalp(p.parting["point"])),
+                       "normal": tuple(frame.normal_to_scalp(p.parting["normal"]))}
+            if "end" in p.parting:
+                parting["end"] = tuple(frame.to_scalp(p.parting["end"]))
+            params = params.replace(parting=parting)
         return Placement(self.name, keys, frame, params, _collapsed(roots, COLLAPSE_FRACTION * frame.size),
                          tuple(off_scalp))
 
@@ -343,8 +345,11 @@ def save_preset(path, keys, params, name=None, description="", scalp=None):
         keys = canonical
         parting = params.parting
         if parting is not None:
-            parting = {"point": tuple(frame.to_canonical(parting["point"])),
-                       "normal": tuple(frame.normal_to_canonical(parting["normal"]))}
+            mapped = {"point": tuple(frame.to_canonical(parting["point"])),
+                      "normal": tuple(frame.normal_to_canonical(parting["normal"]))}
+            if "end" in parting:
+                mapped["end"] = tuple(frame.to_canonical(parting["end"]))
+            parting = mapped
         params = params.replace(up=CANONICAL_UP, front=CANONICAL_FRONT, parting=parting)
     specs = []
     for k in keys:

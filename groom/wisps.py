@@ -80,7 +80,12 @@ def root_groups_for(scalp, tri, bary, points, params):
     if params.parting is not None:
         p = np.asarray(params.parting["point"])
         n = np.asarray(params.parting["normal"])
-        return ((points - p) @ n > 0).astype(np.int32)
+        parted = (points - p) @ n > 0
+        if "end" in params.parting:
+            # Only in front of the end point: the parting stops there (at the crown).
+            front = np.asarray(params.front, dtype=np.float64)
+            parted &= (points - np.asarray(params.parting["end"])) @ front >= 0
+        return parted.astype(np.int32)
     return np.zeros(len(points), np.int32)
 
 

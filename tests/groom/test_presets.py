@@ -31,15 +31,19 @@ def test_short_intelligent_is_one_key_with_the_intelligence_flag():
     assert len(p.key_specs) == 1 and p.params.intelligence
 
 
-def test_parted_has_two_groups_that_do_not_mix(scalp):
+def test_parted_has_two_groups_that_do_not_mix_in_front_of_the_crown(scalp):
     p = load_preset("parted")
     keys = p.keys_on(scalp)
     assert {k.group for k in keys} == {0, 1}
     r = generate(scalp, keys, p.params.replace(count=2000))
     groups = np.array([k.group for k in keys])
-    side = (r.roots - p.params.parting["point"]) @ p.params.parting["normal"] > 0
+    parting = p.params.parting
+    side = (r.roots - parting["point"]) @ parting["normal"] > 0
+    in_front = (r.roots - parting["end"]) @ np.asarray(p.params.front) >= 0
     used = groups[r.guides]
-    assert ((used == side[:, None]) | (r.guide_weights == 0)).all()
+    assert ((used == (side & in_front)[:, None]) | (r.guide_weights == 0)).all()
+    # The parting stops at the crown: behind it both sides follow the same keys.
+    assert (side & ~in_front).any() and (used[side & ~in_front] == 0).all()
 
 
 def test_keys_land_on_the_nearest_point_of_another_scalp(scalp):
