@@ -9,8 +9,6 @@ partner follows); release keeps the result, Esc or a right-click puts the key (a
 partner) back exactly. Called with a stroke (the brush's path, world points), as scripts and
 tests do, it makes the same steps without a viewport.
 """
-import traceback
-
 import numpy as np
 import bpy
 from bpy.props import FloatProperty, StringProperty
@@ -18,7 +16,7 @@ from bpy.types import Operator
 
 from . import key_points, mirror, scene_data, stroke_input
 from .scene_data import SceneError, find_scalp
-from .transaction import transaction
+from .transaction import report_internal_error, transaction
 
 
 def _errors():
@@ -213,10 +211,7 @@ class HAIR_OT_comb_key(stroke_input.StrokeView, Operator):
             self.report({'ERROR'}, str(e))
             return {'CANCELLED'}
         except Exception as e:
-            traceback.print_exception(e)
-            self.report({'ERROR'}, f"Internal error in {self.bl_label} ({type(e).__name__}: {e}); "
-                                   "nothing was changed. Please report this, with the traceback printed "
-                                   "in Blender's system console")
+            report_internal_error(self, e)
             return {'CANCELLED'}
         if not changed:
             self.report({'WARNING'}, f"The comb did not reach key strand {key.name!r}: "

@@ -10,7 +10,6 @@ right-click cancels and leaves nothing. Called with a stroke (world points), as 
 tests do, it makes the same key without a viewport.
 """
 import time
-import traceback
 
 import numpy as np
 import bpy
@@ -19,7 +18,7 @@ from bpy.types import Operator
 
 from . import head, mirror, scene_data, stroke_input
 from .scene_data import SceneError, find_scalp
-from .transaction import transaction
+from .transaction import report_internal_error, transaction
 
 SURFACES = (
     ('VIEW', "View Plane", "Draw on the plane through the root that faces you: the strand keeps the "
@@ -228,10 +227,7 @@ class HAIR_OT_draw_key_strand(stroke_input.StrokeView, Operator):
             self.report({'ERROR'}, str(e))
             return {'CANCELLED'}
         except Exception as e:
-            traceback.print_exception(e)
-            self.report({'ERROR'}, f"Internal error in {self.bl_label} ({type(e).__name__}: {e}); "
-                                   "nothing was changed. Please report this, with the traceback printed "
-                                   "in Blender's system console")
+            report_internal_error(self, e)
             return {'CANCELLED'}
         for obj in context.selected_objects:
             obj.select_set(False)

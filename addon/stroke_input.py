@@ -30,7 +30,7 @@ HEAD_PIXELS = 250.0
 class HAIR_PG_stroke_point(PropertyGroup):
     location: FloatVectorProperty(name="Location", size=3, subtype='XYZ',
                                   description="Where the point lies in the world")
-    mouse: FloatVectorProperty(name="Mouse", size=2, subtype='XYZ',
+    mouse: FloatVectorProperty(name="Mouse", size=2,
                                description="Where the point lies on the screen (region pixels)")
 
 
@@ -128,17 +128,19 @@ def screen_to_world(region, rv3d, coords, depth_world):
 
 
 def view_of(op):
-    """(view direction (3,), eye (3,) or None) in the world, from the operator's properties."""
-    from groom.stroke import _direction
-    direction = _direction("view direction", tuple(op.view_direction))
+    """(unit view direction (3,), eye (3,) or None) in the world, from the operator's
+    properties; SceneError for a view direction of zero."""
+    direction = np.array(op.view_direction, np.float64)
+    length = float(np.linalg.norm(direction))
+    if not (np.isfinite(direction).all() and length > 0):
+        raise SceneError(f"view_direction: expected a direction, got {tuple(op.view_direction)}")
     eye = np.array(op.view_eye, np.float64) if op.view_perspective else None
-    return direction, eye
+    return direction / length, eye
 
 
 def stroke_points(op, context):
-    """The operator's stroke as world points (n,3). Screen strokes need the 3D viewport they
-    were drawn in (their depth is the first point's ray hit on the scalp, found by the
-    caller); SceneError without one."""
+    """The operator's stroke: world points (n,3), or for a screen stroke its mouse positions
+    (n,2), which need the 3D viewport they were drawn in (SceneError without one)."""
     n = len(op.stroke)
     if n == 0:
         raise SceneError("The stroke is empty: drag in the viewport, or give the stroke's points")

@@ -618,3 +618,25 @@ def test_the_overlay_and_the_preview_draw_their_colours(extension_zip, tmp_path)
     print(f"\n[figure] overlay brightness, active wisp / brightest faded one: "
           f"{lit['shown'][1] / max(lit['shown'][0], lit['shown'][2]):.2f}")
     assert out["strip"] > 50, out
+
+
+def test_an_edit_in_edit_mode_is_mirrored_as_it_happens(scalp):
+    scalp.keystrand_hair.symmetry = 'X'
+    draw(hanging_stroke())
+    a, b = key_objects()
+    for obj in bpy.context.selected_objects:
+        obj.select_set(False)
+    a.select_set(True)
+    activate(a)
+    assert bpy.ops.object.mode_set(mode='EDIT') == {'FINISHED'}
+    try:
+        tip = a.data.splines[0].bezier_points[-1]  # the edit curve's, in edit mode
+        for v in (tip.co, tip.handle_left, tip.handle_right):
+            v.x += 0.02
+        a.data.update_tag()
+        bpy.context.view_layer.update()
+        np.testing.assert_allclose(control_points(b), control_points(a) * [-1.0, 1.0, 1.0], atol=1e-6)
+    finally:
+        bpy.ops.object.mode_set(mode='OBJECT')
+    np.testing.assert_allclose(control_points(b)[-1], control_points(a)[-1] * [-1.0, 1.0, 1.0], atol=1e-6)
+    assert control_points(a)[-1][0] > hanging_stroke()[-1][0] + 0.01, "the edit did not stay"
