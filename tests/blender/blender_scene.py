@@ -34,6 +34,27 @@ def make_scalp(name="Scalp", radius=0.1, segments=24, rings=12, uv=False):
     return obj
 
 
+def mesh_arrays(obj):
+    """(vertices (V,3) float64, triangles (T,3) int64) of a mesh object in its own
+    coordinates, the triangles in the order the extension reads them, worked out here on
+    its own, one triangle at a time: each starts at its corner of the smallest loop index
+    (its winding kept), sorted by face, then by loops. (Blender's own order of loop
+    triangles, and the corner each starts at, changed between versions.)"""
+    mesh = obj.data
+    mesh.calc_loop_triangles()
+    v = np.empty(len(mesh.vertices) * 3)
+    mesh.vertices.foreach_get("co", v)
+    corners = []
+    for tri in mesh.loop_triangles:
+        loops = list(tri.loops)
+        first = loops.index(min(loops))
+        corners.append((tri.polygon_index, loops[first:] + loops[:first]))
+    corners.sort()
+    loop_vertex = [loop.vertex_index for loop in mesh.loops]
+    t = np.array([[loop_vertex[i] for i in loops] for _, loops in corners], np.int64).reshape(-1, 3)
+    return v.reshape(-1, 3), t
+
+
 def make_camera(location=(0.0, -0.7, 0.05), rotation=(1.5708, 0.0, 0.0), lens=50.0):
     cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
     cam.data.lens = lens

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import bpy
 
-from blender_scene import activate, make_scalp, scene_snapshot
+from blender_scene import activate, make_scalp, mesh_arrays
 from test_blender_errors import Boom, raise_on, run_failing
 
 
@@ -23,17 +23,6 @@ RAMP_TOLERANCE = 2e-5
 
 def ext_module(extension, name):
     return importlib.import_module(f"{extension.__name__}.addon.{name}")
-
-
-def mesh_arrays(obj):
-    """(vertices (V,3), triangles (T,3)) of a mesh object in its own coordinates."""
-    mesh = obj.data
-    mesh.calc_loop_triangles()
-    v = np.empty(len(mesh.vertices) * 3)
-    mesh.vertices.foreach_get("co", v)
-    t = np.empty(len(mesh.loop_triangles) * 3, np.int64)
-    mesh.loop_triangles.foreach_get("vertices", t)
-    return v.reshape(-1, 3), t.reshape(-1, 3)
 
 
 def carry(points, source, target):

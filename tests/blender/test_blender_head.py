@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import bpy
 
-from blender_scene import activate, make_scalp, scene_snapshot
+from blender_scene import activate, make_scalp, mesh_arrays, scene_snapshot
 
 DATA = pathlib.Path(__file__).resolve().parents[3] / "shared" / "data"
 REAL_HEADS = ("neuralhaircut_final_scalp.obj", "usc_head_model.obj")
@@ -30,13 +30,7 @@ def mesh_surface(obj):
     """groom.Scalp of a mesh object in its own coordinates, read here with foreach_get
     (not through the extension)."""
     from groom import Scalp
-    mesh = obj.data
-    mesh.calc_loop_triangles()
-    v = np.empty(len(mesh.vertices) * 3)
-    mesh.vertices.foreach_get("co", v)
-    t = np.empty(len(mesh.loop_triangles) * 3, np.int64)
-    mesh.loop_triangles.foreach_get("vertices", t)
-    return Scalp(v.reshape(-1, 3), t.reshape(-1, 3))
+    return Scalp(*mesh_arrays(obj))
 
 
 def key_roots(scalp):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import bpy
 
-from blender_scene import activate, make_camera, make_scalp
+from blender_scene import activate, make_camera, make_scalp, mesh_arrays
 
 KEY_POINTS = [(0.0, 0.0, 0.1), (0.07, 0.0, 0.07), (-0.07, 0.0, 0.07), (0.0, -0.07, 0.07), (0.0, 0.07, 0.07)]
 
@@ -30,13 +30,7 @@ def add_keys(scalp, points=KEY_POINTS, shape='STRAIGHT'):
 def read_scalp_arrays(obj):
     """groom.Scalp from the mesh, read here with foreach_get (not through the extension)."""
     from groom import Scalp
-    mesh = obj.data
-    mesh.calc_loop_triangles()
-    v = np.empty(len(mesh.vertices) * 3)
-    mesh.vertices.foreach_get("co", v)
-    t = np.empty(len(mesh.loop_triangles) * 3, np.int64)
-    mesh.loop_triangles.foreach_get("vertices", t)
-    return Scalp(v.reshape(-1, 3), t.reshape(-1, 3))
+    return Scalp(*mesh_arrays(obj))
 
 
 def read_key(obj):
@@ -141,6 +135,66 @@ def test_generate_writes_the_curves_groom_computes(clean):
     np.testing.assert_array_equal(got["strand_rgba"][:, :3], expected.color)
     np.testing.assert_array_equal(got["alpha"], expected.alpha)
     np.testing.assert_array_equal(got["wisp"], expected.wisp)
+
+
+def _mixed_faces():
+    """A mesh of triangles, quads and an ngon: a UV sphere (quads, triangle fans at the
+    poles) with a hexagon beside it."""
+    import bmesh
+    obj = make_scalp(segments=12, rings=6)
+    bm = bmesh.new()
+    bm.from_mesh(obj.data)
+    angles = np.linspace(0.0, 2.0 * np.pi, 7)[:-1]
+    bm.faces.new([bm.verts.new((0.3 + 0.05 * np.cos(a), 0.05 * np.sin(a), 0.0)) for a in angles])
+    bm.to_mesh(obj.data)
+    bm.free()
+    assert {len(p.vertices) for p in obj.data.polygons} == {3, 4, 6}
+    return obj
+
+
+def test_the_scalp_s_triangles_are_read_in_the_mesh_s_own_order(clean):
+    """Not in Blender's order of loop triangles (it changed between versions): each from its
+    corner of the smallest loop index, sorted by face and loops, as worked out here apart."""
+    scene_data = ext_module(clean, "scene_data")
+    obj = _mixed_faces()
+    v, t = mesh_arrays(obj)
+    for depsgraph in (None, bpy.context.evaluated_depsgraph_get()):
+        surface = scene_data.read_scalp(obj, depsgraph)
+        np.testing.assert_array_equal(surface.vertices, v)
+        np.testing.assert_array_equal(surface.triangles, t)
+
+
+def test_a_shuffled_order_of_loop_triangles_grows_the_same_hair(clean):
+    """Blender 5.3 lists the loop triangles of 5.0 in another order, each started at another
+    corner: read the extension's way, both grow the same hair (read as listed, they would not)."""
+    from groom import GroomParams, KeyStrand, Scalp, generate
+    scene_data = ext_module(clean, "scene_data")
+    obj = make_scalp()
+    mesh = obj.data
+    mesh.calc_loop_triangles()
+    n_t = len(mesh.loop_triangles)
+    loops, polygons = np.empty(3 * n_t, np.int64), np.empty(n_t, np.int64)
+    mesh.loop_triangles.foreach_get("loops", loops)
+    mesh.loop_triangles.foreach_get("polygon_index", polygons)
+    loop_vertex = np.array([lp.vertex_index for lp in mesh.loops], np.int64)
+    loops = loops.reshape(-1, 3)
+    rs = np.random.default_rng(7)
+    order = rs.permutation(n_t)
+    turn = rs.integers(0, 3, n_t)[:, None]
+    shuffled = np.take_along_axis(loops[order], (turn + np.arange(3)) % 3, axis=1)
+    v, _ = mesh_arrays(obj)
+    key = KeyStrand(np.array([[0.0, 0.0, 0.1], [0.02, 0.0, 0.14], [0.06, 0.0, 0.12], [0.09, 0.0, 0.02]]))
+    params = GroomParams(count=300, collision=False)
+
+    def grown(triangles):
+        return generate(Scalp(v, triangles), [key], params).strands.points
+
+    canonical = scene_data.canonical_triangles(loops, polygons, loop_vertex)
+    np.testing.assert_array_equal(scene_data.canonical_triangles(shuffled, polygons[order], loop_vertex), canonical)
+    np.testing.assert_array_equal(grown(canonical),
+                                  grown(scene_data.canonical_triangles(shuffled, polygons[order], loop_vertex)))
+    assert not np.array_equal(grown(loop_vertex[loops]), grown(loop_vertex[shuffled])), \
+        "the order of the triangles does not matter: the test proves nothing"
 
 
 def test_generate_again_refills_the_same_hair_object(clean):
