@@ -121,7 +121,10 @@ def _edited_keys(depsgraph):
     for update in depsgraph.updates:
         ident = update.id.original if update.id is not None else None
         if isinstance(ident, bpy.types.Object):
-            if ident.type == 'CURVE' and ident.keystrand_mirror is not None:
+            # Objects are also listed when only their relations were re-evaluated (another
+            # object was added); only a moved or reshaped key needs its partner rewritten.
+            moved = update.is_updated_transform or update.is_updated_geometry
+            if moved and ident.type == 'CURVE' and ident.keystrand_mirror is not None:
                 out[ident.session_uid] = ident
         elif isinstance(ident, bpy.types.Curve):
             curves.add(ident.session_uid)
