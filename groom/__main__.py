@@ -133,7 +133,7 @@ def generate_main(args):
     scalp = load_obj(args.scalp) if args.scalp else default_scalp()
     collider = _collider(args)
     start = time.perf_counter()
-    placement = preset.place_keys(scalp, up, front)
+    placement = preset.place_keys(scalp, up, front, collider)
     warning = placement.warning()
     if warning:
         print(f"warning: {warning}", file=sys.stderr)

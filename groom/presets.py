@@ -75,7 +75,7 @@ class Preset:
             raise InputError(f"preset {name!r}: no keys; a preset needs at least one key strand")
         self.key_specs = [_check_spec(name, i, s) for i, s in enumerate(key_specs)]
 
-    def place_keys(self, scalp, up=None, front=None):
+    def place_keys(self, scalp, up=None, front=None, collider=None):
         """Place the key strands on `scalp` (a groom.Scalp): a Placement.
 
         up, front: the head's axes in the scalp's own space (None: the preset parameters'
@@ -90,7 +90,14 @@ class Preset:
         the hairstyle's (a 30 cm bob is 30 cm on any adult, whose heads differ by some
         10 %), and so are the parameters' radius and tolerance, which scaling the keys alone
         would make too thin or too coarse for the hair. A head in other units shows up as a
-        size far from the bundled one, which Placement.warning reports."""
+        size far from the bundled one, which Placement.warning reports.
+
+        collider: the head the hair stays out of (collide.as_collider), or None. The keys
+        were drawn on the bundled head; a real scalp can lie under its head's surface (the
+        USC scalp does, by up to 7 mm), which puts the keys drawn along it inside the head.
+        Those keys are moved out of it as generation moves hair (collide.resolve_strands on
+        the key's path, then a cubic spline through the result) and listed in
+        Placement.lifted, so the preset's own keys raise no "key inside the head" warning."""
         p = self.params
         up = p.up if up is None else up
         front = p.front if front is None else front
@@ -132,12 +139,13 @@ class Preset:
             if "end" in p.parting:
                 parting["end"] = tuple(frame.to_scalp(p.parting["end"]))
             params = params.replace(parting=parting)
+        lifted = () if collider is None else _lift_out(keys, collider, params)
         return Placement(self.name, keys, frame, params, _collapsed(roots, COLLAPSE_FRACTION * frame.size),
-                         tuple(off_scalp))
+                         tuple(off_scalp), lifted)
 
-    def keys_on(self, scalp, up=None, front=None):
-        """The key strands of place_keys(scalp, up, front), [KeyStrand]."""
-        return self.place_keys(scalp, up, front).keys
+    def keys_on(self, scalp, up=None, front=None, collider=None):
+        """The key strands of place_keys(scalp, up, front, collider), [KeyStrand]."""
+        return self.place_keys(scalp, up, front, collider).keys
 
     def to_dict(self):
         return {"name": self.name, "description": self.description, "params": self.params.to_dict(),
@@ -157,11 +165,12 @@ class Placement:
     off_scalp    (i, ...): keys whose anchor the scalp does not reach (beyond its edge, far
                  from its surface, or in a direction it does not cover), placed on the
                  nearest scalp point instead
+    lifted       (i, ...): keys moved out of the collider given to place_keys
     """
 
-    def __init__(self, preset_name, keys, frame, params, collapsed, off_scalp):
+    def __init__(self, preset_name, keys, frame, params, collapsed, off_scalp, lifted=()):
         self.preset_name, self.keys, self.frame, self.params = preset_name, keys, frame, params
-        self.collapsed, self.off_scalp = collapsed, off_scalp
+        self.collapsed, self.off_scalp, self.lifted = collapsed, off_scalp, tuple(lifted)
 
     def warning(self):
         """A few sentences for an artist when the placement is doubtful, else None."""
@@ -197,6 +206,44 @@ def _listing(indices):
 
 def _vector(v):
     return "(" + ", ".join(f"{x:.3g}" for x in np.where(np.abs(v) < 5e-4, 0.0, v)) + ")"
+
+
+# Points along a key when it is moved out of the collider (its spline passes through them:
+# more make the spline follow the walk's turns and ask the adaptive resolution for more
+# cylinders, measured: 25 keep wavy on the USC head at the points it has without collision).
+_LIFT_SAMPLES = 25
+_LIFT_CLEARANCE = 0.01
+
+
+def _lift_out(keys, collider, params):
+    """Keys (in place in the list) that pass through the collider, moved out of it: the
+    indices of those moved."""
+    from .collide import as_collider, keys_inside, resolve_strands, with_clearance
+    from .keys import arc_length_tables
+    radii = np.array([params.radius if k.root_radius is None else k.root_radius for k in keys])
+    collider = with_clearance(as_collider(collider), float(radii.max()) + params.collision_margin)
+    found = keys_inside(collider, arc_length_tables(keys, 257), np.array([k.root for k in keys]), radii)
+    # Clear of the head by a hundredth of its size (2 mm on a head): the spline between the
+    # points it passes through must not dip back in.
+    margin = params.collision_margin + _LIFT_CLEARANCE * collider.size
+    for hit in found:
+        k = keys[hit.key]
+        path = k.resample(_LIFT_SAMPLES)
+        out, _, _ = resolve_strands(collider, path, np.array([len(path)]), np.full(len(path), radii[hit.key]),
+                                    margin, threads=1, dtype=np.float64)
+        keys[hit.key] = KeyStrand(_spline_through(out), "cubic", k.color, k.root_radius, k.group)
+    return tuple(h.key for h in found)
+
+
+def _spline_through(points):
+    """Piecewise cubic control rows [P0, H0out, H1in, P1, ...] through the points, handles
+    from their neighbours (Catmull-Rom), so the curve passes through every point."""
+    ext = np.vstack([2 * points[0] - points[1], points, 2 * points[-1] - points[-2]])
+    rows = [points[0]]
+    for i in range(len(points) - 1):  # a few dozen points of one key
+        a, b, c, d = ext[i], ext[i + 1], ext[i + 2], ext[i + 3]
+        rows += [b + (c - a) / 6.0, c - (d - b) / 6.0, c]
+    return np.array(rows)
 
 
 def _collapsed(roots, distance):

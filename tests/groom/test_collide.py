@@ -142,10 +142,25 @@ def test_every_preset_ends_outside_the_bundled_head_with_its_lengths_and_roots(n
 
 def test_the_real_usc_head_and_scalp_keep_the_hair_outside(usc):
     collider, scalp = usc
-    placement = load_preset("wavy").place_keys(scalp, up=(0, 1, 0), front=(0, 0, 1))
+    placement = load_preset("wavy").place_keys(scalp, up=(0, 1, 0), front=(0, 0, 1), collider=collider)
     params = placement.params.replace(count=2000)
     result = generate(scalp, placement.keys, params, collider=collider)
     _check_groom(collider, result, generate(scalp, placement.keys, params.replace(collision=False)), params)
+    # The USC scalp lies up to 7 mm under its head: the preset's keys drawn along it were
+    # lifted out, so none is reported inside.
+    assert placement.lifted and result.collision.keys_inside == ()
+    unlifted = load_preset("wavy").place_keys(scalp, up=(0, 1, 0), front=(0, 0, 1))
+    assert generate(scalp, unlifted.keys, params.replace(count=200), collider=collider).collision.keys_inside
+
+
+def test_preset_keys_on_the_bundled_head_need_no_lifting(head):
+    scalp = default_scalp()
+    for name in list_presets():
+        lifted = load_preset(name).place_keys(scalp, collider=head)
+        plain = load_preset(name).place_keys(scalp)
+        assert lifted.lifted == ()
+        for a, b in zip(lifted.keys, plain.keys):
+            np.testing.assert_array_equal(a.points, b.points)
 
 
 def test_incremental_update_equals_full_regeneration_with_collision_and_clump(head):
