@@ -99,14 +99,34 @@ def preview_timings(scalp, runs=5):
     return out
 
 
+def _uv_sphere(segments, rings, radius):
+    """(vertices, faces) of a UV sphere: the poles, `rings` - 1 rings of `segments`, quads
+    between the rings and triangles at the poles, numbered here (bmesh's primitive numbers
+    its vertices differently in 4.2 than in 5.x: the same scene would not be the same mesh)."""
+    theta = np.pi * np.arange(1, rings) / rings
+    phi = 2.0 * np.pi * np.arange(segments) / segments
+    ring = np.stack([np.outer(np.sin(theta), np.cos(phi)), np.outer(np.sin(theta), np.sin(phi)),
+                     np.repeat(np.cos(theta)[:, None], segments, axis=1)], axis=2).reshape(-1, 3)
+    vertices = np.vstack([[0.0, 0.0, 1.0], ring, [0.0, 0.0, -1.0]]) * radius
+    j = np.arange(segments)
+    nxt = (j + 1) % segments
+    bottom = len(vertices) - 1
+    faces = [(0, 1 + a, 1 + b) for a, b in zip(j, nxt)]
+    for i in range(rings - 2):
+        a, b = 1 + i * segments + j, 1 + i * segments + nxt
+        faces += list(zip(a, a + segments, b + segments, b))
+    last = 1 + (rings - 2) * segments
+    faces += [(bottom, last + b, last + a) for a, b in zip(j, nxt)]
+    return vertices, [tuple(int(i) for i in f) for f in faces]
+
+
 def demo_scene(preset="wavy", count=100_000):
-    """A scalp with a preset's keys and a camera, for scripted benchmarks: returns the scalp."""
-    import bmesh
+    """A scalp with a preset's keys and a camera, for scripted benchmarks: returns the scalp.
+    The same mesh in every Blender, so their images can be compared."""
     mesh = bpy.data.meshes.new("Bench Scalp")
-    bm = bmesh.new()
-    bmesh.ops.create_uvsphere(bm, u_segments=48, v_segments=24, radius=0.1)
-    bm.to_mesh(mesh)
-    bm.free()
+    vertices, faces = _uv_sphere(48, 24, 0.1)
+    mesh.from_pydata(vertices.tolist(), [], faces)
+    mesh.update()
     scalp = bpy.data.objects.new("Bench Scalp", mesh)
     bpy.context.scene.collection.objects.link(scalp)
     _active(scalp)

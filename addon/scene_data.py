@@ -86,21 +86,19 @@ def _mesh_of(obj, depsgraph=None):
         source.to_mesh_clear()
 
 
-def canonical_triangles(loops, polygons, loop_vertex):
-    """Vertex indices (T,3) int64 of a mesh's loop triangles in an order of the mesh's own,
-    not Blender's: loops (T,3) the triangles' corners (loop indices), polygons (T,) the face
-    each comes from, loop_vertex (L,) each loop's vertex.
+def canonical_triangles(triangles):
+    """A mesh's triangles (T,3) vertex indices, int64, in an order of its vertices' own, not
+    Blender's: each starts at its smallest vertex index (a rotation: the winding is kept),
+    and they are sorted by their vertex indices.
 
     Blender versions list the same loop triangles in different orders and start them at
-    different corners (5.3 against 5.0), and roots are sampled triangle by triangle, so the
-    same scene would grow other hair. Here each triangle starts at its corner of the
-    smallest loop index (a rotation: the winding is kept) and the triangles are sorted by
-    face, then by their loops."""
-    loops = np.asarray(loops, np.int64).reshape(-1, 3)
-    start = np.argmin(loops, axis=1)
-    loops = np.take_along_axis(loops, (start[:, None] + np.arange(3)) % 3, axis=1)
-    order = np.lexsort((loops[:, 2], loops[:, 1], loops[:, 0], np.asarray(polygons, np.int64)))
-    return np.asarray(loop_vertex, np.int64)[loops[order]]
+    different corners, and the same UV sphere made in 5.0 and 5.3 numbers its faces and
+    loops differently over the same vertices; roots are sampled triangle by triangle, so the
+    same scene grew other hair in each."""
+    t = np.asarray(triangles, np.int64).reshape(-1, 3)
+    start = np.argmin(t, axis=1)
+    t = np.take_along_axis(t, (start[:, None] + np.arange(3)) % 3, axis=1)
+    return t[np.lexsort((t[:, 2], t[:, 1], t[:, 0]))]
 
 
 def _mesh_geometry(mesh):
@@ -108,13 +106,9 @@ def _mesh_geometry(mesh):
     mesh.calc_loop_triangles()
     vertices = np.empty(len(mesh.vertices) * 3, np.float64)
     mesh.vertices.foreach_get("co", vertices)
-    n_t = len(mesh.loop_triangles)
-    loops, polygons = np.empty(n_t * 3, np.int32), np.empty(n_t, np.int32)
-    mesh.loop_triangles.foreach_get("loops", loops)
-    mesh.loop_triangles.foreach_get("polygon_index", polygons)
-    loop_vertex = np.empty(len(mesh.loops), np.int32)
-    mesh.loops.foreach_get("vertex_index", loop_vertex)
-    return vertices.reshape(-1, 3), canonical_triangles(loops, polygons, loop_vertex)
+    triangles = np.empty(len(mesh.loop_triangles) * 3, np.int32)
+    mesh.loop_triangles.foreach_get("vertices", triangles)
+    return vertices.reshape(-1, 3), canonical_triangles(triangles)
 
 
 def read_scalp(obj, depsgraph=None):

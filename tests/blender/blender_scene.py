@@ -37,22 +37,20 @@ def make_scalp(name="Scalp", radius=0.1, segments=24, rings=12, uv=False):
 def mesh_arrays(obj):
     """(vertices (V,3) float64, triangles (T,3) int64) of a mesh object in its own
     coordinates, the triangles in the order the extension reads them, worked out here on
-    its own, one triangle at a time: each starts at its corner of the smallest loop index
-    (its winding kept), sorted by face, then by loops. (Blender's own order of loop
-    triangles, and the corner each starts at, changed between versions.)"""
+    its own, one triangle at a time: each starts at its smallest vertex index (its winding
+    kept), sorted by vertex indices. (Blender's own order of loop triangles, the corner each
+    starts at, and the numbering of faces and loops of the same primitive changed between
+    versions.)"""
     mesh = obj.data
     mesh.calc_loop_triangles()
     v = np.empty(len(mesh.vertices) * 3)
     mesh.vertices.foreach_get("co", v)
-    corners = []
+    triangles = []
     for tri in mesh.loop_triangles:
-        loops = list(tri.loops)
-        first = loops.index(min(loops))
-        corners.append((tri.polygon_index, loops[first:] + loops[:first]))
-    corners.sort()
-    loop_vertex = [loop.vertex_index for loop in mesh.loops]
-    t = np.array([[loop_vertex[i] for i in loops] for _, loops in corners], np.int64).reshape(-1, 3)
-    return v.reshape(-1, 3), t
+        corners = list(tri.vertices)
+        first = corners.index(min(corners))
+        triangles.append(corners[first:] + corners[:first])
+    return v.reshape(-1, 3), np.array(sorted(triangles), np.int64).reshape(-1, 3)
 
 
 def make_camera(location=(0.0, -0.7, 0.05), rotation=(1.5708, 0.0, 0.0), lens=50.0):

@@ -154,7 +154,7 @@ def _mixed_faces():
 
 def test_the_scalp_s_triangles_are_read_in_the_mesh_s_own_order(clean):
     """Not in Blender's order of loop triangles (it changed between versions): each from its
-    corner of the smallest loop index, sorted by face and loops, as worked out here apart."""
+    smallest vertex, sorted by vertices, as worked out here apart."""
     scene_data = ext_module(clean, "scene_data")
     obj = _mixed_faces()
     v, t = mesh_arrays(obj)
@@ -172,16 +172,12 @@ def test_a_shuffled_order_of_loop_triangles_grows_the_same_hair(clean):
     obj = make_scalp()
     mesh = obj.data
     mesh.calc_loop_triangles()
-    n_t = len(mesh.loop_triangles)
-    loops, polygons = np.empty(3 * n_t, np.int64), np.empty(n_t, np.int64)
-    mesh.loop_triangles.foreach_get("loops", loops)
-    mesh.loop_triangles.foreach_get("polygon_index", polygons)
-    loop_vertex = np.array([lp.vertex_index for lp in mesh.loops], np.int64)
-    loops = loops.reshape(-1, 3)
+    listed = np.empty(3 * len(mesh.loop_triangles), np.int64)
+    mesh.loop_triangles.foreach_get("vertices", listed)
+    listed = listed.reshape(-1, 3)
     rs = np.random.default_rng(7)
-    order = rs.permutation(n_t)
-    turn = rs.integers(0, 3, n_t)[:, None]
-    shuffled = np.take_along_axis(loops[order], (turn + np.arange(3)) % 3, axis=1)
+    turn = rs.integers(0, 3, len(listed))[:, None]
+    shuffled = np.take_along_axis(listed[rs.permutation(len(listed))], (turn + np.arange(3)) % 3, axis=1)
     v, _ = mesh_arrays(obj)
     key = KeyStrand(np.array([[0.0, 0.0, 0.1], [0.02, 0.0, 0.14], [0.06, 0.0, 0.12], [0.09, 0.0, 0.02]]))
     params = GroomParams(count=300, collision=False)
@@ -189,11 +185,10 @@ def test_a_shuffled_order_of_loop_triangles_grows_the_same_hair(clean):
     def grown(triangles):
         return generate(Scalp(v, triangles), [key], params).strands.points
 
-    canonical = scene_data.canonical_triangles(loops, polygons, loop_vertex)
-    np.testing.assert_array_equal(scene_data.canonical_triangles(shuffled, polygons[order], loop_vertex), canonical)
-    np.testing.assert_array_equal(grown(canonical),
-                                  grown(scene_data.canonical_triangles(shuffled, polygons[order], loop_vertex)))
-    assert not np.array_equal(grown(loop_vertex[loops]), grown(loop_vertex[shuffled])), \
+    canonical = scene_data.canonical_triangles(listed)
+    np.testing.assert_array_equal(scene_data.canonical_triangles(shuffled), canonical)
+    np.testing.assert_array_equal(grown(canonical), grown(scene_data.canonical_triangles(shuffled)))
+    assert not np.array_equal(grown(listed), grown(shuffled)), \
         "the order of the triangles does not matter: the test proves nothing"
 
 
