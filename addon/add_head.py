@@ -4,8 +4,9 @@ without a mesh of one's own (3D Viewport > Add > Hair Head, and the Hair panel).
 
 The scalp is a child of the head with an identity parent inverse: its coordinates are the
 head's, so the scalp lies on the head wherever the head is moved, and `scalp.parent` is the
-head, which is also the scalp's Collider. The scalp is drawn as a wire and left out of renders: it coincides with the head's
-surface, and two coincident faces flicker in the viewport.
+head, which is also the scalp's Collider. The scalp is drawn as a wire and left out of
+renders: it coincides with the head's surface, and two coincident faces flicker in the
+viewport.
 """
 import numpy as np
 import bpy

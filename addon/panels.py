@@ -171,4 +171,5 @@ class IMAGE_PT_keystrand_hair_preview(_HairPanel, Panel):
 
 
 CLASSES = (VIEW3D_PT_keystrand_hair, VIEW3D_PT_keystrand_hair_shape, VIEW3D_PT_keystrand_hair_look,
-           VIEW3D_PT_keystrand_hair_wisps, VIEW3D_PT_keystrand_hair_collision, VIEW3D_PT_keystrand_hair_key, VIEW3D_PT_keystrand_hair_preview, IMAGE_PT_keystrand_hair_preview)
+           VIEW3D_PT_keystrand_hair_wisps, VIEW3D_PT_keystrand_hair_collision, VIEW3D_PT_keystrand_hair_key,
+           VIEW3D_PT_keystrand_hair_preview, IMAGE_PT_keystrand_hair_preview)

@@ -209,7 +209,8 @@ def test_a_key_through_the_head_is_reported_as_a_warning_and_left_as_drawn(clean
     out = "".join(capfd.readouterr())
     warnings = [line for line in out.splitlines() if line.startswith("Warning:")]
     assert len(warnings) == 1, out
-    assert "key 3" in warnings[0] and repr(keys[3].name) in warnings[0] and repr(head.name) in warnings[0], warnings
+    (warning,) = warnings
+    assert "key 3" in warning and repr(keys[3].name) in warning and repr(head.name) in warning, warning
     np.testing.assert_array_equal(np.array([p.co for p in bp]), drawn)
     # The hair it guides is still kept out.
     d, _, allowed = depths(hair, head)
