@@ -138,11 +138,12 @@ def test_fitted_segments_join_smoothly():
         assert cos > 1 - 1e-12, (j, cos)
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(hs.lists(hs.tuples(*[hs.floats(-1.0, 1.0)] * 3), min_size=2, max_size=12),
-       hs.floats(1e-3, 0.05))
-def test_any_stroke_is_fitted_within_the_tolerance(control, tolerance):
-    """Random polylines (turns, hairpins, repeats) made into strokes: the fit holds."""
+       hs.floats(1e-3, 0.05), hs.sampled_from([None, (0.0, 0.0, 1.0), (1.0, 0.0, 0.0)]))
+def test_any_stroke_is_fitted_within_the_tolerance(control, tolerance, tangent):
+    """Random polylines (turns, hairpins, repeats, a root tangent along, across or against
+    the stroke) made into strokes: the fit holds both ways."""
     corners = np.array(control) * 0.1
     p = np.vstack([np.linspace(a, b, 8, endpoint=False) for a, b in zip(corners[:-1], corners[1:])]
                   + [corners[-1:]])
@@ -150,10 +151,25 @@ def test_any_stroke_is_fitted_within_the_tolerance(control, tolerance):
         with pytest.raises(InputError, match="drag away from the root"):
             stroke.fit_bezier(p, tolerance)
         return
-    c = stroke.fit_bezier(p, tolerance, first_tangent=(0.0, 0.0, 1.0))
+    c = stroke.fit_bezier(p, tolerance, first_tangent=tangent)
     assert np.isfinite(c).all()
     assert stroke.curve_deviation(c, p).max() <= tolerance * (1 + 1e-9)
     assert stroke.distance_to_polyline(stroke.sample_cubic(c, 64), p).max() <= 1.05 * tolerance
+
+
+def test_a_stroke_that_ends_where_it_began_is_fitted():
+    """Out and back within two tolerances: the end's tangent has no far point to read."""
+    p = np.linspace([0.0, 0.0, 0.0], [0.0, 0.0, 0.025], 8, endpoint=False)
+    p = np.vstack([p, p[::-1][:-1], [[0.0, 0.0, 0.0]]])
+    c = stroke.fit_bezier(p, 0.015625)
+    assert np.isfinite(c).all() and stroke.curve_deviation(c, p).max() <= 0.015625
+
+
+def test_a_root_tangent_against_the_stroke_keeps_the_overshoot_within_the_tolerance():
+    p = np.linspace([0.0, -0.1, 0.1], [0.0, -0.1, -0.1], 40)
+    c = stroke.fit_bezier(p, 1e-3, first_tangent=(0.0, 0.0, 1.0))
+    np.testing.assert_allclose(leave(c), (0.0, 0.0, 1.0), atol=1e-12)
+    assert stroke.distance_to_polyline(stroke.sample_cubic(c, 256), p).max() <= 1.05e-3
 
 
 @pytest.mark.parametrize("tolerance", [0.0, -1.0, float("nan"), "fine"])
