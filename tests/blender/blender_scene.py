@@ -34,23 +34,27 @@ def make_scalp(name="Scalp", radius=0.1, segments=24, rings=12, uv=False):
     return obj
 
 
+def in_mesh_order(triangles):
+    """Triangles (T,3) in the order the extension reads a mesh's triangles, worked out here
+    on its own, one triangle at a time: each starts at its smallest vertex index (its
+    winding kept), sorted by vertex indices. (Blender's own order of loop triangles, the
+    corner each starts at, and the numbering of faces and loops of the same primitive
+    changed between versions.)"""
+    out = []
+    for corners in np.asarray(triangles).tolist():
+        first = corners.index(min(corners))
+        out.append(corners[first:] + corners[:first])
+    return np.array(sorted(out), np.int64).reshape(-1, 3)
+
+
 def mesh_arrays(obj):
-    """(vertices (V,3) float64, triangles (T,3) int64) of a mesh object in its own
-    coordinates, the triangles in the order the extension reads them, worked out here on
-    its own, one triangle at a time: each starts at its smallest vertex index (its winding
-    kept), sorted by vertex indices. (Blender's own order of loop triangles, the corner each
-    starts at, and the numbering of faces and loops of the same primitive changed between
-    versions.)"""
+    """(vertices (V,3) float64, triangles (T,3) int64 in_mesh_order) of a mesh object in its
+    own coordinates."""
     mesh = obj.data
     mesh.calc_loop_triangles()
     v = np.empty(len(mesh.vertices) * 3)
     mesh.vertices.foreach_get("co", v)
-    triangles = []
-    for tri in mesh.loop_triangles:
-        corners = list(tri.vertices)
-        first = corners.index(min(corners))
-        triangles.append(corners[first:] + corners[:first])
-    return v.reshape(-1, 3), np.array(sorted(triangles), np.int64).reshape(-1, 3)
+    return v.reshape(-1, 3), in_mesh_order([list(tri.vertices) for tri in mesh.loop_triangles])
 
 
 def make_camera(location=(0.0, -0.7, 0.05), rotation=(1.5708, 0.0, 0.0), lens=50.0):
