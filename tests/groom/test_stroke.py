@@ -94,9 +94,8 @@ def test_fit_stays_within_the_tolerance_of_the_stroke(tolerance, noise):
     c = stroke.fit_bezier(p, tolerance)
     assert c.shape[1] == 3 and (len(c) - 1) % 3 == 0
     assert stroke.curve_deviation(c, p).max() <= tolerance
-    # And the other way: the curve keeps to the stroke (checked at a few points per chord
-    # by the fit, everywhere here, so a little over).
-    assert stroke.distance_to_polyline(stroke.sample_cubic(c, 256), p).max() <= 1.05 * tolerance
+    # And the other way: the curve keeps to the stroke.
+    assert stroke.distance_to_polyline(stroke.sample_cubic(c, 256), p).max() <= tolerance
     np.testing.assert_array_equal(c[[0, -1]], p[[0, -1]])
 
 
@@ -115,7 +114,8 @@ def test_fit_of_a_straight_stroke_is_one_straight_segment():
 
 def test_fit_of_points_on_a_cubic_recovers_one_segment():
     ctrl = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.05], [0.08, 0.0, 0.06], [0.1, 0.0, -0.05]])
-    p = KeyStrand(ctrl, kind="cubic").evaluate(np.linspace(0.0, 1.0, 200))
+    # Dense enough that the first and last chords give the end tangents to within the tolerance.
+    p = KeyStrand(ctrl, kind="cubic").evaluate(np.linspace(0.0, 1.0, 400))
     c = stroke.fit_bezier(p, 1e-4)
     assert len(c) == 4
     assert stroke.curve_deviation(c, p).max() <= 1e-4
@@ -154,7 +154,7 @@ def test_any_stroke_is_fitted_within_the_tolerance(control, tolerance, tangent):
     c = stroke.fit_bezier(p, tolerance, first_tangent=tangent)
     assert np.isfinite(c).all()
     assert stroke.curve_deviation(c, p).max() <= tolerance * (1 + 1e-9)
-    assert stroke.distance_to_polyline(stroke.sample_cubic(c, 64), p).max() <= 1.05 * tolerance
+    assert stroke.distance_to_polyline(stroke.sample_cubic(c, 256), p).max() <= tolerance
 
 
 def test_a_stroke_that_ends_where_it_began_is_fitted():
@@ -169,7 +169,7 @@ def test_a_root_tangent_against_the_stroke_keeps_the_overshoot_within_the_tolera
     p = np.linspace([0.0, -0.1, 0.1], [0.0, -0.1, -0.1], 40)
     c = stroke.fit_bezier(p, 1e-3, first_tangent=(0.0, 0.0, 1.0))
     np.testing.assert_allclose(leave(c), (0.0, 0.0, 1.0), atol=1e-12)
-    assert stroke.distance_to_polyline(stroke.sample_cubic(c, 256), p).max() <= 1.05e-3
+    assert stroke.distance_to_polyline(stroke.sample_cubic(c, 256), p).max() <= 1e-3
 
 
 @pytest.mark.parametrize("tolerance", [0.0, -1.0, float("nan"), "fine"])
