@@ -31,14 +31,14 @@ def read_inputs(scalp, depsgraph=None):
     return scene_data.read_scalp(scalp, depsgraph), scene_data.read_keys(scalp)
 
 
-def read_collider(scalp, depsgraph=None, scalp_data=None):
+def read_collider(scalp, depsgraph=None, scalp_data=None, collision=None):
     """The groom.Collider of the scalp's Collider object in the scalp's space, named after
     the object, or None when Collision is off. Made once per mesh and place (groom caches
     it: building one takes a second or two), so Generate pressed again reuses it; groom
     widens it for the hair's clearance as it does for the command line, so both grow the
-    same hair."""
+    same hair. collision: as scene_data.read_collider's."""
     from groom.collide import collider_for
-    mesh = scene_data.read_collider(scalp, depsgraph, scalp_data)
+    mesh = scene_data.read_collider(scalp, depsgraph, scalp_data, collision)
     if mesh is None:
         return None
     vertices, triangles, name = mesh

@@ -49,9 +49,11 @@ def scalp_axes(obj):
     return scene_to_mesh(obj, (up, front))
 
 
-def place_preset(preset, scalp_obj, scalp_data):
-    """A groom.Preset's keys on a scalp (groom.Placement: keys, frame, collapsed, warning()):
-    the preset's anchors go through the head frame fitted to `scalp_data` (the groom.Scalp
-    read from `scalp_obj`) with the scalp's own axes, the ones Generate grows hair with."""
+def place_preset(preset, scalp_obj, scalp_data, collider=None):
+    """A groom.Preset's keys on a scalp (groom.Placement: keys, frame, collapsed, lifted,
+    warning()): the preset's anchors go through the head frame fitted to `scalp_data` (the
+    groom.Scalp read from `scalp_obj`) with the scalp's own axes, the ones Generate grows
+    hair with; keys that would lie inside `collider` (a groom.Collider or None: a scalp
+    under its head's surface) are lifted out of it."""
     up, front = scalp_axes(scalp_obj)
-    return preset.place_keys(scalp_data, up=up, front=front)
+    return preset.place_keys(scalp_data, up=up, front=front, collider=collider)

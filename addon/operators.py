@@ -287,6 +287,7 @@ class HAIR_OT_load_preset(Operator):
     def execute(self, context):
         from groom import load_preset
         from . import head
+        from .hair import read_collider
         from .properties import dict_to_settings
         scalp = _scalp_or_report(self, context)
         if scalp is None:
@@ -297,8 +298,11 @@ class HAIR_OT_load_preset(Operator):
             return {'CANCELLED'}
         try:
             preset = load_preset(source)
-            scalp_data = scene_data.read_scalp(scalp, context.evaluated_depsgraph_get())
-            placement = head.place_preset(preset, scalp, scalp_data)
+            depsgraph = context.evaluated_depsgraph_get()
+            scalp_data = scene_data.read_scalp(scalp, depsgraph)
+            # The preset's Collision is the scalp's once loaded: its keys are placed with it.
+            collider = read_collider(scalp, depsgraph, scalp_data, preset.params.collision)
+            placement = head.place_preset(preset, scalp, scalp_data, collider)
             keys = placement.keys
             with transaction() as tx:
                 tx.keep_settings(scalp)
@@ -320,7 +324,8 @@ class HAIR_OT_load_preset(Operator):
         except Exception as e:
             report_internal_error(self, e)
             return {'CANCELLED'}
-        self.report({'INFO'}, f"Loaded preset {preset.name!r}: {len(keys)} key strands")
+        lifted = f", {len(placement.lifted)} lifted out of {collider.name!r}" if placement.lifted else ""
+        self.report({'INFO'}, f"Loaded preset {preset.name!r}: {len(keys)} key strands{lifted}")
         warning = placement.warning()
         if warning is not None:
             self.report({'WARNING'}, warning)

@@ -159,13 +159,14 @@ def collider_signature(scalp):
     return obj.session_uid, data, place
 
 
-def read_collider(scalp, depsgraph=None, scalp_data=None):
+def read_collider(scalp, depsgraph=None, scalp_data=None, collision=None):
     """(vertices (V,3), triangles (T,3), name) of the scalp's collider in the scalp's own
     space (where groom works), modifiers applied when a depsgraph is given; None when
-    Collision is off. scalp_data: the scalp's groom.Scalp when already read (a scalp that is
-    its own collider is then not read twice). Raises SceneError for a collider that is not
-    a mesh; groom judges its faces."""
-    if not scalp.keystrand_hair.collision:
+    collision is off (collision: True or False, or None for the scalp's Collision setting).
+    scalp_data: the scalp's groom.Scalp when already read (a scalp that is its own collider
+    is then not read twice). Raises SceneError for a collider that is not a mesh; groom
+    judges its faces."""
+    if not (scalp.keystrand_hair.collision if collision is None else collision):
         return None
     obj = collider_object(scalp)
     if obj.type != 'MESH':

@@ -229,6 +229,33 @@ def test_a_groom_with_no_key_through_the_head_gives_no_warning(clean, capfd):
     assert "Warning:" not in out and "moved out of 'Hair Head'" in out, out
 
 
+def test_load_preset_lifts_its_keys_out_of_a_head_the_scalp_lies_under(clean, capfd):
+    """A scalp a little inside its head (as real scans are): the preset's keys, drawn along
+    the bundled head, would pass through it; Load Preset lifts them out, so Generate has no
+    key to warn about."""
+    from groom import generate as groom_generate, load_preset
+    head_module, hair_module = ext_module(clean, "head"), ext_module(clean, "hair")
+    head, scalp = add_head()
+    scalp.scale = (0.985, 0.985, 0.985)  # some 1.5 mm under the head's surface
+    bpy.context.view_layer.update()
+    capfd.readouterr()
+    assert bpy.ops.hair.load_preset(preset="wavy") == {'FINISHED'}
+    out = "".join(capfd.readouterr())
+    assert "lifted out of 'Hair Head'" in out, out
+    generate(scalp, 300)
+    out = "".join(capfd.readouterr())
+    assert "Warning:" not in out, out
+    # The lift is what keeps the warning away: placed as drawn, keys pass through the head.
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    surface = ext_module(clean, "scene_data").read_scalp(scalp, depsgraph)
+    up, front = head_module.scalp_axes(scalp)
+    preset = load_preset("wavy")
+    drawn = preset.place_keys(surface, up=up, front=front)
+    result = groom_generate(surface, drawn.keys, drawn.params.replace(count=200),
+                            collider=hair_module.read_collider(scalp, depsgraph, surface))
+    assert result.collision.keys_inside, "no key of the preset passes through the head: the test proves nothing"
+
+
 class _Recorder:
     """Stands in for the window manager and the workspace: notes every call."""
 
