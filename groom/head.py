@@ -56,18 +56,24 @@ _MAX_AXIS_RATIO = 2.5
 _BENT_BY_BELOW = 1.6
 
 
+def vector3(name, v):
+    """`v` as a float64 3-vector; InputError naming `name` for anything else or a NaN/Inf."""
+    try:
+        a = np.asarray(v, dtype=np.float64)
+    except (TypeError, ValueError):
+        a = np.full(1, np.nan)
+    if a.shape != (3,) or not np.isfinite(a).all():
+        raise InputError(f"{name}: expected 3 finite numbers, got {v!r}")
+    return a
+
+
 def head_axes(up, front, names=("up", "front")):
     """Unit (up, front), front made perpendicular to up; InputError naming the argument
     (`names`, e.g. the command line's options) for anything that is not two finite,
     non-zero, non-parallel 3-vectors."""
     out = []
     for name, v in zip(names, (up, front)):
-        try:
-            a = np.asarray(v, dtype=np.float64)
-        except (TypeError, ValueError):
-            a = np.full(1, np.nan)
-        if a.shape != (3,) or not np.isfinite(a).all():
-            raise InputError(f"{name}: expected 3 finite numbers, got {v!r}")
+        a = vector3(name, v)
         length = float(np.linalg.norm(a))
         if not length > 1e-300:
             raise InputError(f"{name}: must not be the zero vector")

@@ -22,6 +22,8 @@ import numpy as np
 
 from hairio import InputError, check_finite
 
+from .head import vector3
+
 #: Mirror planes by the head-frame axis they are perpendicular to.
 AXES = ("X", "Y", "Z")
 
@@ -59,18 +61,10 @@ def _points(name, points, minimum=1):
     return check_finite(name, p.astype(np.float64))
 
 
-def _vector(name, v):
-    try:
-        a = np.asarray(v, dtype=np.float64)
-    except (TypeError, ValueError):
-        a = np.full(1, np.nan)
-    if a.shape != (3,) or not np.isfinite(a).all():
-        raise InputError(f"{name}: expected 3 finite numbers, got {v!r}")
-    return a
 
 
 def _direction(name, v):
-    a = _vector(name, v)
+    a = vector3(name, v)
     length = float(np.linalg.norm(a))
     if not length > 1e-300:
         raise InputError(f"{name}: must not be the zero vector")
@@ -103,7 +97,7 @@ def _view_rays(points, view_direction, eye):
     the view direction itself (orthographic)."""
     if eye is None:
         return np.broadcast_to(view_direction, points.shape)
-    eye = _vector("eye", eye)
+    eye = vector3("eye", eye)
     rays = points - eye
     length = np.linalg.norm(rays, axis=1)
     if not (length > 0).all():
@@ -116,7 +110,7 @@ def project_to_plane(points, root, view_direction, eye=None):
     way the viewer looks), each point moved along its view ray: from `eye` for a perspective
     view, along the view direction when eye is None. Returns (n,3)."""
     p = _points("stroke", points)
-    root = _vector("root", root)
+    root = vector3("root", root)
     d = _direction("view_direction", view_direction)
     rays = _view_rays(p, d, eye)
     facing = rays @ d
@@ -182,7 +176,7 @@ def project_to_shell(points, scalp, offset, view_direction, eye=None):
         reach = float(np.linalg.norm(corners, axis=1).max() + np.linalg.norm(local, axis=1).max())
         origins = local - 2.0 * reach * rays
     else:
-        origins = np.broadcast_to(_vector("eye", eye) - centre, p.shape)
+        origins = np.broadcast_to(vector3("eye", eye) - centre, p.shape)
     t = _first_hits(np.ascontiguousarray(origins), np.ascontiguousarray(rays), a, b, c)
     on = np.isfinite(t)
     out = p.copy()
@@ -503,8 +497,8 @@ def comb(points, centre, delta, radius, kind="cubic", view_direction=None, lengt
     view_direction: distances are measured across it (the brush is a cylinder through the
     screen, as a brush on a 2-D view is); None measures them in 3-D. Returns (n,3)."""
     p = _points("key points", points, minimum=2)
-    centre = _vector("brush centre", centre)
-    delta = _vector("brush delta", delta)
+    centre = vector3("brush centre", centre)
+    delta = vector3("brush delta", delta)
     radius = _positive("brush radius", radius)
     groups, anchors, fixed = _groups(len(p), kind)
     target = curve_length(p, kind) if length is None else _positive("key length", length)

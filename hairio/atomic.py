@@ -10,22 +10,19 @@ from .validate import InputError
 
 
 @contextlib.contextmanager
-def atomic_write(path, mode="wb"):
-    """Yield a file object on a temporary name beside `path`; rename onto `path` on success.
-
-    The temporary file lives in the target's folder so the final os.replace is atomic
-    (same file system). On any exception the temporary file is removed and `path` is untouched.
-    """
+def _beside(path):
+    """Yield (fd, name) of a new private temporary file in `path`'s folder (so the final
+    os.replace is atomic: same file system); rename it onto `path` on success, with the
+    permissions open() would give. On any exception the temporary file is removed and
+    `path` is untouched."""
     path = os.fspath(path)
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise FileNotFoundError(f"output folder {folder!r} does not exist; create it first")
     fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=os.path.basename(path), dir=folder)
     try:
-        with os.fdopen(fd, mode) as f:
-            yield f
-        # mkstemp makes the file private (0600); give it the permissions open() would.
-        umask = os.umask(0)
+        yield fd, tmp
+        umask = os.umask(0)   # mkstemp made the file 0600
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
@@ -36,26 +33,20 @@ def atomic_write(path, mode="wb"):
 
 
 @contextlib.contextmanager
+def atomic_write(path, mode="wb"):
+    """Yield a file object on a temporary name beside `path`; rename onto `path` on success."""
+    with _beside(path) as (fd, _tmp), os.fdopen(fd, mode) as f:
+        yield f
+
+
+@contextlib.contextmanager
 def atomic_path(path):
     """Yield a temporary file name beside `path`, with the same extension (for libraries that
     choose the format by it and write by name); rename it onto `path` on success. On any
     exception the temporary file is removed and `path` is untouched."""
-    path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise FileNotFoundError(f"output folder {folder!r} does not exist; create it first")
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=os.path.basename(path), dir=folder)
-    os.close(fd)
-    try:
+    with _beside(path) as (fd, tmp):
+        os.close(fd)
         yield tmp
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
 
 
 def check_destination(path, what=None, expected_bytes=0):

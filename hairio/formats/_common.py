@@ -54,3 +54,15 @@ def check_strands(strands):
         raise InputError(f"strands: expected hairio.Strands, got {type(strands).__name__}; "
                          f"build one with Strands.from_arrays")
     return strands
+
+
+def check_export_options(path, kind, extensions, axes, axis, scale):
+    """The scale as a float after checking a groom export's file name, axis and scale."""
+    if os.path.splitext(os.fspath(path))[1].lower() not in extensions:
+        raise InputError(f"{path}: a {kind} file must end in {' or '.join(extensions)}")
+    if axis not in axes:
+        raise InputError(f"--axis {axis}: for {kind} choose one of {', '.join(axes)}")
+    scale = float(scale)
+    if not np.isfinite(scale) or scale <= 0:
+        raise InputError(f"--scale {scale}: must be a positive number")
+    return scale

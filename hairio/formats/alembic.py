@@ -24,7 +24,7 @@ from ..atomic import atomic_path
 from ..unreal import (GROOM_VERSION, GroomCurves, groom_layout, groom_properties,
                       parse_groom_properties, strands_from_groom)
 from ..validate import InputError
-from ._common import TOOL_NAME, TOOL_VERSION, check_strands
+from ._common import TOOL_NAME, TOOL_VERSION, check_export_options, check_strands
 from .axes import convert_strands, unconvert_points
 
 AXES = ("y-up", "z-up")
@@ -50,22 +50,11 @@ def available():
     return True
 
 
-def _check_options(path, axis, scale):
-    if not os.fspath(path).lower().endswith(".abc"):
-        raise InputError(f"{path}: an Alembic file must end in .abc")
-    if axis not in AXES:
-        raise InputError(f"--axis {axis}: for abc choose one of {', '.join(AXES)}")
-    scale = float(scale)
-    if not np.isfinite(scale) or scale <= 0:
-        raise InputError(f"--scale {scale}: must be a positive number")
-    return scale
-
-
 def write_abc(path, strands, axis="y-up", scale=1.0):
     """Write `strands` (and the guides they carry) as an Alembic groom, atomically. Points
     and widths are multiplied by `scale`; axis 'y-up' turns our Z-up frame (x, z, -y)."""
     s = check_strands(strands)
-    scale = _check_options(path, axis, scale)
+    scale = check_export_options(path, "Alembic", (".abc",), AXES, axis, scale)
     Abc, AbcGeom, imath = alembic_modules()
     s = convert_strands(s, "y-up" if axis == "y-up" else "none", scale)
     with atomic_path(path) as tmp:

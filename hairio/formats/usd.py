@@ -26,7 +26,7 @@ import numpy as np
 from ..atomic import atomic_path
 from ..unreal import GROOM_VERSION, GroomCurves, groom_layout, groom_properties, strands_from_groom
 from ..validate import InputError
-from ._common import TOOL_NAME, TOOL_VERSION, check_strands
+from ._common import TOOL_NAME, TOOL_VERSION, check_export_options, check_strands
 from .axes import convert_strands, unconvert_points
 
 AXES = ("z-up", "y-up")
@@ -70,23 +70,12 @@ def _add_blender_pxr():
     return False
 
 
-def _check_options(path, axis, scale):
-    if os.path.splitext(os.fspath(path))[1].lower() not in EXTENSIONS:
-        raise InputError(f"{path}: a USD file must end in {', '.join(EXTENSIONS)}")
-    if axis not in AXES:
-        raise InputError(f"--axis {axis}: for usd choose one of {', '.join(AXES)}")
-    scale = float(scale)
-    if not np.isfinite(scale) or scale <= 0:
-        raise InputError(f"--scale {scale}: must be a positive number")
-    return scale
-
-
 def write_usd(path, strands, axis="z-up", scale=1.0):
     """Write `strands` (and the guides they carry) as a USD groom, atomically. Points and
     widths are multiplied by `scale` and the stage says metersPerUnit = 1 / scale; axis
     'z-up' keeps our frame, 'y-up' turns it (x, z, -y) and says upAxis Y."""
     s = check_strands(strands)
-    scale = _check_options(path, axis, scale)
+    scale = check_export_options(path, "USD", EXTENSIONS, AXES, axis, scale)
     Usd, UsdGeom, Sdf, Vt, Gf = pxr_modules()
     if s.guides is not None and s.guides.keys.num_strands > _FLOAT32_EXACT_INT:
         raise InputError(f"guides: {s.guides.keys.num_strands} key strands; USD carries at most "
