@@ -382,14 +382,18 @@ class HAIR_OT_save_preset(Operator, ExportHelper):
 def export_to_file(hair, path, format, world_space=True, blender_exporter=None):
     """Write a hair object to `path` through the command line's own writers, with the same
     attributes (`python -m groom export` on the hair's strands writes the same file): numpy
-    formats through hairio.cli.export_strands, Alembic/USD (always world space: Blender's
-    exporters bake the object's matrix) through export_blender.export_hair. Root UVs are
-    the ones Generate stored from the scalp's UV map, when it has one."""
+    formats, and Alembic/USD where their libraries import (alembic3d; pxr, which Blender
+    ships), through hairio.cli.export_strands; Alembic/USD elsewhere through Blender's own
+    exporters (export_blender.export_hair), as the command line falls back too. Alembic and
+    USD are always world space. Root UVs are the ones Generate stored from the scalp's UV
+    map, when it has one."""
+    from hairio.cli import export_strands, groom_library_available
     from . import blender_curves, preview
     uv = blender_curves.root_uv(hair.data)
     if format in ('abc', 'usd'):
-        return blender_exporter.export_hair(hair, path, format, root_uv=uv)
-    from hairio.cli import export_strands
+        if not groom_library_available(format):
+            return blender_exporter.export_hair(hair, path, format, root_uv=uv)
+        world_space = True
     strands = preview.world_strands(hair) if world_space else blender_curves.curves_to_strands(hair)
     source = f"{os.path.basename(bpy.data.filepath) or 'unsaved .blend file'}: {hair.name}"
     return export_strands(strands, path, format, root_uv=uv, source=source)

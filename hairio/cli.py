@@ -48,7 +48,7 @@ def export_file(input_path, out, format=None, vertices_per_strand=32, pinned=2, 
 
     out = os.fspath(out)
     format, scale, axis = _check_request(out, format, scale, axis, guides is not None)
-    if format in BLENDER_FORMATS and not _groom_library(format):
+    if format in BLENDER_FORMATS and not groom_library_available(format):
         return _export_with_blender(input_path, out, format, scale, axis, root_uv)
     strands = read_strands(input_path)
     # Root UVs mean something to TressFX files and grooms; the others have no place for them.
@@ -60,7 +60,7 @@ def export_file(input_path, out, format=None, vertices_per_strand=32, pinned=2, 
                           source=os.path.basename(os.fspath(input_path)))
 
 
-def _groom_library(format):
+def groom_library_available(format):
     """Whether the library that writes `format` (abc: alembic3d, usd: pxr) imports here."""
     from .formats import alembic, usd
     try:

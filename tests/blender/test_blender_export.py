@@ -74,7 +74,7 @@ def _usda_body(path, name):
     as written."""
     text = re.sub(r'doc = "Blender v[^"]*"', 'doc = ""', path.read_text())
     text = text.replace(f'"{name}"', '"HAIR"')
-    return re.sub(r"(?<![\w:])" + re.escape(re.sub(r"\W", "_", name)) + r"(?![\w:])", "HAIR", text)
+    return re.sub(r"(?<![\w:-])" + re.escape(re.sub(r"\W", "_", name)) + r"(?![\w:])", "HAIR", text)
 
 
 def _alembic_arrays(path):
@@ -114,8 +114,15 @@ def test_panel_export_equals_the_command_line_s(clean, tmp_path, uv):
         assert (panel / f"hair.{ext}").read_bytes() == (cli / f"hair.{ext}").read_bytes(), ext
     text = _usda_body(panel / "hair.usda", hair.name)
     assert text == _usda_body(cli / "hair.usda", "hair")
-    for primvar in ("groom_color", "groom_version_major", "groom_version_minor"):
-        assert f"primvars:{primvar} = [" in text, primvar
+    from hairio.cli import groom_library_available
+    if groom_library_available("usd"):      # pxr writes Unreal's groom layout
+        assert "GroomAPI" in text
+        for user_property in ("groom_version_major", "groom_version_minor"):
+            assert f"userProperties:{user_property} = " in text, user_property
+    else:                                   # Blender's exporter writes the attributes as primvars
+        for primvar in ("groom_version_major", "groom_version_minor"):
+            assert f"primvars:{primvar} = [" in text, primvar
+    assert "primvars:groom_color = [" in text
     assert ("primvars:groom_root_uv = [" in text) == uv
     for got, want in zip(_alembic_arrays(panel / "hair.abc"), _alembic_arrays(cli / "hair.abc")):
         np.testing.assert_array_equal(got, want)
