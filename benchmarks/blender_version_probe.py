@@ -69,8 +69,10 @@ def _measure(args, user):
     bpy.ops.hair.generate()
     hair_obj = hair_mod.existing_hair(scalp)
     written = curves_mod.curves_to_strands(hair_obj)
-    scalp_data, keys = hair_mod.read_inputs(scalp, bpy.context.evaluated_depsgraph_get())
-    direct = Generator(scalp_data, keys, props.groom_params(settings)).generate().strands
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    scalp_data, keys = hair_mod.read_inputs(scalp, depsgraph)
+    collider = hair_mod.read_collider(scalp, depsgraph, scalp_data)
+    direct = Generator(scalp_data, keys, props.groom_params(settings), collider=collider).generate().strands
     same_layout = np.array_equal(written.counts, direct.counts)
     gen["max_point_difference"] = (float(np.abs(written.points - direct.points.astype(np.float32)).max())
                                    if same_layout else None)
