@@ -96,6 +96,7 @@ def _measure(args, user):
     pre["covered_pixels"] = int((alone[..., 3] > 0).sum())
     npy = pathlib.Path(args.out).with_suffix(".npy")
     np.save(npy, alone)
+    draw = _draw_to_regrown(scalp, package, props, hair_mod, Generator, runs=max(3, args.runs // 2))
     import hashlib
     import moderngl
     scalp_mesh = scalp.data
@@ -103,10 +104,55 @@ def _measure(args, user):
              "points": int(written.num_points),
              "strands_sha1": hashlib.sha1(np.ascontiguousarray(written.points).tobytes()).hexdigest()[:12],
              "preview_size": [w, h]}
-    return {"scene": facts, "blender": bpy.app.version_string, "python": platform.python_version(),
+    return {"draw": draw, "scene": facts, "blender": bpy.app.version_string, "python": platform.python_version(),
             "numpy": np.__version__, "moderngl": moderngl.__version__,
             "moderngl_from": str(pathlib.Path(moderngl.__file__).parent.parent),
             "install_s": install_s, "generate": gen, "preview": pre, "image": str(npy)}
+
+
+def _draw_to_regrown(scalp, package, props, hair_mod, Generator, runs):
+    """Seconds from the release of a drawn key (Draw Key Strand's execute, its stroke given as
+    points) to the hair regrown around it at the viewport count by live update, median of
+    `runs` keys drawn around the head; beside it, the largest difference between the regrown
+    viewport hair and a full regeneration at the viewport count with every key."""
+    import statistics
+    import numpy as np
+    import bpy
+    live = importlib.import_module(f"{package}.addon.live")
+    curves_mod = importlib.import_module(f"{package}.addon.blender_curves")
+    settings = scalp.keystrand_hair
+    settings.symmetry = 'NONE'
+    to_key, to_hair = [], []
+    for i in range(runs):
+        angle = 2 * np.pi * (i + 0.5) / runs
+        radial = np.array([np.cos(angle), np.sin(angle), 0.0])
+        s = np.linspace(0.0, 1.0, 80)[:, None]
+        stroke = (0.1 * radial + radial * (0.05 * np.sin(np.pi * s) + 0.01 * s)
+                  + np.array([0.0, 0.0, -0.18]) * s)
+        bpy.context.view_layer.objects.active = scalp
+        t0 = time.perf_counter()
+        done = bpy.ops.hair.draw_key_strand(
+            stroke=[{"name": "", "location": tuple(map(float, q)), "mouse": (0.0, 0.0)} for q in stroke],
+            pixel_size=5e-4, tolerance=2.0)
+        t1 = time.perf_counter()
+        if done != {'FINISHED'}:
+            raise RuntimeError(f"Draw Key Strand did not finish: {done}")
+        bpy.context.view_layer.update()
+        live.process(settle=False)
+        t2 = time.perf_counter()
+        to_key.append(t1 - t0)
+        to_hair.append(t2 - t0)
+    view_count = min(settings.viewport_count, settings.count)
+    shown = curves_mod.curves_to_strands(hair_mod.existing_hair(scalp))
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    scalp_data, keys = hair_mod.read_inputs(scalp, depsgraph)
+    collider = hair_mod.read_collider(scalp, depsgraph, scalp_data)
+    full = Generator(scalp_data, keys, props.groom_params(settings, view_count), collider=collider).generate().strands
+    same = np.array_equal(shown.counts, full.counts)
+    return {"release_to_key_s": statistics.median(to_key), "release_to_regrown_s": statistics.median(to_hair),
+            "viewport_count": int(view_count), "keys": len(keys),
+            "max_difference_vs_full": float(np.abs(shown.points - full.points.astype(np.float32)).max())
+            if same else None}
 
 
 if __name__ == "__main__":
