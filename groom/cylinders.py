@@ -6,12 +6,31 @@ straight hair needs only 3–4; `adaptive_sigma` gives each strand few cylinders
 it bends, whose polyline provably stays within a tolerance of the exact curve, and
 `geometric_error` measures the result the way SPEC §6 defines it.
 """
+from dataclasses import dataclass
+
 import numpy as np
 
 from . import rng
 
 
-def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=32768):
+@dataclass(frozen=True, eq=False)
+class AdaptiveResolution:
+    """adaptive_sigma's answer: sigma (P,) flat curve parameters and counts (S,) points per
+    strand; met (S,) the tolerance each strand's polyline is bound to (its own, unless the
+    cylinder cap stopped it); needed (S,) a lower bound of the cylinders its own tolerance
+    takes (for the message when the cap stops it)."""
+    sigma: np.ndarray
+    counts: np.ndarray
+    met: np.ndarray
+    needed: np.ndarray
+
+
+# A strand the cap stops gets the cap's cylinders placed for a looser tolerance, raised by
+# this factor until they suffice (so it is within 25 % of the best the cap allows).
+_RELAX = 1.25
+
+
+def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=32768, table_step=0.0):
     """Per-strand adaptive resolution: curve parameters σ of the fewest points whose polyline
     provably stays within `tolerance` (S,) of the exact strand, for the curvature bound below.
 
@@ -21,22 +40,82 @@ def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=
     each segment is the longest whose h² times the largest bound over the bins it touches
     stays <= 8·tol. Greedy covering is optimal for such a monotone constraint, so straight
     stretches get one long cylinder and bends get short ones. Each segment scans the bins it
-    covers once, so the work is about (strands x bins) whatever the resolution. Strands
-    needing more than `max_cylinders` fall back to max_cylinders equal steps (tolerance not
-    met there).
+    covers once, so the work is about (strands x bins) whatever the resolution.
 
-    Returns (sigma (P,) float64 flat, counts (S,) int64). Each strand's numbers depend only on
-    its own inputs (incremental regeneration relies on it)."""
+    The points themselves come from key tables of `table_step` (in σ) between samples, whose
+    lerp strays from the curve by up to A·table_step²/8 (A the strand's largest bound), so
+    the segments get 8·tol - A·table_step² (interpolate.table_samples makes the tables fine
+    enough that this keeps most of the tolerance): the polyline then stays within tol of the
+    exact curve, not only of the tables'.
+
+    A strand that needs more than `max_cylinders` gets max_cylinders placed the same way for
+    the least tolerance (in steps of _RELAX from what the count's lower bound suggests) they
+    meet, and `met` says which; only a strand that fits no tolerance so (none does after 60
+    steps) falls back to equal steps, met = inf.
+
+    Returns an AdaptiveResolution. Each strand's numbers depend only on its own inputs
+    (incremental regeneration relies on it)."""
+    tolerance = np.asarray(tolerance, np.float64)
+    sigma, counts, capped, needed = _greedy_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk,
+                                                  table_step)
+    met = tolerance.copy()
+    todo = np.flatnonzero(capped & (frac > 0))
+    if todo.size:
+        # The lower bound of the count scales as 1/sqrt(tol): start where it says the cap fits.
+        trial = tolerance[todo] * np.maximum(_RELAX, (needed[todo] / max_cylinders) ** 2)
+        done_idx, done_sig, done_counts = [], [], []
+        for _ in range(60):
+            sig2, cnt2, cap2, _ = _greedy_sigma(frac[todo], guides[todo], weights[todo], bins, trial, max_cylinders,
+                                                chunk, table_step)
+            ends = np.cumsum(cnt2)
+            fits = np.flatnonzero(~cap2)
+            if fits.size:
+                rows = np.repeat(ends[fits] - cnt2[fits], cnt2[fits]) + (
+                    np.arange(int(cnt2[fits].sum())) - np.repeat(np.cumsum(cnt2[fits]) - cnt2[fits], cnt2[fits]))
+                done_idx.append(todo[fits])
+                done_sig.append(sig2[rows])
+                done_counts.append(cnt2[fits])
+                met[todo[fits]] = trial[fits]
+            todo, trial = todo[cap2], trial[cap2] * _RELAX
+            if not todo.size:
+                break
+        met[todo] = np.inf
+        if done_idx:
+            sigma, counts = _replace_strands(sigma, counts, np.concatenate(done_idx), np.concatenate(done_sig),
+                                             np.concatenate(done_counts))
+    return AdaptiveResolution(sigma, counts, met, needed)
+
+
+def _replace_strands(sigma, counts, sel, new_sigma, new_counts):
+    """Flat per-point values of strands with strands `sel` (their new values `new_sigma`, in
+    the order of sel, `new_counts` points each) replaced."""
+    out_counts = counts.copy()
+    out_counts[sel] = new_counts
+    old_start = np.cumsum(counts) - counts
+    base = old_start.copy()
+    new_start = np.cumsum(new_counts) - new_counts
+    base[sel] = len(sigma) + new_start
+    first = np.cumsum(out_counts) - out_counts
+    src = np.repeat(base - first, out_counts) + np.arange(int(out_counts.sum()))
+    return np.concatenate([sigma, new_sigma])[src], out_counts
+
+
+def _greedy_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=32768, table_step=0.0):
+    """The greedy placement of adaptive_sigma: (sigma flat, counts, capped (S,) bool: the
+    cap stopped the strand, which got max_cylinders equal steps, needed (S,) the count's
+    lower bound)."""
     nb = bins.shape[1]
-    sig_parts, count_parts = [], []
+    step2 = float(table_step) ** 2
+    sig_parts, count_parts, cap_parts, need_parts = [], [], [], []
     for lo in range(0, len(frac), chunk):  # chunks of strands bound the (strands x bins) tables
         sl = slice(lo, lo + chunk)
         f, g, w = frac[sl], guides[sl], weights[sl]
-        budget = 8.0 * tolerance[sl]
         s = len(f)
         a = w[:, 0, None] * bins[g[:, 0]] + w[:, 1, None] * bins[g[:, 1]] + w[:, 2, None] * bins[g[:, 2]]
         last_bin = np.clip(np.ceil(f * nb).astype(np.int64) - 1, 0, nb - 1)
         a[np.arange(nb)[None, :] > last_bin[:, None]] = 0.0  # bins past the tip do not count
+        # The tables' lerp moves each point by up to (the strand's largest bound)·step²/8.
+        budget = np.maximum(8.0 * tolerance[sl] - a.max(axis=1) * step2, 1e-300)
         # Lower bound on the count: a segment that fits has ∫ sqrt(A / 8tol) <= 1 over it, so a
         # strand with more than max_cylinders of that integral cannot fit: cap it right away.
         covered = np.clip(f[:, None] * nb - np.arange(nb)[None, :], 0.0, 1.0) / nb
@@ -98,7 +177,10 @@ def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=
         valid = ~np.isnan(grid)
         sig_parts.append(grid[valid])
         count_parts.append(valid.sum(axis=1).astype(np.int64))
-    return np.concatenate(sig_parts), np.concatenate(count_parts)
+        cap_parts.append(capped)
+        need_parts.append(need)
+    return (np.concatenate(sig_parts), np.concatenate(count_parts), np.concatenate(cap_parts),
+            np.concatenate(need_parts))
 
 
 def strand_attributes(seed, ids, counts, along, base_radius, base_color, params):
@@ -206,8 +288,9 @@ def _merge_sliver_tips(grid, rows, suffix, nb, last_bin, budget):
     grid[r[split], k[split] - 1] = 0.5 * (prev2[split] + last[split])
 
 
-def _segment_distances(points, a, b):
-    """Distance from each point (N,3) to the nearest of the segments a[i]–b[i] (M,3)."""
+def _all_segment_distances(points, a, b):
+    """Distance from each point (N,3) to the nearest of the segments a[i]–b[i] (M,3), every
+    pair tested."""
     ab = b - a
     len2 = np.einsum("md,md->m", ab, ab)
     ap = points[:, None, :] - a[None, :, :]
@@ -215,6 +298,35 @@ def _segment_distances(points, a, b):
     t = np.clip(np.where(len2 > 0, t, 0.0), 0.0, 1.0)
     diff = ap - t[..., None] * ab[None]
     return np.sqrt(np.einsum("nmd,nmd->nm", diff, diff)).min(axis=1)
+
+
+_BLOCK = 256    # dense points per block of _segment_distances
+
+
+def _segment_distances(points, a, b):
+    """Distance from each point (N,3) to the nearest of the segments a[i]–b[i] (M,3), exactly.
+
+    All pairs cost N·M (a strand of 300 cylinders sampled 64 times denser: 5.8 M), so points
+    go in blocks of neighbours: a block's distances to the segment whose middle is nearest
+    its centre bound its answer from above, and only segments that could come nearer than
+    that (their middle within the bound + the block's and the segment's half-sizes of its
+    centre) are tested."""
+    n, m = len(points), len(a)
+    if n * m <= 50_000:
+        return _all_segment_distances(points, a, b)
+    mid = 0.5 * (a + b)
+    half = 0.5 * np.linalg.norm(b - a, axis=1)
+    out = np.empty(n)
+    for lo in range(0, n, _BLOCK):
+        block = points[lo:lo + _BLOCK]
+        centre = block.mean(axis=0)
+        spread = float(np.sqrt(np.max(np.einsum("nd,nd->n", block - centre, block - centre))))
+        to_mid = np.sqrt(np.einsum("md,md->m", mid - centre, mid - centre))
+        k = int(np.argmin(to_mid))
+        bound = float(_all_segment_distances(block, a[k:k + 1], b[k:k + 1]).max())
+        near = np.flatnonzero(to_mid - half - spread <= bound * (1 + 1e-9))
+        out[lo:lo + _BLOCK] = _all_segment_distances(block, a[near], b[near])
+    return out
 
 
 def geometric_error(exact_dense, polyline):

@@ -8,6 +8,7 @@ because every per-strand computation is element-wise (see interpolate.py). For t
 reason the work over strands can run in ranges on a pool of threads (parallel.py) without
 changing a number.
 """
+import warnings
 from dataclasses import dataclass
 from functools import partial
 
@@ -19,7 +20,8 @@ from hairio.validate import check_memory
 from .cylinders import (adaptive_sigma, alpha_profile, fill_strand_rows, radius_profile, strand_attributes,
                         strand_colors)
 from .frames import frame_axes, root_frames
-from .interpolate import (KEY_SAMPLES, curvature_bound, evaluate_strands, key_offsets, key_rows,
+from .interpolate import (EXACT_SAMPLES, FINE_SAMPLES, KEY_SAMPLES, curvature_bound, evaluate_strands, key_offsets,
+                          key_rows, lerp_errors, nested_table, table_samples, LERP_SHARE,
                           length_fractions, strand_transforms, tidiness_angles, uniform_sigma)
 from .keys import KeyStrand
 from .params import GroomParams
@@ -37,7 +39,9 @@ class GroomResult:
     None; guides (S,3) int32 (main, n1, n2 key index); guide_weights (S,3) float32;
     root_ids (S,) int64 (stable per-root ids seeding each strand's random stream);
     root_tri (S,), root_bary (S,3): where each root lies on the scalp; collision: a
-    collide.CollisionReport, or None when no collider was given."""
+    collide.CollisionReport, or None when no collider was given; warning: what the adaptive
+    resolution could not meet (strands the cylinder cap stopped short of the tolerance), or
+    None (also issued as a ResolutionWarning)."""
     strands: Strands
     roots: np.ndarray
     root_uv: np.ndarray
@@ -47,6 +51,12 @@ class GroomResult:
     root_tri: np.ndarray
     root_bary: np.ndarray
     collision: object = None
+    warning: str = None
+
+
+class ResolutionWarning(UserWarning):
+    """Adaptive resolution: some strands exceed the tolerance because points_per_strand caps
+    their cylinders (GroomResult.warning says how many, by how much, and what would do)."""
 
 
 def _check_inputs(scalp, keys, params):
@@ -130,6 +140,10 @@ class Generator:
         per_root = [partial(self._per_root, lo, hi) for lo, hi in ranges(n)]
         run_jobs(per_root + assign_jobs, _threads_for(n))
         self._key_data = self._prepare_keys(self.keys)
+        self._samples = self._table_samples(self._key_data)
+        self._set_rows(self._key_data, self._samples)
+        self._exact_rows = None
+        self._resolution = None     # adaptive: (tolerance met, tolerance asked) per strand
         self._collision = None
         if collider is not None and p.collision:
             self._report(0.15, "preparing the collider")
@@ -164,21 +178,60 @@ class Generator:
         return np.stack([a.T for a in self._axes()], axis=2)
 
     def _prepare_keys(self, keys):
-        """Per key: its blend rows, curvature bound (adaptive resolution only), root, group,
-        radius and colour. The keys' roots are placed on the scalp all at once."""
+        """Per key: its arc-length table (FINE_SAMPLES at adaptive resolution, for the
+        curvature bound, else KEY_SAMPLES), curvature bound (adaptive only), root frame, root,
+        group, radius and colour; the blend rows come from _set_rows. The keys' roots are
+        placed on the scalp all at once."""
         p = self.params
         tri, bary, _ = self.scalp.closest_points(np.array([k.root for k in keys]))
         normal = self.scalp.normals_at(tri, bary, p.normal_mode)
         frames = root_frames(normal, p.up, p.front)
         out = []
-        tables = key_offsets(keys, frames, p.intelligence, KEY_SAMPLES)
-        for key, (table, length) in zip(keys, tables):  # a few keys, not strands
-            bound = curvature_bound(table, length) if p.resolution_mode == "adaptive" else None
+        adaptive = p.resolution_mode == "adaptive"
+        tables = key_offsets(keys, frames, p.intelligence, FINE_SAMPLES if adaptive else KEY_SAMPLES)
+        for key, frame, (table, length) in zip(keys, frames, tables):  # a few keys, not strands
+            bound = curvature_bound(table, length) if adaptive else None
             radius = p.radius if key.root_radius is None else key.root_radius
             color = np.asarray(p.color if key.color is None else key.color, dtype=np.float64)
-            out.append({"rows": key_rows(table), "bound": bound, "root": key.root.copy(),
+            out.append({"table": table, "key": key, "frame": frame, "bound": bound, "root": key.root.copy(),
                         "group": key.group, "radius": radius, "color": color})
         return out
+
+    def _table_samples(self, data):
+        """Samples of the blend tables for keys `data`: KEY_SAMPLES at fixed resolution; at
+        adaptive resolution as many as keep the lerp between them within LERP_SHARE of the
+        smallest tolerance a strand can have (interpolate.table_samples). InputError when
+        not even MAX_TABLE_SAMPLES do: a tolerance the tables cannot follow."""
+        p = self.params
+        if p.resolution_mode != "adaptive":
+            return KEY_SAMPLES
+        radii = np.array([d["radius"] for d in data], np.float64)
+        # Keys too large for float32 points are that error, not one of tolerance.
+        _check_float32(self._reach, np.array([np.abs(d["table"]).max() for d in data]), radii)
+        bounds = np.stack([d["bound"] for d in data])
+        floor = p.tolerance * (float(radii[radii > 0].min()) if p.tolerance_units == "radius" and (radii > 0).any()
+                               else 1.0)
+        samples = table_samples(bounds, floor)
+        lerp = float(lerp_errors(bounds, samples).max())
+        if lerp > LERP_SHARE * floor:
+            units = "root radii" if p.tolerance_units == "radius" else "scene units"
+            least = p.tolerance * lerp / (LERP_SHARE * floor)
+            raise InputError(f"tolerance: {p.tolerance:g} {units} is finer than the keys' tables follow (their "
+                             f"{samples:,} samples stray up to {lerp:.3g} from the curves, which must stay within "
+                             f"1/{round(1 / LERP_SHARE)} of the tolerance); use a tolerance of at least {least:.3g}")
+        return samples
+
+    def _set_rows(self, data, samples):
+        """The blend rows (interpolate.key_rows) of keys `data` at `samples` samples: taken from
+        their tables where those nest, else resampled."""
+        p = self.params
+        for d in data:
+            table = d["table"]
+            if (len(table) - 1) % (samples - 1) == 0:
+                table = nested_table(table, samples)
+            else:
+                table = key_offsets([d["key"]], [d["frame"]], p.intelligence, samples)[0][0]
+            d["rows"] = key_rows(table)
 
     def _assign(self):
         """Guides (3, S) int64 and weights (3, S) float64 of every root, in ranges of roots on
@@ -203,13 +256,15 @@ class Generator:
             guides[:, lo:hi], weights[:, lo:hi] = g, w
         return [partial(assign, lo, hi) for lo, hi in ranges(n)], (guides, weights)
 
-    def evaluate(self, sel, cylinders):
+    def evaluate(self, sel, cylinders, exact=False):
         """Points of strands `sel` at the given numbers of equal steps in σ (S,) (measurement:
-        dense samples of the exact curve). Returns (points (P,3) float32, counts (S,))."""
+        dense samples of the curve). `exact`: from key tables of EXACT_SAMPLES samples (the
+        exact curve to within 1/4096 of the lerp error of 1025 samples), not the blend's own.
+        Returns (points (P,3) float32, counts (S,))."""
         if self._result is None:
             self.generate()
         sel = np.asarray(sel, np.int64)
-        rows = np.stack([d["rows"] for d in self._key_data])
+        rows = self._exact_key_rows() if exact else np.stack([d["rows"] for d in self._key_data])
         sigma, counts = uniform_sigma(self.frac[sel], np.asarray(cylinders, np.int64))
         main = self._guides[0, sel]
         clump = clump_arguments(self.params, main, self._roots[:, sel], np.array([d["root"] for d in self._key_data]))
@@ -219,6 +274,16 @@ class Generator:
         shape_strands(pts, counts, sigma, None, self.transforms[:, sel], main, self.samples.ids[sel], rows, self.params,
                       _threads_for(len(sel)))
         return pts, counts
+
+    def _exact_key_rows(self):
+        """(K, EXACT_SAMPLES, 8) blend rows of the current keys (made on first use)."""
+        if self._exact_rows is None or len(self._exact_rows[0]) != len(self._key_data) or any(
+                a is not d["key"] for a, d in zip(self._exact_rows[0], self._key_data)):
+            p = self.params
+            tables = key_offsets([d["key"] for d in self._key_data], [d["frame"] for d in self._key_data],
+                                 p.intelligence, EXACT_SAMPLES)
+            self._exact_rows = ([d["key"] for d in self._key_data], np.stack([key_rows(t) for t, _ in tables]))
+        return self._exact_rows[1]
 
     def _strands(self, sel, guides, weights):
         """Points and attributes of the strands `sel` (indices into the roots, in that order;
@@ -249,10 +314,12 @@ class Generator:
             attrs = attrs or done[0]
             sigma = None
         else:
-            tol = p.tolerance * (base_radius if p.tolerance_units == "radius" else np.ones(len(frac)))
-            tol = np.maximum(tol, 1e-300)
+            asked = p.tolerance * (base_radius if p.tolerance_units == "radius" else np.ones(len(frac)))
+            tol = np.maximum(asked, 1e-300)
             bins = shaping_bound(np.stack([d["bound"] for d in kd]), rows, p)
-            sigma, counts = adaptive_sigma(frac, g.T, w.T, bins, tol, max_cyl)
+            res = adaptive_sigma(frac, g.T, w.T, bins, tol, max_cyl, table_step=1.0 / (self._samples - 1))
+            sigma, counts = res.sigma, res.counts
+            self._note_resolution(sel, res.met, tol, res.needed)
             pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma, threads=_threads_for(len(frac)), clump=clump)
             attrs = self._attributes(ids, counts, sigma / np.repeat(frac, counts), g, w, base_radius)
         threads = _threads_for(len(frac))
@@ -263,6 +330,43 @@ class Generator:
             pts = self._collision.apply(pts, counts, attrs[0], sel, threads)
         self._report(0.95, "writing strands")
         return (pts, counts) + tuple(attrs)
+
+    def _note_resolution(self, sel, met, asked, needed):
+        """Keeps per strand the tolerance its polyline is bound to, the one asked and the
+        cylinders a bound says it needs (strands `sel`; None: all), for the warning."""
+        if sel is None or self._resolution is None:
+            self._resolution = (met, asked, needed)
+            return
+        self._resolution = tuple(old.copy() for old in self._resolution)
+        for old, new in zip(self._resolution, (met, asked, needed)):
+            old[sel] = new
+
+    @property
+    def tolerance_met(self):
+        """(S,) the tolerance each current strand's polyline is bound to (scene units): its own
+        unless the cylinder cap stopped it (inf where no bound holds); None at fixed
+        resolution."""
+        return None if self._resolution is None else self._resolution[0]
+
+    def resolution_warning(self):
+        """What the adaptive resolution of the current strands could not meet, or None."""
+        if self._resolution is None:
+            return None
+        met, asked, needed = self._resolution
+        over = met > asked * (1 + 1e-9)
+        if not over.any():
+            return None
+        p = self.params
+        units = "root radii" if p.tolerance_units == "radius" else "scene units"
+        ratio = float((met[over] / asked[over]).max())
+        cap = p.points_per_strand - 1
+        got = (f"they got {cap} cylinders each, placed to stay within {ratio:.3g} times the tolerance at worst"
+               if np.isfinite(ratio) else f"they got {cap} equal steps, with no bound on their error")
+        loosen = f", or loosen the tolerance to {p.tolerance * ratio:.3g} {units}" if np.isfinite(ratio) else ""
+        return (f"adaptive resolution: {int(over.sum()):,} of {len(met):,} strands need more than the {cap} cylinders "
+                f"points_per_strand {p.points_per_strand} allows to stay within the tolerance {p.tolerance:g} {units}; "
+                f"{got}. To meet the tolerance raise points_per_strand to at least "
+                f"{int(np.ceil(needed[over].max())) + 1}{loosen}")
 
     def _attributes(self, ids, counts, along, g, w, base_radius):
         """(radius, colour, alpha) per point (cylinders.strand_attributes) from the guides' colours."""
@@ -302,7 +406,10 @@ class Generator:
         self._cache = {"pts": pts, "counts": counts, "radius": radius, "color": color, "alpha": alpha}
         self._result = GroomResult(strands, s.points, self.root_uv, np.ascontiguousarray(guides.T, dtype=np.int32),
                                    np.ascontiguousarray(weights.T, dtype=np.float32), s.ids, s.tri, s.bary,
-                                   None if self._collision is None else self._collision.report())
+                                   None if self._collision is None else self._collision.report(),
+                                   self.resolution_warning())
+        if self._result.warning:
+            warnings.warn(self._result.warning, ResolutionWarning, stacklevel=3)
         self._guides, self._weights = guides, weights
         self._report(1.0, "done")
         return self._result
@@ -333,12 +440,28 @@ class Generator:
                 raise InputError(f"update_keys: key index {i!r} out of range [0, {len(self.keys) - 1}]")
             if not isinstance(k, KeyStrand):
                 raise InputError(f"update_keys[{i}]: expected a groom.KeyStrand, got {type(k).__name__}")
-        old_data = list(self._key_data)
+        old_data, old_keys, old_samples = list(self._key_data), list(self.keys), self._samples
         self._first_assignment = None
         order = sorted(changes)
         for i, d in zip(order, self._prepare_keys([changes[i] for i in order])):
             self.keys[i] = changes[i]
             self._key_data[i] = d
+
+        def restore():
+            self.keys[:], self._key_data = old_keys, old_data
+            if self._samples != old_samples:
+                self._samples = old_samples
+                self._set_rows(old_data, old_samples)
+        try:
+            samples = self._table_samples(self._key_data)
+        except InputError:
+            restore()
+            raise
+        # Tables of another size change every strand: all are recomputed, as a full
+        # regeneration would.
+        resampled = samples != self._samples
+        self._set_rows(self._key_data if resampled else [self._key_data[i] for i in order], samples)
+        self._samples = samples
         if self._collision is not None:
             self._collision.check_keys(self.keys, self.params)
         changed = np.array(order, np.int64)
@@ -353,10 +476,12 @@ class Generator:
             try:
                 guides, weights = self._assign()
             except InputError:
-                self._key_data = old_data
+                restore()
                 raise
             dirty = (np.isin(guides, changed).any(axis=0) | np.isin(old_g, changed).any(axis=0)
                      | (guides != old_g).any(axis=0) | (weights != old_w).any(axis=0))
+        if resampled:
+            dirty[:] = True
         sel = np.flatnonzero(dirty)
         self.last_recomputed = len(sel)
         return self._build(guides, weights, self._splice(sel, self._strands(sel, guides, weights)))

@@ -30,12 +30,29 @@ from .keys import arc_length_tables
 from . import parallel
 
 # Arc-length samples per key table (1024 steps): the lerp between samples is off the exact
-# curve by at most |D''|·h²/8 with h = 1/1024, about 1e-7 of the length for a curl of 20 turns.
+# curve by at most |D''|·h²/8 with h = 1/1024 (on the bundled curly keys the points lay up to
+# 7.8 µm off it, 16 % of a one-radius tolerance). Fixed resolution uses these; the adaptive
+# resolution uses as many as its tolerance needs (table_samples).
 KEY_SAMPLES = 1025
 # Curvature bins per key for the adaptive resolution (SAMPLES - 1 must be a multiple).
 CURVATURE_BINS = 128
 # The sampled curvature can miss a peak between samples; bound it with a margin.
 _CURVATURE_SAFETY = 1.05
+# The adaptive resolution takes its curvature bound on tables this fine (64 samples a bin).
+# The bundled presets' tightest turns are a few tenths of a millimetre long: on 1025 samples
+# their bound came out 2 to 100 times below what 65,537 samples see, on these 2 to 14 times,
+# where the segments the bound allows span several samples, and a turn between two samples
+# then moves the chord by less than the bound says (measured against the exact curve:
+# tests/groom/test_adaptive_tolerance.py).
+FINE_SAMPLES = CURVATURE_BINS * 64 + 1
+# The most samples a blend table may get (2 MB a key), and the exact curve of measurements
+# (groom.measure.strand_errors): the lerp between them is off by 1/4096 of that of 1025.
+MAX_TABLE_SAMPLES = CURVATURE_BINS * 512 + 1
+EXACT_SAMPLES = MAX_TABLE_SAMPLES
+# At adaptive resolution the lerp between table samples may stray by at most this share of
+# the tolerance at the keys' tightest bend (elsewhere by less): the segments there can then
+# still be most of what the tolerance allows (cylinders.adaptive_sigma counts the lerp in).
+LERP_SHARE = 0.25
 
 
 def key_offsets(keys, frames, intelligence, samples=KEY_SAMPLES):
@@ -71,6 +88,32 @@ def curvature_bound(table, length, bins=CURVATURE_BINS):
     # bin b covers samples b·per .. (b+1)·per; padded index = sample + 1, widened by one each side
     idx = np.arange(bins)[:, None] * per + np.arange(per + 3)[None, :]
     return padded[idx].max(axis=1) * _CURVATURE_SAFETY
+
+
+def lerp_errors(bounds, samples):
+    """(K,) how far the lerp between `samples` equally spaced table samples strays at most
+    from each key's curve, from its curvature bound (K, bins): max |D''|·h²/8, h = 1/(samples - 1)."""
+    return np.asarray(bounds, np.float64).max(axis=1) / (8.0 * (samples - 1) ** 2)
+
+
+def table_samples(bounds, tolerance):
+    """Samples of the blend's key tables at adaptive resolution: KEY_SAMPLES, or twice as
+    many steps at a time (so the tables nest) until the lerp takes at most LERP_SHARE of
+    `tolerance`, the smallest a strand has; at most MAX_TABLE_SAMPLES."""
+    worst = float(np.max(bounds)) if np.size(bounds) else 0.0
+    m = KEY_SAMPLES
+    while m < MAX_TABLE_SAMPLES and worst / (8.0 * (m - 1) ** 2) > LERP_SHARE * tolerance:
+        m = 2 * m - 1
+    return m
+
+
+def nested_table(table, samples):
+    """The rows of a table of (samples - 1)·k + 1 equally spaced samples that a table of
+    `samples` samples has (every k-th)."""
+    step = (len(table) - 1) // (samples - 1)
+    if step < 1 or (samples - 1) * step != len(table) - 1:
+        raise ValueError(f"nested_table: {samples} samples do not nest in {len(table)}")
+    return table[::step]
 
 
 def key_rows(table):

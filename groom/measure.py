@@ -82,12 +82,14 @@ def seam_jumps_by_mode(scalp, keys, params, **kw):
 
 def strand_errors(gen, sel=None, oversample=64):
     """Per-strand geometric error of a Generator's current strands: max distance from the
-    exact curve sampled at `oversample` x the strand's resolution to its polyline."""
+    exact curve sampled at `oversample` x the strand's resolution (SPEC §6) to its polyline.
+    The exact curve is the blend of the keys' tables of EXACT_SAMPLES samples, not of the
+    tables the strands were made from (whose lerp is part of the error)."""
     res = gen.result
     s = res.strands
     sel = np.arange(s.num_strands) if sel is None else np.asarray(sel)
     counts = s.counts[sel].astype(np.int64)
-    dense, _ = gen.evaluate(sel, (counts - 1) * oversample)
+    dense, _ = gen.evaluate(sel, (counts - 1) * oversample, exact=True)
     offs = s.offsets
     errs = np.empty(len(sel))
     dense_off = np.concatenate([[0], np.cumsum(oversample * (counts - 1) + 1)])
