@@ -13,10 +13,10 @@ tube, as the tracer treats them), shading is SPEC §7's (the normal of the surfa
 the side, or a cut plane), shadow rays count the entries between the point and the light.
 
 Nothing here comes from the tracer's hit test, entry flags or grid: no shared-plane rule,
-no crescent test, no cells. Every ray is tested against every cylinder (in bundles of
-neighbouring rays, ray_bundles, which only skips cylinders no ray of the bundle can reach).
-It shares with the tracer only the strand points after the repeat rule (cylinders.
-plan_cylinders), the sample positions of each pixel and the settings.
+no crescent test, no cells. Every ray meets every cylinder it can reach: ray_bundles pairs
+them (conservatively: it only leaves out cylinders no ray of the set comes near). It shares
+with the tracer only the strand points after the repeat rule (cylinders.plan_cylinders),
+the sample positions of each pixel and the settings.
 
 Not modelled: the minimum pixel width, which widens each cylinder per ray (a rendering
 device, not geometry); `solid_render` refuses it.
