@@ -105,7 +105,7 @@ class HAIR_OT_comb_key(stroke_input.StrokeView, Operator):
         if self._state is None:
             if event.type == 'LEFTMOUSE' and event.value == 'PRESS':
                 return self._press(context, event)
-            if event.type in {'MIDDLEMOUSE', 'WHEELUPMOUSE', 'WHEELDOWNMOUSE', 'TRACKPADPAN', 'TRACKPADZOOM'}:
+            if event.type in stroke_input.VIEW_NAVIGATION:
                 return {'PASS_THROUGH'}
             return {'RUNNING_MODAL'}
         if event.type in {'MOUSEMOVE', 'INBETWEEN_MOUSEMOVE'}:

@@ -139,7 +139,7 @@ class HAIR_OT_draw_key_strand(stroke_input.StrokeView, Operator):
         if self._fit is None:
             if event.type == 'LEFTMOUSE' and event.value == 'PRESS':
                 return self._press(context, event)
-            if event.type in {'MIDDLEMOUSE', 'WHEELUPMOUSE', 'WHEELDOWNMOUSE', 'TRACKPADPAN', 'TRACKPADZOOM'}:
+            if event.type in stroke_input.VIEW_NAVIGATION:
                 return {'PASS_THROUGH'}  # look around before drawing
             return {'RUNNING_MODAL'}
         if event.type in {'MOUSEMOVE', 'INBETWEEN_MOUSEMOVE'}:

@@ -17,6 +17,9 @@ from bpy.types import PropertyGroup
 
 from .scene_data import SceneError
 
+# Events that move the view: a stroke tool passes them on while it waits for its press.
+VIEW_NAVIGATION = frozenset({'MIDDLEMOUSE', 'WHEELUPMOUSE', 'WHEELDOWNMOUSE', 'TRACKPADPAN', 'TRACKPADZOOM'})
+
 STROKE_SPACES = (
     ('WORLD', "World", "Stroke points are world locations (on or near the drawing surface)"),
     ('SCREEN', "Screen", "Stroke points are mouse positions in the 3D viewport's region, in pixels"),
