@@ -360,6 +360,12 @@ def export_blender_module():
     return export_blender
 
 
+def _export_refused():
+    """export_blender's own bad-input error (its ExportError, a ValueError beside InputError)."""
+    module = export_blender_module()
+    return (module.ExportError,) if module else ()
+
+
 def _cannot_write():
     """The errors that mean the file could not be written (not the user's input, not a bug)."""
     module = export_blender_module()
@@ -392,7 +398,8 @@ class HAIR_OT_export(Operator, ExportHelper):
         self.filename_ext = "." + self.format
         return ExportHelper.invoke(self, context, event)
 
-    @reports_errors(failures=((lambda: _cannot_write(), lambda op, e: f"Cannot write {op.export_path}: {e}"),))
+    @reports_errors(failures=((lambda: _export_refused(), lambda op, e: str(e)),
+                              (lambda: _cannot_write(), lambda op, e: f"Cannot write {op.export_path}: {e}")))
     def execute(self, context):
         scalp = find_scalp(context)
         hair = existing_hair(scalp) if scalp is not None else None
