@@ -608,6 +608,15 @@ def parting_of(settings):
     return parting
 
 
+def key_with_settings(obj):
+    """read_key with the key's own settings: its part group, colour and root radius."""
+    from groom import KeyStrand
+    k = obj.keystrand_hair
+    return KeyStrand(read_key(obj).points, kind="cubic", group=k.key_group,
+                     color=tuple(k.key_color) if k.use_key_color else None,
+                     root_radius=k.key_radius if k.key_radius > 0 else None)
+
+
 def test_load_preset_carries_its_parting_onto_the_scalp(clean):
     from groom import load_preset
     scalp = make_scalp()
@@ -641,7 +650,7 @@ def test_generate_parts_the_hair_as_groom_does(clean):
     keys = sorted((o for o in bpy.data.objects if o.keystrand_hair.role == 'KEY'), key=lambda o: o.name)
     surface = read_scalp_arrays(scalp)
     parting = parting_of(s)
-    expected = generate(surface, [read_key(k) for k in keys], params_of(scalp, parting=parting),
+    expected = generate(surface, [key_with_settings(k) for k in keys], params_of(scalp, parting=parting),
                         collider=(surface.vertices, surface.triangles)).strands
     np.testing.assert_array_equal(got["counts"], expected.counts)
     np.testing.assert_array_equal(got["position"], expected.points)
