@@ -19,9 +19,8 @@ from bpy.props import EnumProperty, FloatVectorProperty, BoolProperty, StringPro
 from bpy.types import Operator
 from bpy_extras.io_utils import ExportHelper
 
-from . import blender_curves, head, preview, scene_data
+from . import blender_curves, head, preview, progress, scene_data
 from .hair import existing_hair, generate, read_collider
-from .progress import BlenderProgress
 from .properties import dict_to_settings, groom_params
 from .scene_data import find_scalp
 from .transaction import reports_errors, transaction
@@ -189,8 +188,8 @@ class HAIR_OT_generate(Operator):
         scalp = _scalp_or_report(self, context)
         if scalp is None:
             return {'CANCELLED'}
-        with BlenderProgress(context.window_manager, context.workspace, "Generating hair") as progress:
-            hair, result, t = generate(scalp, context.evaluated_depsgraph_get(), progress=progress)
+        with progress.BlenderProgress(context.window_manager, context.workspace, "Generating hair") as shown:
+            hair, result, t = generate(scalp, context.evaluated_depsgraph_get(), progress=shown)
         s = result.strands
         collision = result.collision
         moved = "" if collision is None else f", {collision.strands_moved:,} moved out of {collision.collider!r}"
