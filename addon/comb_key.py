@@ -13,6 +13,7 @@ import numpy as np
 import bpy
 from bpy.props import FloatProperty, StringProperty
 from bpy.types import Operator
+from bpy_extras import view3d_utils
 from hairio import InputError
 
 from . import key_points, mirror, scene_data, stroke_input
@@ -117,7 +118,6 @@ class HAIR_OT_comb_key(stroke_input.StrokeView, Operator):
 
     def _nearest_key(self, context, coord):
         """(key object, world point of its curve nearest the mouse) within the brush, or None."""
-        from bpy_extras import view3d_utils
         from groom.stroke import sample_cubic
         region, rv3d = self._view.region, self._view.rv3d
         best = None

@@ -17,6 +17,7 @@ import numpy as np
 import bpy
 from bpy.props import EnumProperty, FloatVectorProperty, BoolProperty, StringProperty
 from bpy.types import Operator
+from bpy_extras import view3d_utils
 from bpy_extras.io_utils import ExportHelper
 
 from . import blender_curves, head, preview, progress, scene_data
@@ -128,7 +129,6 @@ class HAIR_OT_add_key_strand(Operator):
 
     @staticmethod
     def _raycast(context, event):
-        from bpy_extras import view3d_utils
         scalp = find_scalp(context)
         region, rv3d = context.region, context.region_data
         if scalp is None or region is None or rv3d is None:

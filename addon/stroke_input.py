@@ -14,6 +14,8 @@ import numpy as np
 import bpy
 from bpy.props import BoolProperty, CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty
 from bpy.types import PropertyGroup
+from bpy_extras import view3d_utils
+from mathutils import Vector
 from hairio import InputError
 
 
@@ -105,8 +107,6 @@ class ViewUnderMouse:
 def capture_view(op, region, rv3d, root_world):
     """Store the viewport's view in the operator's view properties: its direction, its eye
     (perspective), and the world size of a pixel at the depth of `root_world`."""
-    from bpy_extras import view3d_utils
-    from mathutils import Vector
     direction = rv3d.view_rotation @ Vector((0.0, 0.0, -1.0))
     op.view_direction = direction.normalized()
     op.view_perspective = bool(rv3d.is_perspective)
@@ -123,8 +123,6 @@ def capture_view(op, region, rv3d, root_world):
 def screen_to_world(region, rv3d, coords, depth_world):
     """Region pixel coordinates (n,2) -> world points (n,3) on the plane facing the view
     through `depth_world`."""
-    from bpy_extras import view3d_utils
-    from mathutils import Vector
     depth = Vector(depth_world)
     return np.array([tuple(view3d_utils.region_2d_to_location_3d(region, rv3d, Vector(c), depth)) for c in coords],
                     np.float64)
@@ -206,7 +204,6 @@ def direction_to_local(obj, direction):
 def ray_cast_scalp(context, region, rv3d, scalp, coord):
     """The world point of the scalp under region pixel `coord`, or None (as Add Key Strand
     finds it: the evaluated mesh, in its own space)."""
-    from bpy_extras import view3d_utils
     if scalp is None or region is None:
         return None
     origin = view3d_utils.region_2d_to_origin_3d(region, rv3d, coord)
