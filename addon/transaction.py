@@ -198,12 +198,23 @@ def report_background(scalp, task, error):
         traceback.print_exception(error)
         message = (f"Internal error in {task} ({type(error).__name__}: {error}). Please report this, "
                    "with the traceback printed in Blender's system console")
-    _background[scalp.session_uid, task] = message
+    if _background.get((scalp.session_uid, task)) != message:
+        _background[scalp.session_uid, task] = message
+        _redraw_hair_tab()
 
 
 def clear_background(scalp, task):
     """`task` succeeded on `scalp`: its note goes."""
-    _background.pop((scalp.session_uid, task), None)
+    if _background.pop((scalp.session_uid, task), None) is not None:
+        _redraw_hair_tab()
+
+
+def _redraw_hair_tab():
+    # The notes change in handlers and timers, which redraw nothing by themselves.
+    for window in getattr(bpy.context.window_manager, "windows", ()):
+        for area in window.screen.areas:
+            if area.type == 'VIEW_3D':
+                area.tag_redraw()
 
 
 def background_errors(scalp):
