@@ -105,7 +105,7 @@ def render_png(renderer, camera, settings, out, tile_pixels=TILE_PIXELS, tile_si
             band = np.empty((h, W, 4), np.uint8)
             for x0, w in row:
                 img = renderer.render(tile_camera(camera, x0, y0, w, h), settings)
-                spent[0] += renderer.stats["render_s"]
+                spent[0] += renderer.stats.render_s
                 for r in range(0, h, CONVERT_ROWS):    # float64 temporaries of a few rows at a time
                     band[r:r + CONVERT_ROWS, x0:x0 + w] = to_srgb8(img[r:r + CONVERT_ROWS])
             yield band
@@ -162,7 +162,7 @@ def main(argv=None):
         except InputError as e:     # strands the tracer cannot resolve: name the file they came from
             raise InputError(f"{args.input}: {e}") from None
         camera = parse_camera(args.camera, strands, size)
-        st = dict(renderer.stats)
+        st = renderer.stats.as_dict()
         try:
             render_s = render_png(renderer, camera, settings, args.out)
         except OSError as e:     # the disk filled up, or the place changed, while rendering

@@ -5,7 +5,7 @@ mistake the GPU tracer and its mirror (reference.py) share.
 Every strand is the union of its cut cylinders, each a convex solid: the points within r of
 the axis line through P_i, P_{i+1} that lie on the inner side of both cut planes (plane 1
 through P_i square to its own axis; plane 2 through P_{i+1} square to the next axis, or to
-its own at a strand's end and past SHARP_BEND_DEG). A ray meets a convex solid in one
+its own at a strand's end and past layout.SHARP_BEND_DEG). A ray meets a convex solid in one
 interval [t_in, t_out]; it enters a strand at t_in of one of its cylinders unless another
 cylinder of the same strand already holds the ray there (t_in' < t_in <= t_out'). The
 image is those entries, nearest first: layers are entries into strands (each strand one
@@ -27,7 +27,8 @@ import numpy as np
 
 from hairio import InputError
 
-from .cylinders import SHARP_BEND_DEG, plan_cylinders
+from . import layout
+from .cylinders import plan_cylinders
 from .ray_bundles import candidate_pairs
 from .reference import finish_pixels, pixel_samples
 from .settings import RenderSettings
@@ -70,7 +71,7 @@ def cut_cylinders(strands):
     n2 = u.copy()
     n2[:-1][follows[:-1]] = u[1:][follows[:-1]]
     cos = np.einsum("ij,ij->i", u, n2)
-    sharp = cos < np.cos(np.radians(SHARP_BEND_DEG))
+    sharp = cos < layout.cos_sharp()
     n2[sharp] = u[sharp]
     cos[sharp] = 1.0
     r = np.asarray(plan.radius, np.float64)[i]

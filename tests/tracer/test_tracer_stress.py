@@ -49,7 +49,7 @@ def test_a_cell_with_thousands_of_cylinders(renderer):
     renderer.set_strands(make_strands(lines, radius=2e-4, alpha=0.5))
     cam = Camera.look_at((0, -0.05, 0.005), (0, 0, 0.005), size=(24, 24))
     img = _finite(renderer.render(cam, RenderSettings(layers=8, count=True)))
-    assert img[..., 3].max() > 0.5 and renderer.stats["cylinder_tests"] > 3000
+    assert img[..., 3].max() > 0.5 and renderer.stats.cylinder_tests > 3000
 
 
 def test_empty_scene_renders_the_background(renderer):
