@@ -17,6 +17,7 @@ gl_context (which backend makes the context, where raw GL entry points come from
 reference (float64 CPU tracer), png, worker (out-of-process renderer), scenes (synthetic
 strands for tests and benchmarks), __main__ (python -m tracer render).
 """
+from . import layout
 from .camera import Camera
 from .settings import Light, RenderSettings
 from .cylinders import Cylinders, strands_to_cylinders

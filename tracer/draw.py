@@ -34,8 +34,11 @@ void main() {   // one triangle that covers the screen; the scissor picks the pi
 
 
 def trace_files(settings):
-    """The trace program's files in dependency order (see docs/ARCHITECTURE.md)."""
-    return ["trace.glsl"]
+    """The trace program's files in dependency order (tracer/shaders/trace_scene.glsl lists
+    them): the scene, the shape, the accelerator interface and the grid that implements it,
+    the shading model of `settings`, the tracer's main."""
+    return ["trace_scene.glsl", "shapes_cylinder.glsl", "accel.glsl", "accel_grid.glsl",
+            shading_model(settings.shading).glsl, "trace_main.glsl"]
 
 
 class Drawer:
@@ -55,7 +58,6 @@ class Drawer:
             defines = {
                 "LAYERS": layers,
                 "SHADOWS": int(key[1] or 0),
-                "SHADING_KK": int(shading_model(settings.shading).name == "kajiya-kay"),
                 "NUM_LIGHTS": len(settings.lights),
                 "SPP_N": settings.spp_n,
                 "MIN_PX": int(settings.min_pixel_width),

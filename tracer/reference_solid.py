@@ -32,6 +32,7 @@ from .cylinders import plan_cylinders
 from .ray_bundles import candidate_pairs
 from .reference import finish_pixels, pixel_samples
 from .settings import RenderSettings
+from .shading import Surface, shading_model
 
 BIG = 1e30
 PAIRS_PER_STEP = 4_000_000      # ray x cylinder pairs held in memory at once
@@ -202,11 +203,11 @@ def _light_through(cyl, p, L, dist, own_radius, settings, target=None):
 
 
 def _shade(cyl, ids, surf, o, d, t, settings):
+    model = shading_model(settings.shading)
     p = o + t[:, None] * d
     col = cyl.color[ids]
-    tangent = cyl.u[ids]
-    if settings.shading == "phong":
-        n = _normals(cyl, ids, surf, p, d)
+    n = _normals(cyl, ids, surf, p, d) if model.needs_normal else None
+    s = Surface(p=p, T=cyl.u[ids], N=n, V=d, color=col)
     out = settings.ambient * col
     for light in settings.lights:
         vec, lcol = light.packed()
@@ -220,17 +221,7 @@ def _shade(cyl, ids, surf, o, d, t, settings):
         lit = np.ones(len(p))
         if settings.shadows:
             lit = _light_through(cyl, p, L, dist, cyl.radius[ids], settings, vec[:3] if vec[3] > 0.5 else None)
-        if settings.shading == "kajiya-kay":
-            tl, tv = _dot(tangent, L), _dot(tangent, d)
-            sl, sv = np.sqrt(np.maximum(0, 1 - tl * tl)), np.sqrt(np.maximum(0, 1 - tv * tv))
-            diff, spec = sl, np.maximum(0, tl * tv + sl * sv) ** settings.shininess
-        else:
-            nl = _dot(n, L)
-            diff = np.maximum(nl, 0)
-            refl = 2 * nl[:, None] * n - L
-            spec = np.where(diff > 0, np.maximum(_dot(refl, -d), 0) ** settings.shininess, 0)
-        out = out + lit[:, None] * np.asarray(lcol) * (settings.diffuse * diff[:, None] * col
-                                                       + settings.specular * spec[:, None])
+        out = out + lit[:, None] * np.asarray(lcol) * model.reference(s, L, settings)
     return out
 
 
