@@ -18,6 +18,8 @@ from .cylinders import plan_cylinders
 from .draw import Drawer, screen_bounds
 from .gl_state import context_backend, shared_context
 from .gpu_build import compute_available
+from .meshes import mesh_set
+from .mesh_upload import upload_meshes
 from .scene_buffers import SceneBuffers
 from .scene_grid import build_scene_grid, grid_indices
 from .settings import GRID_WIDEN_CAP, RenderSettings
@@ -53,6 +55,8 @@ class Renderer:
         self.buffers = SceneBuffers(self.ctx, max_buffer_texels or self.ctx.info["GL_MAX_TEXTURE_BUFFER_SIZE"],
                                     self.stats)
         self.scene = Scene()
+        self.meshes = None          # tracer.meshes.MeshSet, or None
+        self.mesh_grid = None
         self._upload = GpuUpload(self.buffers) if self.build == "gpu" else NumpyUpload(self.buffers)
         self._drawer = Drawer(self.ctx)
 
@@ -107,6 +111,23 @@ class Renderer:
             self.scene.forget()
             raise
 
+    def set_meshes(self, meshes):
+        """Opaque triangle meshes beside the strands: a list of (vertices (V,3), triangles
+        (F,3) int, rgb), each optionally followed by a name for messages; [] or None for
+        none. Checked where they enter (tracer/meshes.py: InputError naming the mesh for
+        NaN, indices outside its vertices, no faces, ...), then uploaded as float32 with a
+        grid of their own; they stay until the next set_meshes, whatever the strands do.
+        They hide hair from the camera and the lights, take the hair's shadows and cast
+        their own, and are shaded diffusely with their colour."""
+        t0 = time.perf_counter()
+        checked = mesh_set(meshes)      # nothing changes when this refuses them
+        self.meshes = self.mesh_grid = None
+        if checked is not None:
+            self.mesh_grid = upload_meshes(self.buffers, checked)
+            self.meshes = checked
+        self.stats.num_triangles = 0 if checked is None else len(checked)
+        self.stats.mesh_s = time.perf_counter() - t0
+
     def update_strands(self, strand_ids, strands):
         """`strands` is the whole new set; only strands `strand_ids` changed. When their point
         counts are unchanged, only their data is re-uploaded (their cylinders with the numpy
@@ -158,11 +179,13 @@ class Renderer:
         return settings.layers
 
     def screen_bounds(self, camera):
-        """Pixel rectangle (x0, y0, x1, y1), y from the top, that the grid box can cover;
-        None when nothing can be seen."""
-        if not self.scene.num_cylinders:
+        """Pixel rectangle (x0, y0, x1, y1), y from the top, that the strands' grid box and
+        the meshes' box can cover; None when nothing can be seen."""
+        boxes = [(g.lo, g.hi) for g, there in ((self.scene.grid, self.scene.num_cylinders),
+                                              (self.mesh_grid, self.meshes is not None)) if there]
+        if not boxes:
             return None
-        return screen_bounds(self.scene.grid, camera)
+        return screen_bounds(np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0), camera)
 
     def render(self, camera, settings=None):
         """(H, W, 4) float32 linear RGBA, premultiplied, row 0 = top of the image."""
@@ -178,7 +201,8 @@ class Renderer:
             self.stats.grid_rebuilds += 1
         box = self.screen_bounds(camera)
         layers = self.effective_layers(settings)
-        img, counts = self._drawer.draw(self.buffers, self.scene.grid, camera, settings, layers, box)
+        img, counts = self._drawer.draw(self.buffers, self.scene.grid, camera, settings, layers, box, self.mesh_grid,
+                                        0.0 if self.meshes is None else self.meshes.shadow_offset())
         st = self.stats
         st.render_s = time.perf_counter() - t0
         st.renders += 1

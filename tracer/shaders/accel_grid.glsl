@@ -132,9 +132,9 @@ vec3 safe_inverse(vec3 d) {
 
 // Cells come in ray order, so once the hit list is settled after a full cell, no later
 // cell can change it.
-void accel_nearest(vec3 o, vec3 d, float widen_per_t, float widen_const) {
+void accel_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_const) {
     vec3 inv = safe_inverse(d);
-    float t0 = 0.0, t1 = BIG;
+    float t0 = 0.0, t1 = tmax;
     if (enter_grid(o, inv, t0, t1)) {
         ivec3 stp; vec3 tdelta;
         Walk w = begin_walk(o, d, inv, t0, stp, tdelta);
@@ -164,7 +164,7 @@ void accel_nearest(vec3 o, vec3 d, float widen_per_t, float widen_const) {
                 // cylinder is also listed in (half-open, so a hit on a face counts once).
                 // Equal distances are ordered by id, so the result does not depend on the
                 // order of the cell's list (the GPU grid build fills lists with atomics).
-                bool ok = t > 0.0 && t >= w.tcur && (t < texit || last);
+                bool ok = t > 0.0 && t < tmax && t >= w.tcur && (t < texit || last);
                 hits_offer(ok ? t : BIG, ok ? id : NO_ID, surf, alpha * asc);
             }
             if (!empty && hits_settled()) break;

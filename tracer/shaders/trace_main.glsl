@@ -26,10 +26,14 @@ uint hash32(uint x) {
 }
 
 #if SHADOWS
-// Transmittance toward a light from p (1 = lit): the accelerator's, after one guess.
+// Transmittance toward a light from p (1 = lit): 0 behind a mesh, else the accelerator's,
+// after one guess.
 float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint) {
 #if COUNT
     counter.x += 1.0;
+#endif
+#if MESHES
+    if (mesh_blocked(p, d, tmax, -1)) return 0.0;
 #endif
 #if SHADOWS == 1 && LAYERS > 1
     // The cylinder that shadowed this pixel's previous (nearer) layer often shadows this
@@ -76,6 +80,31 @@ vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
     return result;
 }
 
+#if MESHES
+// A mesh's point, shaded diffusely with its base colour (tracer/meshes.py): ambient plus
+// every light's colour times max(N·L, 0), in the shadow of hair and meshes. Shadow rays
+// leave mesh_offset off the surface, ignoring the triangle they leave.
+vec3 shade_mesh(int tri, vec3 o, vec3 d, float t, vec3 N) {
+    vec3 col = triangle_color(tri);
+    vec3 q = o + t * d + N * mesh_offset;
+    vec3 result = material.x * col;
+    for (int l = 0; l < NUM_LIGHTS; ++l) {
+        vec3 L; float dist;
+        if (light_vec[l].w > 0.5) { L = light_vec[l].xyz - q; dist = length(L); L /= max(dist, 1e-30); }
+        else { L = -light_vec[l].xyz; dist = BIG; }
+        float lit = 1.0;
+#if SHADOWS
+        if (mesh_blocked(q, L, dist, tri)) continue;
+        int hint = -1;
+        lit = accel_transmittance(q, L, dist, -1, 0.0, hint);
+        if (lit <= 0.0) continue;
+#endif
+        result += lit * light_col[l] * max(dot(N, L), 0.0) * col;
+    }
+    return result;
+}
+#endif
+
 // One primary ray: first find its LAYERS nearest hits without shading (accel_nearest fills
 // the hit list of accel.glsl), then shade them front to back. Keeping the shadow rays out
 // of the traversal loop matters on SIMD hardware (llvmpipe included): nested in it, one
@@ -90,8 +119,14 @@ vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
 // candidates per pass, to overlap their cache misses: 5 % faster on the real hair and on
 // 100k wavy strands, 12 % slower on 10k wavy strands, whose cells hold fewer candidates.
 vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
+    float tmesh = BIG;
+#if MESHES
+    // The nearest mesh hides every hair behind it.
+    int mtri; vec3 mn;
+    tmesh = mesh_nearest(o, d, BIG, mtri, mn);
+#endif
     hits_clear();
-    accel_nearest(o, d, widen_per_t, widen_const);
+    accel_nearest(o, d, tmesh, widen_per_t, widen_const);
     int n = 0;
     for (int i = 0; i < LAYERS; ++i) n += ht[i] < BIG ? 1 : 0;
     vec3 C = vec3(0.0);
@@ -111,6 +146,12 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
         counter.y += 1.0;
 #endif
     }
+#if MESHES
+    if (mtri >= 0) {            // opaque: what is left of the ray ends on the mesh
+        C += T * shade_mesh(mtri, o, d, tmesh, mn);
+        T = 0.0;
+    }
+#endif
     return vec4(C + T * background.rgb, 1.0 - T + T * background.a);
 }
 
