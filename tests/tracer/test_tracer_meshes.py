@@ -14,6 +14,14 @@ from tracer_scenes import curls, make_strands
 from test_tracer_vs_reference import _boundary
 
 SUN = Light(vector=(0.2, 0.3, -1.0))
+
+
+@pytest.fixture
+def meshed(renderer):
+    """The session's renderer, its meshes taken away again after the test (they stay on a
+    renderer until the next set_meshes)."""
+    yield renderer
+    renderer.set_meshes(None)
 GREY = (0.6, 0.6, 0.6)
 
 
@@ -56,13 +64,13 @@ def _matches_reference(renderer, strands, meshes, camera, settings):
     return img, ref
 
 
-def test_a_sphere_in_front_of_a_strand_hides_it(renderer):
+def test_a_sphere_in_front_of_a_strand_hides_it(meshed):
     strand = make_strands([[[-0.6, 0, 0], [0, 0, 0.02], [0.6, 0, 0]]], radius=0.03)
     sphere = uv_sphere((0, -0.4, 0), 0.15)
     cam = Camera.look_at((0, -2.5, 0), (0, 0, 0), size=(64, 32), fov_deg=30)
     # No highlight: hair then shows its colour times a grey level, as the mesh does.
     settings = RenderSettings(shadows=True, lights=(SUN,), specular=0.0)
-    img, ref = _matches_reference(renderer, strand, [(*sphere, (0.2, 0.4, 0.9))], cam, settings)
+    img, ref = _matches_reference(meshed, strand, [(*sphere, (0.2, 0.4, 0.9))], cam, settings)
     centre = img[15, 32]
     # The sphere's centre pixel shows the sphere's colour times its lighting, nothing of the hair.
     np.testing.assert_allclose(centre[:3] / centre[2], np.array([0.2, 0.4, 0.9]) / 0.9, rtol=1e-5)
@@ -72,17 +80,17 @@ def test_a_sphere_in_front_of_a_strand_hides_it(renderer):
     side = img[15, 4, :3]
     np.testing.assert_allclose(side / side[0], hair / hair[0], rtol=1e-4)
     # Without the sphere the centre pixel is hair.
-    renderer.set_meshes([])
-    bare = renderer.render(cam, settings)[15, 32, :3]
+    meshed.set_meshes([])
+    bare = meshed.render(cam, settings)[15, 32, :3]
     np.testing.assert_allclose(bare / bare[0], hair / hair[0], rtol=1e-4)
 
 
-def test_a_strand_shadows_a_plane(renderer):
+def test_a_strand_shadows_a_plane(meshed):
     strand = make_strands([[[-0.5, 0, 0.2], [0.5, 0, 0.2]]], radius=0.04)
     floor = plane(0.0, 1.0)
     cam = Camera.look_at((0, -0.01, 2.5), (0, 0, 0), up=(0, 1, 0), size=(48, 48), fov_deg=35)
     settings = RenderSettings(shadows=True, lights=(Light(vector=(0.0, 0.0, -1.0)),))
-    img, _ = _matches_reference(renderer, strand, [(*floor, GREY)], cam, settings)
+    img, _ = _matches_reference(meshed, strand, [(*floor, GREY)], cam, settings)
     col = img[..., :3]
     # Straight down: the floor gets the full sun but under the strand (which hides that from
     # above), where it gets ambient only.
@@ -91,26 +99,26 @@ def test_a_strand_shadows_a_plane(renderer):
     assert np.isclose(col[..., 0][floor_px], lit_level, atol=1e-4).sum() > 500
     # From the side the shadow shows.
     cam2 = Camera.look_at((0, -2.0, 1.2), (0, 0.3, 0), size=(64, 48), fov_deg=40)
-    img2, _ = _matches_reference(renderer, strand, [(*floor, GREY)], cam2, settings)
+    img2, _ = _matches_reference(meshed, strand, [(*floor, GREY)], cam2, settings)
     grey = img2[..., :3]
     assert np.isclose(grey[..., 0], shadow_level, atol=1e-4).sum() > 10
     assert np.isclose(grey[..., 0], lit_level, atol=1e-4).sum() > 500
 
 
-def test_a_plane_shadows_strands(renderer):
+def test_a_plane_shadows_strands(meshed):
     tuft = curls(16, 8, radius=0.015)
     roof = plane(1.3, 0.3, centre=(-0.3, 0.0))      # over the left half of the tuft
     cam = Camera.look_at((0, -2.6, 0.5), (0, 0, 0.5), size=(64, 48), fov_deg=40)
     settings = RenderSettings(shadows=True, lights=(Light(vector=(0.0, 0.0, -1.0)),))
-    img, ref = _matches_reference(renderer, tuft, [(*roof, GREY)], cam, settings)
+    img, ref = _matches_reference(meshed, tuft, [(*roof, GREY)], cam, settings)
     hair = (img[..., 3] > 0.99) & (img[..., 0] > 1.5 * img[..., 2])       # the brown pixels (the roof is grey)
     ambient_only = np.isclose(img[..., 0], 0.7 * settings.ambient, atol=2e-3)
     left, right = hair & (np.arange(64) < 28)[None], hair & (np.arange(64) > 36)[None]
     assert left.sum() > 30 and right.sum() > 30
     assert (ambient_only & left).sum() > 0.8 * left.sum()         # under the roof: in its shadow
     assert (ambient_only & right).sum() < 0.2 * right.sum()
-    renderer.set_meshes(None)
-    assert np.isclose(renderer.render(cam, settings)[..., 0], 0.7 * settings.ambient, atol=2e-3)[left].mean() < 0.5
+    meshed.set_meshes(None)
+    assert np.isclose(meshed.render(cam, settings)[..., 0], 0.7 * settings.ambient, atol=2e-3)[left].mean() < 0.5
 
 
 @pytest.mark.parametrize("mesh,match", [
@@ -126,14 +134,14 @@ def test_bad_meshes_are_refused_naming_them(mesh, match):
         mesh_set([(*mesh, "head")])
 
 
-def test_a_refused_mesh_changes_nothing(renderer):
+def test_a_refused_mesh_changes_nothing(meshed):
     s = curls(6, 6)
-    renderer.set_strands(s)
+    meshed.set_strands(s)
     sphere = uv_sphere((0, -0.5, 0.5), 0.1)
-    renderer.set_meshes([(*sphere, GREY)])
+    meshed.set_meshes([(*sphere, GREY)])
     cam = Camera.look_at((0, -2.5, 0.5), (0, 0, 0.5), size=(32, 32))
-    before = renderer.render(cam)
+    before = meshed.render(cam)
     with pytest.raises(InputError, match="mesh 1: no faces"):
-        renderer.set_meshes([(*sphere, GREY), (np.eye(3), np.zeros((0, 3), int), GREY)])
-    np.testing.assert_array_equal(renderer.render(cam), before)
-    assert renderer.stats.num_triangles == len(sphere[1])
+        meshed.set_meshes([(*sphere, GREY), (np.eye(3), np.zeros((0, 3), int), GREY)])
+    np.testing.assert_array_equal(meshed.render(cam), before)
+    assert meshed.stats.num_triangles == len(sphere[1])
