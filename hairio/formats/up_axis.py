@@ -2,11 +2,12 @@
 """Which way is up in a file, and bringing it into our frame (Z up, -Y front, SPEC §0).
 
 Our arrays never guess: a reader returns a file's coordinates as they are. Commands that
-show or convert files take `--up z|y|auto`: `z` keeps the coordinates, `y` reads the file
-as Y up in its format's convention (TressFX: left-handed DirectX; every other format
-right-handed), `auto` does so for the formats whose files are Y up (Y_UP_FORMATS) and
-keeps the others. The turn is a signed permutation of the axes (hairio/formats/axes.py), exact
-in float32.
+show or convert files take `--up z|y|auto`: `z` keeps the coordinates, `y` reads the file as
+right-handed Y up with the face toward +Z (x, y, z -> x, -z, y: the face toward our -Y, the
+front), `auto` does so for the formats whose files are Y up (Y_UP_FORMATS) and keeps the
+others. The turn is a signed permutation of the axes (hairio/formats/axes.py), exact in
+float32. TressFX files are read right-handed too: the TressFX-OpenGL Sintel's hair and body
+then face the front, and Ratboy's mohawk sweeps back from its brow.
 """
 import os
 
@@ -17,8 +18,8 @@ from .axes import unconvert_points
 UP_CHOICES = ("z", "y", "auto")
 # Extension -> the file's frame (a name of axes.AXES) for formats whose files are Y up.
 Y_UP_FORMATS = {
-    ".tfx": "directx",      # AMD TressFX samples: left-handed Y up, the face toward -Z
-    ".data": "y-up",        # USC-HairSalon: right-handed Y up, the face toward +Z
+    ".tfx": "y-up",         # TressFX samples (AMD's, TressFX-OpenGL's)
+    ".data": "y-up",        # USC-HairSalon
 }
 
 
@@ -31,7 +32,7 @@ def file_frame(path, up="auto"):
     if up == "z":
         return "none"
     if up == "y":
-        return Y_UP_FORMATS.get(ext, "y-up")
+        return "y-up"
     return Y_UP_FORMATS.get(ext, "none")
 
 

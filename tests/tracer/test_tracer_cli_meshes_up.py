@@ -56,7 +56,7 @@ def test_bad_meshes_on_the_command_line_exit_2_and_write_nothing(tmp_path, capsy
 
 
 def test_up_auto_recognises_y_up_formats():
-    assert file_frame("a.tfx", "auto") == "directx" and file_frame("a.data", "auto") == "y-up"
+    assert file_frame("a.tfx", "auto") == file_frame("a.data", "auto") == "y-up"
     assert file_frame("a.npz", "auto") == file_frame("a.hair", "auto") == "none"
     assert file_frame("a.tfx", "z") == "none" and file_frame("a.npz", "y") == "y-up"
 
@@ -73,6 +73,9 @@ def test_the_mohawk_stands_up_and_faces_the_camera(shared_data):
     rlo, rhi = raw.bounds()
     assert np.argmax(rhi - rlo) == 1
     np.testing.assert_array_equal(turned.points[:, 2], raw.points[:, 1])
+    # Its strands sweep back from the brow: tips lie behind (+Y) their roots.
+    roots, tips = turned.points[turned.offsets], turned.points[turned.offsets + turned.counts - 1]
+    assert np.mean(tips[:, 1] > roots[:, 1]) > 0.6
 
 
 def test_render_up_z_and_auto_differ_only_by_the_turn(tmp_path, shared_data):
