@@ -145,3 +145,13 @@ def test_a_refused_mesh_changes_nothing(meshed):
         meshed.set_meshes([(*sphere, GREY), (np.eye(3), np.zeros((0, 3), int), GREY)])
     np.testing.assert_array_equal(meshed.render(cam), before)
     assert meshed.stats.num_triangles == len(sphere[1])
+
+
+def test_meshes_without_strands(meshed):
+    from hairio import Strands
+    floor = plane(0.0, 1.0)
+    cam = Camera.look_at((0, -2.0, 1.5), (0, 0, 0), size=(32, 24))
+    settings = RenderSettings(lights=(Light(vector=(0.0, 0.0, -1.0)),))
+    img, ref = _matches_reference(meshed, Strands.empty(), [(*floor, GREY)], cam, settings)
+    assert (img[..., 3] == 1.0).mean() > 0.3
+    np.testing.assert_allclose(img[img[..., 3] == 1.0][:, :3], GREY[0] * (settings.ambient + 1.0), atol=1e-5)

@@ -94,6 +94,9 @@ vec3 shade_mesh(int tri, vec3 o, vec3 d, float t, vec3 N) {
         else { L = -light_vec[l].xyz; dist = BIG; }
         float lit = 1.0;
 #if SHADOWS
+#if COUNT
+        counter.x += 1.0;
+#endif
         if (mesh_blocked(q, L, dist, tri)) continue;
         int hint = -1;
         lit = accel_transmittance(q, L, dist, -1, 0.0, hint);
