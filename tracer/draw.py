@@ -9,17 +9,13 @@ import numpy as np
 from hairio import InputError
 from hairio.validate import check_memory
 
+from . import layout
 from .gl_buffers import set_samplers
 from .gpu_build import set_uniforms
 from .mesh_upload import MESH_BUFFERS
 from .shader_source import shader_source
 from .shading import shading_model
 
-# The shader squares distances in float32 (3.4e38 = (1.8e19)^2): past this a hit's
-# arithmetic overflows and the image comes out empty while the float64 reference shows
-# hair. Cameras within 1e19 of strands within MAX_POINT_COORDINATE keep every squared
-# distance finite (measured: hair at 1e18 and cameras out to 3e19 render as the reference does).
-MAX_CAMERA_COORDINATE = 1e19
 # Host memory of one render: the framebuffer (a driver like llvmpipe keeps it in host memory),
 # its read-back bytes and the flipped image, RGBA float32 each.
 RENDER_COPIES = 3
@@ -102,9 +98,9 @@ class Drawer:
         out that squared distances overflow, an image wider than the driver draws, or one
         whose copies need more memory than there is."""
         far = float(np.abs(camera.position).max())
-        if not far <= MAX_CAMERA_COORDINATE:
+        if not far <= layout.MAX_CAMERA_COORDINATE:
             raise InputError(f"camera: position {far:.3g} from the origin; the GPU tracer squares distances in "
-                             f"float32, so it takes cameras within ±{MAX_CAMERA_COORDINATE:.0e}: move it closer "
+                             f"float32, so it takes cameras within ±{layout.MAX_CAMERA_COORDINATE:.0e}: move it closer "
                              "or scale the scene down")
         w, h = camera.size
         side = min(int(self.ctx.info["GL_MAX_TEXTURE_SIZE"]), *(int(d) for d in self.ctx.info["GL_MAX_VIEWPORT_DIMS"]))

@@ -10,6 +10,15 @@ the compute build, the trace shader and the references all follow.
 """
 import numpy as np
 
+# --- Coordinates the GPU can square ---------------------------------------------------------
+# The shaders square distances in float32 (3.4e38 = (1.8e19)^2): past these a hit's
+# arithmetic overflows and the image comes out empty while the float64 reference shows hair
+# (a strand 1e20 from the origin did). Points (strands, meshes) within 1e18 seen from a
+# camera within 1e19 keep every squared distance finite (measured: hair at 1e18 and cameras
+# out to 3e19 render as the reference does).
+MAX_POINT_COORDINATE = 1e18
+MAX_CAMERA_COORDINATE = 1e19
+
 # --- Cylinder rules (SPEC §6; tracer/cylinders.py says why) ---------------------------------
 # Past this angle between two axes the shared plane would cut an unbounded piece: both
 # cylinders end on a cap square to their own axis instead.

@@ -14,8 +14,7 @@ import numpy as np
 
 from hairio import InputError
 
-# The GPU squares distances in float32 (see tracer/renderer.py, MAX_POINT_COORDINATE).
-MAX_COORDINATE = 1e18
+from . import layout
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,7 +37,6 @@ class MeshSet:
 
     def shadow_offset(self):
         """How far shadow rays leave the surface (layout.MESH_SHADOW_OFFSET × the diagonal)."""
-        from . import layout
         lo, hi = self.bounds()
         return float(layout.MESH_SHADOW_OFFSET * max(np.linalg.norm(hi - lo), 1e-30))
 
@@ -84,9 +82,9 @@ def _check_mesh(name, vertices, triangles, rgb):
     if not np.isfinite(v).all():
         bad = int(np.argmax(~np.isfinite(v).all(axis=1)))
         raise InputError(f"{name}: vertex {bad} has NaN or infinite coordinates; repair the mesh")
-    if v.size and np.abs(v).max() > MAX_COORDINATE:
+    if v.size and np.abs(v).max() > layout.MAX_POINT_COORDINATE:
         raise InputError(f"{name}: coordinates reach {np.abs(v).max():.3g}; the GPU tracer takes meshes within "
-                         f"±{MAX_COORDINATE:.0e} of the origin: scale or recentre it")
+                         f"±{layout.MAX_POINT_COORDINATE:.0e} of the origin: scale or recentre it")
     t = np.asarray(triangles)
     if t.size == 0:
         raise InputError(f"{name}: no faces; a mesh needs at least one triangle")

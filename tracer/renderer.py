@@ -4,7 +4,8 @@ scene data in buffer textures (tracer/scene_buffers.py), one fragment shader tha
 every pixel (tracer/draw.py).
 
 `Renderer` only says what happens in which order; each job has its module: the two upload
-paths (tracer/strand_upload.py), the grid (tracer/scene_grid.py), drawing (tracer/draw.py).
+paths (tracer/strand_upload.py), the grid (tracer/scene_grid.py), meshes (tracer/meshes.py,
+tracer/mesh_upload.py), drawing (tracer/draw.py).
 Only `set_strands`/`update_strands` upload; a render with a new camera, light or setting
 sends uniforms and nothing else (`stats.bytes_uploaded` proves it).
 """
@@ -14,6 +15,7 @@ import numpy as np
 
 from hairio import InputError, Strands
 
+from . import layout
 from .cylinders import plan_cylinders
 from .draw import Drawer, screen_bounds
 from .gl_state import context_backend, shared_context
@@ -26,11 +28,6 @@ from .settings import GRID_WIDEN_CAP, RenderSettings
 from .stats import RenderStats
 from .strand_upload import GpuUpload, NumpyUpload, Scene, select_strands
 
-# The shader squares distances in float32 (3.4e38 = (1.8e19)^2): past these a hit's
-# arithmetic overflows and the image comes out empty while the float64 reference shows
-# hair (a strand 1e20 from the origin did). Points within 1e18 seen from a camera within
-# MAX_CAMERA_COORDINATE keep every squared distance finite.
-MAX_POINT_COORDINATE = 1e18
 BUILDS = ("auto", "gpu", "numpy")
 
 
@@ -216,11 +213,11 @@ class Renderer:
 
 def check_gpu_range(strands):
     """InputError when strands lie farther from the origin than the GPU's float32 arithmetic
-    can square (MAX_POINT_COORDINATE), naming how far they reach."""
+    can square (layout.MAX_POINT_COORDINATE), naming how far they reach."""
     if not strands.num_points:
         return
     far = float(np.abs(strands.points).max()) + float(strands.radius.max())
-    if not far <= MAX_POINT_COORDINATE:
+    if not far <= layout.MAX_POINT_COORDINATE:
         raise InputError(f"points: coordinates reach {far:.3g}; the GPU tracer squares distances in float32, so "
-                         f"it takes strands within ±{MAX_POINT_COORDINATE:.0e} of the origin: scale them down "
+                         f"it takes strands within ±{layout.MAX_POINT_COORDINATE:.0e} of the origin: scale them down "
                          "(and the camera with them) or recentre them")
