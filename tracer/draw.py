@@ -51,7 +51,7 @@ class Drawer:
     def program(self, settings, camera, layers, meshes=False):
         key = (layers, settings.shadows and (1 if settings.shadow_mode == "hard" else 2),
                settings.shading, len(settings.lights), settings.spp_n, settings.min_pixel_width,
-               camera.type, settings.count, bool(meshes))
+               camera.type, settings.count, bool(meshes), layout.glsl_header())
         prog = self._programs.get(key)
         if prog is None:
             defines = {
