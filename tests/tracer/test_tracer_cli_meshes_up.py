@@ -10,8 +10,7 @@ from hairio.formats.up_axis import file_frame, strands_to_z_up
 from tracer.__main__ import main
 
 from test_tracer_io import _decode_png
-from test_tracer_meshes import uv_sphere
-from tracer_scenes import make_strands
+from tracer_scenes import make_strands, uv_sphere
 
 
 def _write_obj(path, verts, tris, nan_vertex=None):

@@ -19,7 +19,7 @@ from tracer.png import encode_png, linear_to_srgb, to_srgb8, write_png
 from tracer.gl_state import context_backend
 from tracer.worker import WorkerClient, WorkerError
 
-from tracer_scenes import curls
+from tracer_scenes import curls, uv_sphere
 
 
 def _decode_png(data):
@@ -177,8 +177,7 @@ def test_every_render_option_has_help():
 
 
 def test_worker_draws_meshes_and_keeps_them_across_a_restart():
-    from test_tracer_meshes import uv_sphere
-    from tracer import Renderer
+        from tracer import Renderer
     s = curls(6, 6)
     meshes = [(*uv_sphere((0, -0.4, 0.5), 0.15), (0.1, 0.5, 0.9))]
     cam = Camera.look_at((0, -2.5, 0.5), (0, 0, 0.5), size=(24, 24))

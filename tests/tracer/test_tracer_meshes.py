@@ -10,7 +10,7 @@ from hairio import InputError
 from tracer import Camera, Light, RenderSettings, Renderer, reference_render
 from tracer.meshes import mesh_set
 
-from tracer_scenes import curls, make_strands
+from tracer_scenes import curls, make_strands, plane, uv_sphere
 from test_tracer_vs_reference import _boundary
 
 SUN = Light(vector=(0.2, 0.3, -1.0))
@@ -23,30 +23,6 @@ def meshed(renderer):
     yield renderer
     renderer.set_meshes(None)
 GREY = (0.6, 0.6, 0.6)
-
-
-def uv_sphere(centre, radius, rings=12, segments=24):
-    """A closed sphere: (vertices, triangles)."""
-    theta = np.linspace(0, np.pi, rings + 1)[1:-1]
-    phi = np.linspace(0, 2 * np.pi, segments, endpoint=False)
-    t, p = np.meshgrid(theta, phi, indexing="ij")
-    ring = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1).reshape(-1, 3)
-    verts = np.concatenate([[[0, 0, 1]], ring, [[0, 0, -1]]]) * radius + np.asarray(centre, float)
-    idx = 1 + np.arange((rings - 1) * segments).reshape(rings - 1, segments)
-    nxt = np.roll(idx, -1, axis=1)
-    tris = [np.stack([np.zeros(segments, int), idx[0], nxt[0]], 1),
-            np.stack([np.full(segments, len(verts) - 1), nxt[-1], idx[-1]], 1)]
-    tris += [np.stack([idx[:-1], idx[1:], nxt[1:]], -1).reshape(-1, 3),
-             np.stack([idx[:-1], nxt[1:], nxt[:-1]], -1).reshape(-1, 3)]
-    return verts, np.concatenate(tris)
-
-
-def plane(z, half, centre=(0.0, 0.0)):
-    """A square at height z: (vertices, triangles)."""
-    cx, cy = centre
-    v = np.array([[cx - half, cy - half, z], [cx + half, cy - half, z], [cx + half, cy + half, z],
-                  [cx - half, cy + half, z]])
-    return v, np.array([[0, 1, 2], [0, 2, 3]])
 
 
 def _matches_reference(renderer, strands, meshes, camera, settings):
