@@ -177,7 +177,7 @@ def test_every_render_option_has_help():
 
 
 def test_worker_draws_meshes_and_keeps_them_across_a_restart():
-        from tracer import Renderer
+    from tracer import Renderer
     s = curls(6, 6)
     meshes = [(*uv_sphere((0, -0.4, 0.5), 0.15), (0.1, 0.5, 0.9))]
     cam = Camera.look_at((0, -2.5, 0.5), (0, 0, 0.5), size=(24, 24))
