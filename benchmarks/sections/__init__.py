@@ -17,6 +17,7 @@ SECTIONS = [
     ("gpu", "GPU"),
     ("integration", "Extension and export figures (issues 4 and 5)"),
     ("versions", "Blender versions: Generate and Render Preview in each Blender of the matrix"),
+    ("preview_defaults", "Preview defaults: no dust at the default settings"),
 ]
 
 
