@@ -38,6 +38,7 @@ class Session:
         self.passes = 0            # passes rendered since the last start
         self.starts = 0            # how many times it started over
         self.note = None           # the mesh budget's note of the last start, or None
+        self.meshes = None         # scene_data.SceneMeshes of the last start
 
     def image(self):
         return (self.sum / self.samples).astype(np.float32)
@@ -49,6 +50,16 @@ _session = None
 def current():
     """The running Session, or None."""
     return _session
+
+
+def status(scalp):
+    """A line for the panel while `scalp`'s preview is refined, else None."""
+    session = _session
+    if session is None or session.scalp != scalp:
+        return None
+    if session.samples >= TARGET_SAMPLES:
+        return f"Refined: {session.samples} samples per pixel"
+    return f"Refining: {session.samples} of {TARGET_SAMPLES} samples per pixel"
 
 
 def signature(context, session):

@@ -160,6 +160,7 @@ def test_the_preview_refines_towards_the_many_sample_image(clean):
     first = image_pixels()
     spp = int(scalp.keystrand_hair.preview_samples)
     assert (session.samples, session.passes) == (spp, 1)
+    assert progressive.status(scalp) == f"Refining: {spp} of {progressive.TARGET_SAMPLES} samples per pixel"
     # The reference: the tracer's own stratified samples (other positions than the passes').
     h, w = first.shape[:2]
     renderer = Renderer()
@@ -182,6 +183,7 @@ def test_the_preview_refines_towards_the_many_sample_image(clean):
     assert errors[-1] < 0.35 * errors[0], errors
     assert errors[len(errors) // 4] < errors[0]
     assert progressive.step() == "converged"
+    assert progressive.status(scalp) == f"Refined: {session.samples} samples per pixel"
 
 
 def test_the_preview_starts_over_when_the_camera_a_setting_or_the_hair_changes(clean):
