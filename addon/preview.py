@@ -17,8 +17,9 @@ triangles shows only the scalp and collider, and the operator says so.
 
 One image is one pass of the settings' samples; `render(..., sample_pass=k)` shifts every
 sample of pass k by the same sub-pixel offset (`pass_offset`, a low-discrepancy sequence
-over the pixel), so the passes the progressive preview (progressive.py) averages are new
-samples of the pixel's area, not the same ones again.
+over the pixel, or over one stratum of it with several samples), so the passes the
+progressive preview (progressive.py) averages are new samples of the pixel's area, not the
+same ones again.
 """
 import hashlib
 import os
@@ -194,10 +195,13 @@ def pass_offset(k):
     return tuple(float((0.5 + k * a) % 1.0 - 0.5) for a in _R2)
 
 
-def _shifted(camera, k):
+def _shifted(camera, k, spp_n):
+    """The camera of pass k. With n x n stratified samples a pass moves them by the offset
+    over one stratum (1/n of a pixel), so every sample stays near its own stratum and the
+    passes' mean keeps the pixel's footprint (shifted by whole pixels it would blur)."""
     if k == 0:
         return camera
-    ox, oy = pass_offset(k)
+    ox, oy = (c / spp_n for c in pass_offset(k))
     # shift_px moves the image centre: x as the samples' x, y up (the samples' y runs down).
     return replace(camera, shift_px=np.asarray(camera.shift_px, np.float64) + (ox, -oy))
 
@@ -211,9 +215,9 @@ def render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass=0):
     global _uploaded, _uploaded_meshes
     t0 = time.perf_counter()
     size = preview_size(scene, settings)
-    camera = _shifted(camera_for(scene, camera_obj, size), sample_pass)
     rs = render_settings(scene, settings)
     rs.check()
+    camera = _shifted(camera_for(scene, camera_obj, size), sample_pass, rs.spp_n)
     mesh_list = [] if meshes is None else meshes.meshes
     mesh_key = _meshes_key(mesh_list)
     t1 = time.perf_counter()

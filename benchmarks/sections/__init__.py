@@ -18,6 +18,7 @@ SECTIONS = [
     ("integration", "Extension and export figures (issues 4 and 5)"),
     ("versions", "Blender versions: Generate and Render Preview in each Blender of the matrix"),
     ("preview_defaults", "Preview defaults: no dust at the default settings"),
+    ("contact_sheet", "Contact sheet: each preset with the head, Cycles beside the preview"),
 ]
 
 

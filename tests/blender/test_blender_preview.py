@@ -149,11 +149,13 @@ def rmse(a, b):
     return float(np.sqrt(np.mean((np.asarray(a, np.float64) - b) ** 2)))
 
 
-def test_the_preview_refines_towards_the_many_sample_image(clean):
+@pytest.mark.parametrize("samples", ['1', '4'])
+def test_the_preview_refines_towards_the_many_sample_image(clean, samples):
     from tracer import RenderSettings, Renderer
     preview = ext_module(clean, "preview")
     progressive = ext_module(clean, "progressive")
     scalp = head_scene(size=48)
+    scalp.keystrand_hair.preview_samples = samples
     scene = bpy.context.scene
     assert bpy.ops.hair.render_preview() == {'FINISHED'}
     session = progressive.current()
@@ -161,14 +163,15 @@ def test_the_preview_refines_towards_the_many_sample_image(clean):
     spp = int(scalp.keystrand_hair.preview_samples)
     assert (session.samples, session.passes) == (spp, 1)
     assert progressive.status(scalp) == f"Refining: {spp} of {progressive.TARGET_SAMPLES} samples per pixel"
-    # The reference: the tracer's own stratified samples (other positions than the passes').
+    # The reference: the tracer's own stratified samples (other positions than the passes'),
+    # four times as many as the refinement reaches, so its own error stays below the one measured.
     h, w = first.shape[:2]
     renderer = Renderer()
     renderer.set_strands(preview.world_strands(scalp.keystrand_hair.hair_object))
     renderer.set_meshes(session.meshes.meshes)
     rs = preview.render_settings(scene, scalp.keystrand_hair)
     reference = renderer.render(preview.camera_for(scene, scene.camera, (w, h)),
-                                RenderSettings(**{**rs.__dict__, "spp": progressive.TARGET_SAMPLES}))
+                                RenderSettings(**{**rs.__dict__, "spp": 4 * progressive.TARGET_SAMPLES}))
     states, errors = [], [rmse(first, reference)]
     while True:
         state = progressive.step()
@@ -180,7 +183,7 @@ def test_the_preview_refines_towards_the_many_sample_image(clean):
     assert len(states) == -(-progressive.TARGET_SAMPLES // spp) - 1
     assert errors[0] > 0.01, "the first image is already the reference: nothing to refine"
     # The passes' mean approaches the reference: both estimate the same pixel areas.
-    assert errors[-1] < 0.35 * errors[0], errors
+    assert errors[-1] < 0.5 * errors[0], errors     # passes of the same samples again would stay at 1.0
     assert errors[len(errors) // 4] < errors[0]
     assert progressive.step() == "converged"
     assert progressive.status(scalp) == f"Refined: {session.samples} samples per pixel"
