@@ -21,6 +21,7 @@ over the pixel, or over one stratum of it with several samples), so the passes t
 progressive preview (progressive.py) averages are new samples of the pixel's area, not the
 same ones again.
 """
+import contextlib
 import hashlib
 import os
 import time
@@ -212,6 +213,13 @@ def render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass=0):
     sample_pass: which pass of samples (see pass_offset). Raises hairio.InputError for bad
     settings and RendererDied when the renderer failed (it is then closed, so the next call
     starts a fresh one)."""
+    return begin_render(scene, hair_obj, camera_obj, settings, meshes, sample_pass).result()
+
+
+def begin_render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass=0, wait=True):
+    """As render, but returns a PendingImage. With wait=False and the renderer process, the
+    render runs while Blender goes on (uploads, rare, are still waited for); in process it
+    is done on return either way."""
     global _uploaded, _uploaded_meshes
     t0 = time.perf_counter()
     size = preview_size(scene, settings)
@@ -221,7 +229,7 @@ def render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass=0):
     mesh_list = [] if meshes is None else meshes.meshes
     mesh_key = _meshes_key(mesh_list)
     t1 = time.perf_counter()
-    try:
+    with _renderer_failures():
         renderer = get_renderer(in_process_requested(settings))
         key = upload_key(hair_obj)
         uploaded = False
@@ -236,18 +244,51 @@ def render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass=0):
             _uploaded_meshes = mesh_key
             uploaded = True
         t2 = time.perf_counter()
+        timings = {"prepare_s": t1 - t0, "upload_s": t2 - t1, "uploaded": uploaded}
+        if not wait and hasattr(renderer, "render_begin"):
+            renderer.render_begin(camera, rs)
+            return PendingImage(size, timings, renderer=renderer)
+        t3 = time.perf_counter()
         image = renderer.render(camera, rs)
+        timings["render_s"] = time.perf_counter() - t3
+    return PendingImage(size, timings, image=image)
+
+
+@contextlib.contextmanager
+def _renderer_failures():
+    """InputError passes; any other failure of the renderer closes it and is RendererDied."""
+    try:
+        yield
     except InputError:
         raise
     except Exception as e:
         close()
         raise RendererDied(f"{type(e).__name__}: {e}") from e
-    t3 = time.perf_counter()
-    image = np.asarray(image, np.float32)
-    if image.shape != (size[1], size[0], 4):
-        close()
-        raise RendererDied(f"renderer returned an image of shape {image.shape}, expected {(size[1], size[0], 4)}")
-    return image, {"prepare_s": t1 - t0, "upload_s": t2 - t1, "render_s": t3 - t2, "uploaded": uploaded}
+
+
+class PendingImage:
+    """A preview image being drawn: ready() says, without waiting, whether result() has it;
+    result() -> ((H, W, 4) float32, timings), raising as render does."""
+
+    def __init__(self, size, timings, image=None, renderer=None):
+        self.size, self.timings = size, timings
+        self._image, self._renderer = image, renderer
+        self._t0 = time.perf_counter()
+
+    def ready(self):
+        return self._image is not None or self._renderer.render_ready()
+
+    def result(self):
+        if self._image is None:
+            with _renderer_failures():
+                self._image = self._renderer.render_end()
+        self.timings.setdefault("render_s", time.perf_counter() - self._t0)
+        image = np.asarray(self._image, np.float32)
+        w, h = self.size
+        if image.shape != (h, w, 4):
+            close()
+            raise RendererDied(f"renderer returned an image of shape {image.shape}, expected {(h, w, 4)}")
+        return image, self.timings
 
 
 def write_image(pixels):

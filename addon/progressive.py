@@ -5,9 +5,13 @@ positions each pass) and shows the running mean in the image, until TARGET_SAMPL
 per pixel; a change of what the image shows (the hair, a key's regrown wisps, the camera, a
 preview setting, the meshes, the lights) starts it over from a first image.
 
-Each timer tick renders one pass (the time of one first image) and gives the UI back: a
-tick never blocks longer than one render. While no Image Editor shows the preview (and a
-window could), the timer only watches for changes and renders nothing.
+With the renderer process (the default) a tick never waits for it: it sends a pass
+(WorkerClient.render_begin) and returns, and a later tick collects the image once it has
+come, so Blender stays responsive however long a pass takes; a new first image after a change
+comes the same way. In process (Render Inside Blender) a tick draws its pass before it
+returns. Only the press of Render Preview waits, for its first image. While no Image Editor
+shows the preview (and a window could), the timer only watches for changes and renders
+nothing.
 
 `step()` is one tick without the timer, so the refinement can be driven and tested in
 background mode, where Blender runs no timers.
@@ -39,6 +43,8 @@ class Session:
         self.starts = 0            # how many times it started over
         self.note = None           # the mesh budget's note of the last start, or None
         self.meshes = None         # scene_data.SceneMeshes of the last start
+        self.pending = None        # preview.PendingImage of the pass being drawn
+        self.pending_first = False  # whether it is a first image (the sums start over with it)
 
     def image(self):
         return (self.sum / self.samples).astype(np.float32)
@@ -109,19 +115,37 @@ def _begin(session):
         bpy.app.timers.register(_tick, first_interval=REFINE_INTERVAL_S)
 
 
-def _restart(context, session):
-    """A first image: one pass at the settings' samples, the sums started over."""
+def _restart(context, session, wait=True):
+    """A first image: one pass at the settings' samples, the sums started over when it comes
+    (at once with wait, else when a later step finds it ready)."""
     session.signature = signature(context, session)
-    meshes = preview.scene_meshes(context, session.scalp)
-    session.note = preview.budget_note(meshes)
-    session.meshes = meshes
-    pixels, _t = preview.render(context.scene, session.hair, session.camera, session.scalp.keystrand_hair,
-                                meshes=meshes, sample_pass=0)
-    session.sum = pixels.astype(np.float64) * _spp(session)
-    session.samples = _spp(session)
-    session.passes = 1
+    session.meshes = preview.scene_meshes(context, session.scalp)
+    session.note = preview.budget_note(session.meshes)
     session.starts += 1
-    preview.write_image(pixels)
+    session.pending, session.pending_first = _begin_pass(context, session, 0, wait), True
+    if wait:
+        _collect(session)
+
+
+def _begin_pass(context, session, k, wait=False):
+    return preview.begin_render(context.scene, session.hair, session.camera, session.scalp.keystrand_hair,
+                                meshes=session.meshes, sample_pass=k, wait=wait)
+
+
+def _collect(session):
+    """Add the finished pass to the sums (or start them with it) and show the mean."""
+    pending, first = session.pending, session.pending_first
+    session.pending = None
+    pixels, _t = pending.result()
+    spp = _spp(session)
+    if first:
+        session.sum, session.samples, session.passes = pixels.astype(np.float64) * spp, spp, 1
+        preview.write_image(pixels)
+    else:
+        session.sum += pixels.astype(np.float64) * spp
+        session.samples += spp
+        session.passes += 1
+        preview.write_image(session.image())
 
 
 def _spp(session):
@@ -129,8 +153,10 @@ def _spp(session):
 
 
 def step(context=None):
-    """One tick: start over when what the image shows changed, else add one pass of samples
-    until TARGET_SAMPLES. Returns "restarted", "refined", "converged" or "stopped" (no
+    """One tick, which never waits for the renderer process: start over when what the image
+    shows changed, else add one pass of samples until TARGET_SAMPLES. Returns "restarted"
+    (a new first image was asked for; shown when it is ready, at once in process), "refined"
+    (a pass was added), "waiting" (a pass is being drawn), "converged", or "stopped" (no
     session, or its objects, camera or image are gone)."""
     context = context or bpy.context
     session = _session
@@ -140,18 +166,19 @@ def step(context=None):
         stop()
         return "stopped"
     if signature(context, session) != session.signature:
-        _restart(context, session)
+        _restart(context, session, wait=False)
+        if session.pending.ready():
+            _collect(session)
         return "restarted"
-    if session.samples >= TARGET_SAMPLES:
-        return "converged"
-    spp = _spp(session)
-    pixels, _t = preview.render(context.scene, session.hair, session.camera, session.scalp.keystrand_hair,
-                                meshes=session.meshes, sample_pass=session.passes)
-    session.sum += pixels.astype(np.float64) * spp
-    session.samples += spp
-    session.passes += 1
-    preview.write_image(session.image())
-    return "refined"
+    if session.pending is None:
+        if session.samples >= TARGET_SAMPLES:
+            return "converged"
+        session.pending, session.pending_first = _begin_pass(context, session, session.passes), False
+    if not session.pending.ready():
+        return "waiting"
+    first = session.pending_first
+    _collect(session)
+    return "restarted" if first else "refined"
 
 
 def _alive(context, session):

@@ -229,3 +229,44 @@ def test_the_preview_starts_over_when_the_camera_a_setting_or_the_hair_changes(c
     # The image is removed: the refinement ends.
     bpy.data.images.remove(bpy.data.images["Hair Preview"])
     assert progressive.step() == "stopped" and progressive.current() is None
+
+
+def test_with_the_renderer_process_a_step_does_not_wait_for_the_pass(clean, monkeypatch):
+    import time
+    preview = ext_module(clean, "preview")
+    progressive = ext_module(clean, "progressive")
+    scalp = head_scene(size=48)
+    scene = bpy.context.scene
+    hair = scalp.keystrand_hair.hair_object
+    monkeypatch.setenv("KEYSTRAND_PREVIEW_IN_PROCESS", "0")
+    try:
+        assert bpy.ops.hair.render_preview() == {'FINISHED'}
+        session = progressive.current()
+        assert type(preview.current_renderer()).__name__ == "WorkerClient"
+        # The pass is sent and the step returns before the process can have drawn it.
+        assert progressive.step() == "waiting" and session.passes == 1
+        deadline = time.monotonic() + 60
+        state = "waiting"
+        while state == "waiting" and time.monotonic() < deadline:
+            time.sleep(0.02)
+            state = progressive.step()
+        assert state == "refined" and session.passes == 2
+        passes = [preview.render(scene, hair, scene.camera, scalp.keystrand_hair, meshes=session.meshes,
+                                 sample_pass=k)[0] for k in (0, 1)]
+        np.testing.assert_allclose(image_pixels(), (passes[0] + passes[1]) / 2, atol=1e-6)
+        # A change while a pass is drawn: the owed image is dropped, the new first image shown.
+        assert progressive.step() == "waiting"
+        scene.camera.location.x += 0.02
+        bpy.context.view_layer.update()
+        state = progressive.step()
+        deadline = time.monotonic() + 60
+        while (state == "waiting" or (state == "restarted" and session.pending is not None)) \
+                and time.monotonic() < deadline:
+            time.sleep(0.02)
+            state = progressive.step()
+        assert session.starts == 2 and session.passes == 1
+        fresh, _ = preview.render(scene, hair, scene.camera, scalp.keystrand_hair, meshes=session.meshes)
+        np.testing.assert_array_equal(image_pixels(), fresh)
+    finally:
+        progressive.stop()
+        preview.close()
