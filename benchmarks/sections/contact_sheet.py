@@ -2,7 +2,9 @@
 """Contact sheet (issues 13 and 14): every preset grown on the bundled scalp, kept out of the
 bundled head, rendered with Cycles as the extension's hair material makes it (Principled
 Hair BSDF, the strand colours) with the head beside it, next to the tracer's preview of the
-same strands with the same head, camera and sun. The preview's head is what Render Preview
+same strands with the same head, camera and sun: its first image (the add-on's default,
+one sample per pixel) and the image its refinement reaches (REFINED_SPP samples, stratified;
+the Blender preview refines to 64). The preview's head is what Render Preview
 shows: opaque, diffuse, the head's base colour; Cycles renders the head with a Principled
 BSDF of that colour. A reading aid, not a measure: the two hair shadings differ by design
 until the preview has the physically based fibre model.
@@ -20,6 +22,7 @@ HEAD_RGB = (0.62, 0.45, 0.36)              # a skin tone, linear
 VIEW = np.array([0.45, 1.0, -0.25])        # the way the camera looks: the face and one side
 SUN = np.array([0.3, 0.6, -0.75])          # the way the light travels: from the front, above
 CYCLES_SAMPLES = 32
+REFINED_SPP = 64
 
 
 def _cycles(strands, head, matrix, size):
@@ -82,7 +85,7 @@ def run(sec, cfg):
     full = cfg.mode == "full"
     size = (512, 512) if full else (320, 320)
     scalp, head = groom.default_scalp(), groom.default_head()
-    sec.text(__doc__.split("\n\n", 1)[1].strip())
+    sec.text(__doc__.strip())
     sec.settings(image=f"{size[0]}x{size[1]}", strands="each preset's count" if full else "a quarter of each preset's",
                  cycles_samples=CYCLES_SAMPLES, preview="the add-on's defaults (1 spp) with the head",
                  head_rgb=HEAD_RGB)
@@ -104,22 +107,29 @@ def run(sec, cfg):
         renderer.set_strands(strands)
         renderer.set_meshes([(head.vertices, head.triangles, HEAD_RGB, "head")])
         rs = tracer.RenderSettings(lights=(tracer.Light("directional", tuple(SUN), (1, 1, 1), 3.0),))
-        t_preview, preview = once(lambda: renderer.render(tracer_camera(matrix, size), rs))
+        camera = tracer_camera(matrix, size)
+        t_preview, preview = once(lambda: renderer.render(camera, rs))
+        refined_spp = REFINED_SPP if full else 16
+        t_refined, refined = once(lambda: renderer.render(camera, tracer.RenderSettings(
+            **{**rs.__dict__, "spp": refined_spp})))
         cycles, t_cycles = _cycles(strands, head, matrix, size)
-        panels.append((name, to_srgb8(cycles), to_srgb8(preview)))
-        rows.append([name, f"{strands.num_strands:,}", fmt_time(t_cycles), fmt_time(t_preview)])
-    sec.table(["preset", "strands", f"Cycles ({CYCLES_SAMPLES} samples, one run)", "preview (one run)"], rows)
+        panels.append((name, to_srgb8(cycles), to_srgb8(preview), to_srgb8(refined)))
+        rows.append([name, f"{strands.num_strands:,}", fmt_time(t_cycles), fmt_time(t_preview), fmt_time(t_refined)])
+    sec.table(["preset", "strands", f"Cycles ({CYCLES_SAMPLES} samples, one run)", "preview, 1 spp (one run)",
+               f"preview, {REFINED_SPP if full else 16} spp (one run)"], rows)
     if panels:
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        fig, axes = plt.subplots(len(panels), 2, figsize=(6, 3 * len(panels)), squeeze=False)
-        for row, (name, cyc, pre) in zip(axes, panels):
-            for ax, img, title in zip(row, (cyc, pre), ("Cycles", "preview")):
+        fig, axes = plt.subplots(len(panels), 3, figsize=(9, 3 * len(panels)), squeeze=False)
+        spp = REFINED_SPP if full else 16
+        for row, (name, cyc, pre, ref) in zip(axes, panels):
+            for ax, img, title in zip(row, (cyc, pre, ref), ("Cycles", "preview, 1 spp", f"preview, {spp} spp")):
                 ax.imshow(img)
                 ax.set_title(f"{name}: {title}", fontsize=8)
                 ax.axis("off")
         fig.tight_layout()
-        sec.figure(fig, "contact_sheet.png", "Each preset with the bundled head: Cycles (left) and the "
-                                             "tracer's preview (right), same strands, camera and sun")
+        sec.figure(fig, "contact_sheet.png", "Each preset with the bundled head: Cycles (left), the tracer's "
+                                             "preview at one sample per pixel (middle) and refined (right); "
+                                             "same strands, camera and sun")
     sec.summary.append(f"contact sheet: {len(panels)} presets, Cycles beside the preview with the head")

@@ -59,7 +59,7 @@ def _preset_count():
 
 def run(sec, cfg):
     tracer = tracer_api()
-    sec.text(__doc__.split("\n\n", 1)[1].strip())
+    sec.text(__doc__.strip())
     sizes = [(512, 512), (1920, 1080)]
     rows, summary = [], []
     for name, make, direction in _scenes(cfg):
