@@ -108,17 +108,6 @@ def read_meshes(paths, colors, frame_of):
     return mesh_set(meshes)
 
 
-def tile_camera(camera, x0, y0, w, h):
-    """The camera that sees exactly pixels [x0, x0+w) x [y0, y0+h) of `camera`'s image:
-    same pixel size, the image centre shifted. At 1 spp a tile's pixels are the whole
-    image's bit for bit; with more samples the jitter follows the tile's own pixel
-    numbers (same stratification, another fixed pattern)."""
-    from .camera import Camera
-    W, H = camera.size
-    shift = np.asarray(camera.shift_px, np.float64) + [x0 + w / 2 - W / 2, H / 2 - h / 2 - y0]
-    return Camera(camera.type, camera.position, camera.rotation, (int(w), int(h)), camera.pixel_size, shift)
-
-
 def tiles(size, tile_pixels=TILE_PIXELS, tile_side=TILE_SIDE):
     """Row bands of tiles covering a (W, H) image: [(y0, h, [(x0, w), ...]), ...]."""
     W, H = size
@@ -138,7 +127,7 @@ def render_png(renderer, camera, settings, out, tile_pixels=TILE_PIXELS, tile_si
         for y0, h, row in tiles(camera.size, tile_pixels, tile_side):
             band = np.empty((h, W, 4), np.uint8)
             for x0, w in row:
-                img = renderer.render(tile_camera(camera, x0, y0, w, h), settings)
+                img = renderer.render(camera.window(x0, y0, w, h), settings)
                 spent[0] += renderer.stats.render_s
                 for r in range(0, h, CONVERT_ROWS):    # float64 temporaries of a few rows at a time
                     band[r:r + CONVERT_ROWS, x0:x0 + w] = to_srgb8(img[r:r + CONVERT_ROWS])

@@ -6,8 +6,9 @@
 uniform vec3 cam_pos;
 uniform mat3 cam_rot;
 uniform float pixel_size;
-uniform vec2 shift_px;
-uniform vec2 image_size;
+uniform vec2 image_size;      // this draw's image (a window of the whole image, or all of it)
+uniform ivec2 pixel_origin;   // its pixel (0, 0) in the whole image (tracer/camera.py)
+uniform vec2 centre_px;       // the optical axis in the whole image's pixels (Camera.centre_px)
 
 uniform vec4 light_vec[NUM_LIGHTS];   // w = 0: xyz is the direction light travels; w = 1: position
 uniform vec3 light_col[NUM_LIGHTS];
@@ -166,9 +167,11 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
 // past it and dropped hits, so the work of one invocation is kept to one sample.
 uniform int sample_index;
 
+// A pixel's samples depend only on its place in the whole image and the sample index, so
+// the tiles of a large render are the image rendered whole.
 void main() {
-    int px = int(gl_FragCoord.x);
-    int py = int(image_size.y) - 1 - int(gl_FragCoord.y);   // row 0 = top
+    int px = int(gl_FragCoord.x) + pixel_origin.x;
+    int py = int(image_size.y) - 1 - int(gl_FragCoord.y) + pixel_origin.y;   // row 0 = top
     int s = sample_index;
     vec2 jit = vec2(0.5);
 #if SPP_N > 1
@@ -177,8 +180,8 @@ void main() {
     jit = (vec2(s % SPP_N, s / SPP_N) + rnd) / float(SPP_N);
 #endif
     float x = float(px) + jit.x, y = float(py) + jit.y;
-    float u = (x - 0.5 * image_size.x + shift_px.x) * pixel_size;
-    float v = (0.5 * image_size.y - y + shift_px.y) * pixel_size;
+    float u = (x - centre_px.x) * pixel_size;
+    float v = (centre_px.y - y) * pixel_size;
     vec3 o, d;
     float widen_per_t = 0.0, widen_const = 0.0;
 #if ORTHO

@@ -1,0 +1,103 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Tiled renders: a pixel's samples depend only on where the pixel lies in the whole image
+and on the sample index, so an image rendered in tiles is the image rendered whole."""
+import numpy as np
+import pytest
+
+from hairio import InputError
+from tracer import Camera, RenderSettings
+from tracer.__main__ import main, render_png, tiles
+from tracer.reference import reference_render
+from tracer.reference.samples import pixel_samples
+
+from tracer_scenes import curls
+
+
+def _camera(size):
+    s = curls(n_strands=16, radius=0.02)
+    return s, Camera.frame_bounds(*s.bounds(), size)
+
+
+def _assemble(render, camera, xs, ys):
+    """The image of `camera` put together from the windows [xs[i], xs[i+1]) x [ys[j], ys[j+1])."""
+    W, H = camera.size
+    out = np.full((H, W, 4), np.nan)
+    for y0, y1 in zip(ys[:-1], ys[1:]):
+        for x0, x1 in zip(xs[:-1], xs[1:]):
+            out[y0:y1, x0:x1] = render(camera.window(x0, y0, x1 - x0, y1 - y0))
+    return out
+
+
+def test_a_window_keeps_the_rays_of_its_pixels():
+    _, cam = _camera((40, 30))
+    cam = Camera(cam.type, cam.position, cam.rotation, cam.size, cam.pixel_size, np.array([3.25, -1.5]))
+    win = cam.window(12, 7, 9, 11)
+    assert win.size == (9, 11) and tuple(win.pixel_origin) == (12, 7)
+    x, y = np.meshgrid(np.arange(9) + 0.3, np.arange(11) + 0.7)
+    np.testing.assert_allclose(win.rays(x, y)[1], cam.rays(x + 12, y + 7)[1], rtol=0, atol=1e-15)
+    inner = win.window(2, 3, 4, 4)     # a window of a window is a window of the whole image
+    assert tuple(inner.pixel_origin) == (14, 10)
+    np.testing.assert_allclose(inner.rays(x[:4, :4], y[:4, :4])[1], cam.rays(x[:4, :4] + 14, y[:4, :4] + 10)[1],
+                               rtol=0, atol=1e-15)
+    with pytest.raises(InputError, match="window"):
+        cam.window(35, 0, 6, 1)
+
+
+@pytest.mark.parametrize("spp", [1, 4])
+def test_reference_samples_follow_the_whole_image(spp):
+    n = int(round(np.sqrt(spp)))
+    _, cam = _camera((24, 18))
+    whole = pixel_samples(cam, n).reshape(18, 24, spp, 2)
+    win = pixel_samples(cam.window(10, 5, 7, 6), n).reshape(6, 7, spp, 2)
+    np.testing.assert_array_equal(win + [10, 5], whole[5:11, 10:17])
+
+
+def test_a_tiled_reference_render_is_the_whole_one():
+    s, cam = _camera((20, 16))
+    settings = RenderSettings(spp=4)
+    whole = reference_render(s, cam, settings)
+    assert (whole[..., 3] > 0.5).mean() > 0.05
+    tiled = _assemble(lambda c: reference_render(s, c, settings), cam, [0, 9, 20], [0, 7, 16])
+    np.testing.assert_allclose(tiled, whole, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("spp", [1, 4])
+def test_a_2x2_tiled_render_is_the_whole_render(renderer, spp):
+    """Tiles of odd sizes at odd offsets; at spp 4 the jitter of each pixel must be the one
+    it has in the whole image (tiles numbered their own pixels from 0 before)."""
+    s, cam = _camera((96, 80))
+    settings = RenderSettings(spp=spp)
+    renderer.set_strands(s)
+    whole = renderer.render(cam, settings)
+    assert (whole[..., 3] > 0.5).mean() > 0.05 and (whole[..., 3] < 0.5).mean() > 0.05
+    tiled = _assemble(lambda c: renderer.render(c, settings), cam, [0, 37, 96], [0, 45, 80])
+    np.testing.assert_allclose(tiled, whole, rtol=0, atol=2e-7)
+
+
+def test_render_png_tiles_at_4_spp_write_the_whole_image(renderer, tmp_path):
+    from tracer.png import to_srgb8
+    s, cam = _camera((70, 50))
+    settings = RenderSettings(spp=4)
+    renderer.set_strands(s)
+    whole = to_srgb8(renderer.render(cam, settings))
+    out = tmp_path / "tiled.png"
+    assert sum(len(row) for _, _, row in tiles(cam.size, 900, 32)) == 6
+    render_png(renderer, cam, settings, out, tile_pixels=900, tile_side=32)
+    np.testing.assert_array_equal(_decode(out), whole)
+
+
+def _decode(path):
+    import struct
+    import zlib
+    data = path.read_bytes()
+    pos, idat = 8, b""
+    while pos < len(data):
+        (n,) = struct.unpack(">I", data[pos:pos + 4])
+        kind, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + n]
+        if kind == b"IHDR":
+            w, h = struct.unpack(">II", body[:8])
+        elif kind == b"IDAT":
+            idat += body
+        pos += 12 + n
+    raw = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(h, 1 + 4 * w)
+    return raw[:, 1:].reshape(h, w, 4)
