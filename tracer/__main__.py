@@ -4,8 +4,8 @@
 [--camera auto|x,y,z:tx,ty,tz:fov] [--up auto|z|y] [--mesh MESH.obj [--mesh-color R,G,B]]...
 
 Bad input exits 2 with one line naming it and writes nothing. What can be known before the
-render is checked before it: the size, the samples, the destination (a folder, a missing
-or read-only place). The image is rendered in tiles of at most TILE_PIXELS and written to
+render is checked before it: the size, the memory of one band of tiles at that width, the
+samples, the destination (a folder, a missing or read-only place). The image is rendered in tiles of at most TILE_PIXELS and written to
 the PNG band by band as they finish, so a 16384 x 16384 image takes the memory of one band
 of tiles, not of the image (a whole 8192² image in float64 needs 2 GiB per copy). A disk
 that fills up while the PNG is written is an exit 2 too, and leaves no file.
@@ -19,6 +19,9 @@ import numpy as np
 
 from hairio import InputError
 
+# Samples are placed in float32 pixel coordinates of the whole image: below 16384 they
+# round to within 1/2048 of a pixel (a 32nd of the finest stratum, 64 per side at MAX_SPP);
+# each doubling of the size doubles that error.
 MAX_SIZE = 16384
 # Pixels per tile: 4 MiB of float32 RGBA from the GPU; tiles are at most TILE_SIDE wide, so
 # a band of them is at most 16384 x 128 pixels (8 MiB of 8-bit rows). Smaller tiles cost
@@ -54,9 +57,34 @@ def parse_size(text):
         w, h = (int(x) for x in text.lower().split("x"))
     except ValueError:
         raise InputError(f"--size {text!r}: expected WIDTHxHEIGHT, e.g. 512x512") from None
-    if not (1 <= w <= MAX_SIZE and 1 <= h <= MAX_SIZE):
+    if min(w, h) < 1:
         raise InputError(f"--size {text!r}: width and height must lie in 1..{MAX_SIZE}")
+    if max(w, h) > MAX_SIZE:
+        raise InputError(f"--size {text!r}: width and height must lie in 1..{MAX_SIZE}; the tracer places samples "
+                         f"in float32 pixel coordinates, which {max(w, h)} pixels across round to "
+                         f"1/{1 / position_error(max(w, h)):.0f} of a pixel (1/{1 / position_error(MAX_SIZE):.0f} "
+                         f"at {MAX_SIZE})")
     return w, h
+
+
+def position_error(side):
+    """The largest rounding of a float32 sample position (0 <= x < side) in an image `side`
+    pixels across, in pixels: half the float32 spacing just below `side`."""
+    below = np.nextafter(np.float32(side), np.float32(0))
+    return float(np.spacing(below)) / 2
+
+
+def render_memory(size, tile_pixels=TILE_PIXELS, tile_side=TILE_SIDE):
+    """Bytes of host memory render_png takes for an image of `size` (W, H), whatever its
+    height: one band of 8-bit rows and its PNG scanlines twice (the filtered rows and their
+    bytes), one tile's float32 copies (tracer.draw.RENDER_COPIES), the float64 temporaries
+    of converting CONVERT_ROWS rows of a tile (about four), and 1 MiB for zlib."""
+    from .draw import RENDER_COPIES
+    W, _ = size
+    _, h, row = tiles(size, tile_pixels, tile_side)[0]
+    tw = row[0][1]
+    return (h * W * 4 + 2 * h * (1 + 4 * W) + RENDER_COPIES * tw * h * 16
+            + 4 * min(h, CONVERT_ROWS) * tw * 4 * 8 + (1 << 20))
 
 
 def parse_camera(text, strands, size, meshes=None):
@@ -181,6 +209,9 @@ def main(argv=None):
     args = parser.parse_args(argv)
     try:
         size = parse_size(args.size)
+        from hairio.validate import check_memory
+        check_memory(f"--size {args.size}", render_memory(size),
+                     "render a narrower image (it is rendered in bands of tiles, each the image's width)")
         from hairio.atomic import check_destination
         check_destination(args.out, f"--out {args.out}")
         from .settings import RenderSettings

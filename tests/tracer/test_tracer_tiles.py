@@ -101,3 +101,66 @@ def _decode(path):
         pos += 12 + n
     raw = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(h, 1 + 4 * w)
     return raw[:, 1:].reshape(h, w, 4)
+
+
+# ------------------------------------------------------------------ the command's stated limits
+
+@pytest.mark.parametrize("size,want", [
+    ("16385x2", "width and height must lie in 1..16384; the tracer places samples in float32 pixel coordinates, "
+                "which 16385 pixels across round to 1/1024 of a pixel (1/2048 at 16384)"),
+    ("40000x40000", "which 40000 pixels across round to 1/512 of a pixel"),
+    ("0x8", "width and height must lie in 1..16384"),
+])
+def test_a_size_past_the_limit_is_refused_with_its_error_before_the_input_is_read(tmp_path, capsys, size, want):
+    missing = tmp_path / "no-such-input.npz"
+    assert main(["render", str(missing), "--out", str(tmp_path / "x.png"), "--size", size]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: --size '{size}': ") and want in err
+    assert not list(tmp_path.iterdir())
+
+
+def test_spp_past_the_limit_is_refused_with_its_error_before_the_input_is_read(tmp_path, capsys):
+    missing = tmp_path / "no-such-input.npz"
+    assert main(["render", str(missing), "--out", str(tmp_path / "x.png"), "--spp", str(1000 ** 2)]) == 2
+    err = capsys.readouterr().err
+    assert "spp: 1000000 samples per pixel, summed in float32, can be off by up to 5.96% of a pixel's value; " \
+           "use at most 4096 (error 0.024%)" in err
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_16k_image_is_refused_only_when_a_band_does_not_fit_in_memory(tmp_path, capsys, monkeypatch):
+    import hairio.validate
+    from tracer.__main__ import render_memory
+    missing = tmp_path / "no-such-input.npz"
+    argv = ["render", str(missing), "--out", str(tmp_path / "x.png"), "--size", "16384x16384"]
+    need = render_memory((16384, 16384))
+    assert need < 64 << 20          # a band of tiles, not the 4 GiB of the image in float32
+    assert render_memory((16384, 16384)) == render_memory((16384, 300))
+    monkeypatch.setattr(hairio.validate, "available_memory", lambda: need - 1)
+    assert main(argv) == 2
+    assert f"error: --size 16384x16384: needs about {need / 2**30:.2f} GiB of memory but" in capsys.readouterr().err
+    monkeypatch.setattr(hairio.validate, "available_memory", lambda: need)
+    assert main(argv) == 2           # past the size: refused only for the missing input
+    err = capsys.readouterr().err
+    assert str(missing) in err and "--size" not in err
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_16k_wide_render_takes_no_more_than_its_estimate(renderer, tmp_path):
+    """Two bands of eight 2048 x 128 tiles: the image (16384 x 256) is never held whole,
+    in float32 or float64; what Python allocates stays within render_memory."""
+    import tracemalloc
+    from tracer.__main__ import render_memory
+    s, cam = _camera((16384, 256))
+    renderer.set_strands(s)
+    out = tmp_path / "wide.png"
+    tracemalloc.start()
+    try:
+        render_png(renderer, cam, RenderSettings(), out)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak <= render_memory(cam.size), (peak, render_memory(cam.size))
+    assert peak < 16384 * 256 * 16       # less than the image in float32
+    img = _decode(out)
+    assert img.shape == (256, 16384, 4) and 0 < (img[..., 3] > 0).mean() < 0.05
