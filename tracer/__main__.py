@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """python -m tracer render INPUT --out IMAGE.png [--size 512x512] [--spp N]
-[--shadows|--no-shadows] [--layers K] [--shading MODEL]
+[--shadows|--no-shadows] [--layers K] [--shading MODEL] [--min-pixel-width|--no-min-pixel-width]
 [--camera auto|x,y,z:tx,ty,tz:fov] [--up auto|z|y] [--mesh MESH.obj [--mesh-color R,G,B]]...
 
 Bad input exits 2 with one line naming it and writes nothing. What can be known before the
@@ -167,7 +167,7 @@ def render_png(renderer, camera, settings, out, tile_pixels=TILE_PIXELS, tile_si
 
 def build_parser():
     from hairio.formats.up_axis import UP_CHOICES
-    from .settings import MAX_SPP
+    from .settings import MAX_SPP, RenderSettings
     from .shading import DEFAULT_SHADING, SHADING_MODELS
     parser = argparse.ArgumentParser(prog="python -m tracer", description="Render strands with the GPU ray tracer.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -186,6 +186,16 @@ def build_parser():
     r.add_argument("--no-shadows", dest="shadows", action="store_false", help="no shadow rays: faster, flatter")
     r.add_argument("--layers", type=int, default=4,
                    help="semi-transparent hits composited front to back per ray, 1..64 (default %(default)s)")
+    defaults = RenderSettings()     # the options' defaults are the library's
+    on_off = {True: "on", False: "off"}
+    r.add_argument("--min-pixel-width", dest="min_pixel_width", action="store_true",
+                   default=defaults.min_pixel_width,
+                   help="widen hairs thinner than half a pixel (up to "
+                        f"{defaults.min_pixel_width_cap:g}x their radius) and make them fainter to match, so thin "
+                        "hair shows as strands, not dust; hair far thinner than a pixel stays faint "
+                        f"(default {on_off[defaults.min_pixel_width]})")
+    r.add_argument("--no-min-pixel-width", dest="min_pixel_width", action="store_false",
+                   help="trace every hair at its own radius")
     r.add_argument("--shading", choices=[m.name for m in SHADING_MODELS], default=DEFAULT_SHADING,
                    help="shading model: " + "; ".join(f"{m.name}: {m.description}" for m in SHADING_MODELS)
                         + " (default %(default)s)")
@@ -216,7 +226,8 @@ def main(argv=None):
         check_destination(args.out, f"--out {args.out}")
         from .settings import RenderSettings
         settings = RenderSettings(spp=args.spp, shadows=args.shadows, layers=args.layers,
-                                  shading=args.shading, background=(0.0, 0.0, 0.0, 0.0))
+                                  shading=args.shading, min_pixel_width=args.min_pixel_width,
+                                  background=(0.0, 0.0, 0.0, 0.0))
         settings.check()
         from hairio.formats.up_axis import file_frame
         from hairio.formats.axes import unconvert_points
@@ -254,7 +265,8 @@ def main(argv=None):
           + (f", {st['num_triangles']} mesh triangles" if st["num_triangles"] else ""))
     print(f"upload {st['upload_s']:.3f} s (cylinders {st['cylinders_s']:.3f} s)")
     print(f"grid build {st['grid_s']:.3f} s: {st['grid_dims']} cells, {st['grid_refs']} references")
-    print(f"render {render_s:.3f} s at {size[0]}x{size[1]}, {args.spp} spp")
+    print(f"render {render_s:.3f} s at {size[0]}x{size[1]}, {args.spp} spp"
+          + (", minimum pixel width" if settings.min_pixel_width else ""))
     print(f"wrote {args.out}")
     return 0
 
