@@ -25,7 +25,7 @@ from hairio import InputError
 MAX_SIZE = 16384
 # Pixels per tile: 4 MiB of float32 RGBA from the GPU; tiles are at most TILE_SIDE wide, so
 # a band of them is at most 16384 x 128 pixels (8 MiB of 8-bit rows). Smaller tiles cost
-# more in per-draw overhead than they save (1/4 the pixels: 1.8x the render time at 4096²).
+# more in per-draw overhead than they save (docs/DECISIONS.md, "Tiles of 2^18 pixels").
 TILE_PIXELS = 1 << 18
 TILE_SIDE = 2048
 # Rows converted to 8-bit sRGB at once: the conversion works in float64 (~10 MiB at 2048 wide).

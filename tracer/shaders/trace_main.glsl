@@ -38,9 +38,9 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint
 #endif
 #if SHADOWS == 1 && LAYERS > 1
     // The cylinder that shadowed this pixel's previous (nearer) layer often shadows this
-    // one too: one test that can end the walk before it starts (5 % off the 4-layer
-    // real-hair scene). Any hit in (tmin, tmax) darkens, so which one is found first
-    // does not change the result.
+    // one too: one test that can end the walk before it starts (docs/DECISIONS.md,
+    // "Shadow rays try the last occluder first"). Any hit in (tmin, tmax) darkens, so
+    // which one is found first does not change the result.
     {
         int h = max(hint, 0), hsurf; float hasc, halpha;
         float th = hit_cylinder(h, p, d, 0.0, 0.0, hsurf, hasc, halpha);
@@ -112,16 +112,8 @@ vec3 shade_mesh(int tri, vec3 o, vec3 d, float t, vec3 N) {
 // One primary ray: first find its LAYERS nearest hits without shading (accel_nearest fills
 // the hit list of accel.glsl), then shade them front to back. Keeping the shadow rays out
 // of the traversal loop matters on SIMD hardware (llvmpipe included): nested in it, one
-// lane's shadow ray stalls all the lanes still traversing.
-// Measured and dropped (llvmpipe, 2 cores, 512x512, CPU time against this loop): one flat
-// loop in which each pass either tests one candidate or steps one cell, so lanes with
-// short cell lists need not wait for their neighbours' long ones: every pass then pays for
-// both halves; 0 % on the real straight hair, 3-4 % slower on 10k and 100k wavy strands
-// (it won 5-12 % on wavy hair with the older, finer grids). The same for shadow rays (all
-// layers' shadow rays of a pixel walked in one loop, a lane starting its next ray when
-// one ends): 13 % slower on the real hair, as every pass pays for setting a ray up. Two
-// candidates per pass, to overlap their cache misses: 5 % faster on the real hair and on
-// 100k wavy strands, 12 % slower on 10k wavy strands, whose cells hold fewer candidates.
+// lane's shadow ray stalls all the lanes still traversing. The flat loops tried instead:
+// docs/DECISIONS.md, "The trace loop finds the nearest hits first".
 vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
     float tmesh = BIG;
 #if MESHES
