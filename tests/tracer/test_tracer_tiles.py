@@ -61,12 +61,17 @@ def test_a_tiled_reference_render_is_the_whole_one():
     np.testing.assert_allclose(tiled, whole, rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("spp", [1, 4])
-def test_a_2x2_tiled_render_is_the_whole_render(renderer, spp):
+@pytest.mark.parametrize("spp,kind", [(1, "persp"), (4, "persp"), (4, "ortho shifted")])
+def test_a_2x2_tiled_render_is_the_whole_render(renderer, spp, kind):
     """Tiles of odd sizes at odd offsets; at spp 4 the jitter of each pixel must be the one
     it has in the whole image (tiles numbered their own pixels from 0 before)."""
     s, cam = _camera((96, 80))
-    settings = RenderSettings(spp=spp)
+    if kind == "ortho shifted":
+        lo, hi = s.bounds()
+        c = (lo + hi) / 2
+        cam = Camera.look_at(c - [0, 3, 0], c, type="ORTHO", ortho_scale=1.2, size=(96, 80))
+        cam = Camera(cam.type, cam.position, cam.rotation, cam.size, cam.pixel_size, np.array([7.3, -4.6]))
+    settings = RenderSettings(spp=spp, min_pixel_width=kind != "persp")
     renderer.set_strands(s)
     whole = renderer.render(cam, settings)
     assert (whole[..., 3] > 0.5).mean() > 0.05 and (whole[..., 3] < 0.5).mean() > 0.05
