@@ -158,7 +158,8 @@ def process(now=None, settle=False):
             print(f"Key-strand hair: live update skipped ({e})")
             continue
         if result is not None:
-            hair.write_hair(scalp, result.strands, result.root_uv)
+            gen = state.full if view_count >= settings.count else state.view
+            hair.write_hair(scalp, hair.groom_strands(gen, result), result.root_uv)
             state.last_edit = now
             written += 1
     for uid, state in list(_states.items()):
@@ -236,7 +237,7 @@ def _finish_catch_up(uid, state, wait=False):
     scalp = _scalp_by_uid(uid)
     if state.dragging or scalp is None or hair.existing_hair(scalp) is None:
         return 0  # a newer drag is on screen; its own catch-up follows
-    hair.write_hair(scalp, result.strands, result.root_uv)
+    hair.write_hair(scalp, hair.groom_strands(state.full, result), result.root_uv)
     return 1
 
 
