@@ -283,3 +283,14 @@ def test_a_bug_in_a_writer_is_an_internal_error_not_a_user_message(clean, tmp_pa
         bpy.ops.hair.export(filepath=str(tmp_path / "hair.npz"), format='npz')
     assert "planted bug" in str(info.value) and "Please report" in str(info.value)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_extension_brings_the_alembic_library_it_writes_grooms_with(clean):
+    """The zip ships alembic3d for each Python and platform it serves, so the panel writes the
+    Alembic groom (guides included) in every Blender, not Blender's strands-only file; USD
+    is written with the pxr Blender ships (the bpy module of 4.2 lacks it: there, Blender's
+    USD exporter, as the fallback test shows)."""
+    from hairio.formats import get_format
+    assert get_format("abc").available()
+    import alembic3d
+    assert alembic3d.__name__ == "alembic3d"
