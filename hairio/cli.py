@@ -73,7 +73,8 @@ def _load_root_uv(path, num_strands):
 def _formats_epilog():
     lines = ["formats (the options each takes; the library it needs):"]
     for f in FORMATS:
-        need = "" if f.library is None else f"; needs {f.library}" + ("" if f.available() else " (not installed)")
+        # Named, not probed: importing a groom library only to print help costs seconds.
+        need = "" if f.library is None else f"; needs {f.library}"
         axes = f" (--axis {'|'.join(f.axes)}, default {f.axes[0]})"
         opts = ", ".join("--" + o.replace("_", "-") for o in f.options if o != "source")
         lines.append(f"  {f.name:5} {', '.join(f.extensions)}: {f.description}. Options: {opts}{axes}{need}")
