@@ -91,7 +91,7 @@ FULL = Config(
     mode="full",
     limits={"generation": 400, "geometry": 300, "rendering": 240, "anchors": 900, "scaling": 300,
             "skips": 180, "stress": 100, "gpu": 20, "integration": 240,
-            "export": 240, "versions": 600},
+            "export": 420, "versions": 600},
 )
 
 GPU = Config(

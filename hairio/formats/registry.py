@@ -86,8 +86,13 @@ class Format:
         if axis is not None and axis not in self.axes:
             raise InputError(f"--axis {axis}: for {self.name} choose one of {', '.join(self.axes)}")
         scale = options.get("scale")
-        if scale is not None and not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
-            raise InputError(f"--scale {scale}: must be a positive number")
+        if scale is not None:
+            try:
+                value = float(scale)
+            except (TypeError, ValueError):
+                value = math.nan
+            if not (math.isfinite(value) and value > 0):
+                raise InputError(f"--scale {scale}: must be a positive number")
 
 
 def _flag(option):

@@ -474,7 +474,7 @@ def follow_hair_guides(strands, follow_hairs):
     of them around each guide at load time (TressFXAsset::GenerateFollowHairs), each the
     guide moved by a random root offset (each of two components in +-maxRadiusAroundGuideHair,
     across the guide's first segment) that grows along the strand to 1 + tipSeparationFactor
-    times at the tip. What a file can decide is where the guides are and the three numbers.
+    times at the tip (about). What a file can decide is where the guides are and the three numbers.
     So every wisp is cut into patches of `follow_hairs` + 1 strands with nearby roots (runs
     of a Z-order of the roots within the wisp); each patch's guide is its strand nearest the
     patch's root centroid, so the generated followers grow where that wisp's strands grow,
@@ -549,8 +549,8 @@ def export_tfx(path, strands, axis="none", scale=1.0, root_uv=None, vertices_per
     s = convert_strands(s, axis, scale)
     guides_path = guides_out or guides_path_for(path)
     if guides is not None:
-        key_uv = spherical_root_uv(guides.points[guides.offsets])
-        keys = convert_strands(check_strands(guides), axis, scale)
+        key_uv = spherical_root_uv(check_strands(guides).points[guides.offsets])
+        keys = convert_strands(guides, axis, scale)
         return list(write_tfx_pair(path, s, keys, guides_path, guide_root_uv=key_uv, root_uv=uv, **opts))
     if follow_hairs is None:
         write_tfx(path, s, root_uv=uv, **opts)
