@@ -294,3 +294,30 @@ def test_the_extension_brings_the_alembic_library_it_writes_grooms_with(clean):
     assert get_format("abc").available()
     import alembic3d
     assert alembic3d.__name__ == "alembic3d"
+
+
+def test_live_update_stores_the_guides_of_the_hair_it_regrows(clean):
+    """A dragged key regrows its wisps at the viewport count, then the full count: each time
+    the stored guides are those of the hair now on screen (the moved key's new shape)."""
+    live = importlib.import_module(f"{clean.__name__}.addon.live")
+    curves = importlib.import_module(f"{clean.__name__}.addon.blender_curves")
+    scalp, hair = _generated_hair(uv=False)
+    s = scalp.keystrand_hair
+    s.viewport_count = 60
+    before = curves.read_guides(hair.data)
+    key = next(o for o in bpy.data.objects if o.type == 'CURVE' and o.parent == scalp)
+    tip = key.data.splines[0].bezier_points[-1]
+    for point in (tip.co, tip.handle_left, tip.handle_right):
+        point.y += 0.05
+    key.data.update_tag()
+    bpy.context.view_layer.update()
+    for settle, count in ((False, 60), (True, 150)):
+        assert live.process(settle=settle) == 1
+        hair = s.hair_object
+        stored = curves.read_guides(hair.data)
+        assert stored is not None and len(stored.index) == len(hair.data.curves) == count
+        wisp = np.empty(count, np.int32)
+        hair.data.attributes["wisp"].data.foreach_get("value", wisp)
+        np.testing.assert_array_equal(stored.index[:, 0], wisp)
+        moved = np.abs(stored.keys.points - before.keys.points).max(axis=1) > 1e-6
+        assert moved.any() and not moved.all(), "only the dragged key's shape changed"
