@@ -18,14 +18,13 @@ The guides a groom carries (hairio.Guides: the key strands and how every strand 
 them), so an export from Blender carries them as the command line's does (only when the
 strands have them; a refill without guides removes them, as they would be stale):
 
-    keystrand_guide_index    CURVE  INT32 x3  the strand's main key (= wisp) and two neighbours,
-                             as three INT attributes keystrand_guide_index_0, _1, _2
+    keystrand_guide_index_0, _1, _2  CURVE  INT  the strand's main key (= wisp) and its two
+                                      neighbours, key indices
     keystrand_guide_weights  CURVE  FLOAT_VECTOR  their interpolation weights (summing to 1)
-    keystrand_keys           the key strands, as custom properties of the Curves datablock
-                             (there is no key domain): keystrand_key_points (float32, Pk*3),
-                             keystrand_key_counts, keystrand_key_group (int32, K),
-                             keystrand_key_radius (float32, Pk), keystrand_key_color
-                             (float32, Pk*3), in the same space as the strands
+    keystrand_key_points, _counts, _group, _radius, _color   the key strands, as custom
+                                      properties of the Curves datablock (Curves have no key
+                                      domain): float32 Pk*3, int32 K, int32 K, float32 Pk,
+                                      float32 Pk*3, in the same space as the strands
 
 Curve type is POLY: the strands are polylines (the tracer's cylinders), so Blender's
 evaluated curve, its exporters and the tracer all see the same points.

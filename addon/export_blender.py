@@ -22,13 +22,11 @@ What the files hold (verified by tests/hairio/test_io_blender_export.py):
   Unreal is in centimetres: pass scale=100 for a scene in metres; points and widths are both
   scaled in the file.
   Limitation: Blender writes no other curve attributes to Alembic (checked in Blender 5.0:
-  only `width`), and no maintained Alembic Python library installs from the package index
-  here (PyAlembic is not published there; the `alembic` package is an unrelated database
-  tool). So groom_guide, groom_group_id, groom_root_uv, groom_color, groom_closest_guides,
-  groom_guide_weights and groom_version_* are not in our .abc. Workaround in Unreal: import
-  with "Generate guides" (guides and closest-guide weights are then built by Unreal), let it
-  compute root UVs, split hair groups into separate objects (each Alembic object becomes a
-  group), and set the color in the groom material; or export USD, which carries them.
+  only `width`), so groom_guide, groom_group_id, groom_root_uv, groom_color,
+  groom_closest_guides, groom_guide_weights and groom_version_* are not in this fallback's
+  .abc (hairio's writer, with the alembic3d the extension ships, writes them all). In Unreal:
+  import it with "Generate guides", let Unreal compute root UVs, and set the colour in the
+  groom material.
 - USD: a BasisCurves prim, type "linear", curveVertexCounts, per-vertex `widths`
   (= 2 * radius), and every attribute of `attributes` as a primvar of the same name
   (hairio.unreal.groom_attributes). Orientation and units are left to Blender's USD options
@@ -146,7 +144,7 @@ def export_curves_object(obj, path, format="abc", scale=1.0, axis=None, attribut
     """
     if obj is None or obj.type != 'CURVES':
         raise InputError(f"obj: expected a hair Curves object, got "
-                          f"{'nothing' if obj is None else obj.type}")
+                         f"{'nothing' if obj is None else obj.type}")
     ext, axis, scale = _check(format, path, axis, scale)
     world = np.array(obj.matrix_world, np.float64)
     matrix = world.copy()
