@@ -15,10 +15,11 @@ Also runnable as `python -m hairio.cli export ...` or `python -m hairio.cli ...`
 import argparse
 import os
 import sys
+import textwrap
 import time
 
 from .atomic import check_destination
-from .formats.registry import FORMATS, format_of
+from .formats.registry import FORMATS, flag, format_of
 from .npyfile import read_npy
 from .validate import InputError
 
@@ -74,10 +75,11 @@ def _formats_epilog():
     lines = ["formats (the options each takes; the library it needs):"]
     for f in FORMATS:
         # Named, not probed: importing a groom library only to print help costs seconds.
-        need = "" if f.library is None else f"; needs {f.library}"
-        axes = f" (--axis {'|'.join(f.axes)}, default {f.axes[0]})"
-        opts = ", ".join("--" + o.replace("_", "-") for o in f.options if o != "source")
-        lines.append(f"  {f.name:5} {', '.join(f.extensions)}: {f.description}. Options: {opts}{axes}{need}")
+        need = "" if f.library is None else f" Needs {f.library}."
+        opts = ", ".join(flag(o) for o in f.options if o != "source")
+        text = (f"{f.description}. Options: {opts} (--axis {'|'.join(f.axes)}, default {f.axes[0]}).{need}")
+        lines.append(f"  {f.name:5} {', '.join(f.extensions)}:")
+        lines += textwrap.wrap(text, width=88, initial_indent=" " * 8, subsequent_indent=" " * 8)
     return "\n".join(lines)
 
 

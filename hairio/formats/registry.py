@@ -79,8 +79,8 @@ class Format:
         """Refuse options this format does not take (InputError naming each and what it takes)."""
         extra = sorted(set(options) - set(self.options))
         if extra:
-            takes = ", ".join(_flag(o) for o in self.options) or "no options"
-            raise InputError(f"{', '.join(_flag(o) for o in extra)}: .{self.name} files take no "
+            takes = ", ".join(flag(o) for o in self.options) or "no options"
+            raise InputError(f"{', '.join(flag(o) for o in extra)}: .{self.name} files take no "
                              f"{'such option' if len(extra) == 1 else 'such options'}; {self.name} takes {takes}")
         axis = options.get("axis")
         if axis is not None and axis not in self.axes:
@@ -95,8 +95,9 @@ class Format:
                 raise InputError(f"--scale {scale}: must be a positive number")
 
 
-def _flag(option):
-    return "--" + option.replace("_", "-")
+def flag(option):
+    """The command line's flag for an export option (flip_v is turned off by --no-flip-v)."""
+    return "--no-flip-v" if option == "flip_v" else "--" + option.replace("_", "-")
 
 
 def _convert_then(write):

@@ -172,7 +172,7 @@ def test_help_lists_every_format_of_the_registry(capsys):
         export_main(["--help"])
     out = capsys.readouterr().out
     for f in FORMATS:
-        assert f"{f.name:5} {', '.join(f.extensions)}:" in out, f.name
+        assert f"{f.name:5} {', '.join(f.extensions)}:\n" in out, f.name
 
 
 def test_module_entry_point(npz, tmp_path):
