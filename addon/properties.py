@@ -12,6 +12,7 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorPro
 from bpy.types import PropertyGroup
 
 from hairio import InputError
+from tracer.shading import DEFAULT_SHADING, enum_items as shading_enum_items
 
 from . import generator_cache, head
 from .transaction import forget_background
@@ -260,9 +261,7 @@ class HairSettings(PropertyGroup):
     preview_layers: IntProperty(name="Layers", default=4, min=1, soft_max=16,
                                 description="How many see-through hair layers are blended per pixel")
     preview_shading: EnumProperty(
-        name="Shading", default='kajiya-kay',
-        items=(('kajiya-kay', "Kajiya-Kay", "The classic hair shading, with a highlight along the strand"),
-               ('phong', "Phong", "Plastic-like shading, as in the thesis")),
+        name="Shading", default=DEFAULT_SHADING, items=shading_enum_items(),    # tracer's registry
         description="How the hair reacts to light")
     preview_min_pixel_width: BoolProperty(
         name="Min Pixel Width", default=False,

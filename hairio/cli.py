@@ -20,20 +20,24 @@ import time
 
 from .atomic import check_destination
 from .formats.registry import FORMATS, flag, format_of
+from .formats.up_axis import UP_CHOICES
 from .npyfile import read_npy
 from .validate import InputError
 
 
-def export_file(input_path, out, format=None, **options):
+def export_file(input_path, out, format=None, up="z", **options):
     """Export the strands in `input_path` to `out`; returns the list of files written.
     The command line's engine, callable from benchmarks. Raises InputError for bad input.
-    Options are the format's export options (registry.py); guides and root_uv are file
-    names here (a KEYS strand file, a UV.npy)."""
+    `up`: z|y|auto, which way is up in the input (hairio/formats/up_axis.py); it is turned
+    into our Z-up frame first. Options are the format's export options (registry.py);
+    guides and root_uv are file names here (a KEYS strand file, a UV.npy)."""
     from .formats import read_strands
+    from .formats.up_axis import file_frame, strands_to_z_up
 
     out = os.fspath(out)
+    file_frame(input_path, up)      # a bad --up is refused before the work
     fmt = _checked(out, format, options)
-    strands = read_strands(input_path)
+    strands = strands_to_z_up(read_strands(input_path), input_path, up)
     if options.get("root_uv") is not None:
         options["root_uv"] = _load_root_uv(options["root_uv"], strands.num_strands)
     if options.get("guides") is not None:
@@ -104,6 +108,9 @@ def build_parser(prog="groom export"):
     ap.add_argument("--scale", type=float, help="multiply points and widths (100: metres to cm; default 1)")
     ap.add_argument("--axis", help="the target frame: " + "; ".join(
         f"{f.name}: {'|'.join(f.axes)}" for f in FORMATS))
+    ap.add_argument("--up", choices=UP_CHOICES, default="z",
+                    help="which way is up in INPUT: z keeps it as it is (the default), y turns a Y-up file into "
+                         "our Z up first, auto does so for the formats that are Y up (TressFX .tfx, USC .data)")
     ap.add_argument("--no-flip-v", dest="flip_v", action="store_const", const=False,
                     help="tfx: keep V as is (default flips it for DirectX)")
     ap.add_argument("--pad-strands", action="store_const", const=True,
@@ -116,11 +123,11 @@ def build_parser(prog="groom export"):
 def export_main(argv=None, prog="groom export"):
     """The `export` command; returns the exit status (0 done, 2 bad input, nothing written)."""
     args = vars(build_parser(prog).parse_args(argv))
-    input_path, out, format = args.pop("input"), args.pop("out"), args.pop("format")
+    input_path, out, format, up = args.pop("input"), args.pop("out"), args.pop("format"), args.pop("up")
     options = {name: value for name, value in args.items() if value is not None}
     t0 = time.perf_counter()
     try:
-        written = export_file(input_path, out, format, **options)
+        written = export_file(input_path, out, format, up, **options)
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

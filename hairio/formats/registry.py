@@ -49,6 +49,8 @@ class Format:
     axes: tuple = tuple(AXES)       # the values its `axis` option takes, the default first
     library: str = None             # the pip requirement it needs beyond numpy, if any
     probe: Callable = field(default=None, repr=False)   # raises InputError when `library` is missing
+    frame: str = "none"             # the frame (axes.AXES) its files are in as others write
+                                    # them: what `--up auto` reads them as (up_axis.py)
 
     @property
     def extension(self):
@@ -130,14 +132,15 @@ FORMATS = (
     Format("hair", (".hair",), "Cem Yuksel HAIR (.hair)",
            "The HAIR file of many hair renderers: points, thickness, transparency, colour",
            cyhair.read_hair, _convert_then(cyhair.write_hair), _PLAIN),
+    # TressFX samples (AMD's, TressFX-OpenGL's) and USC-HairSalon's files are right-handed Y up.
     Format("tfx", (".tfx",), "AMD TressFX (.tfx)",
            "TressFX 4 binary for game engines: strands resampled to equal chords, optional guide file",
            tressfx.read_tfx, tressfx.export_tfx,
            _PLAIN + ("root_uv", "vertices_per_strand", "pinned", "pin_tip", "flip_v", "pad_strands",
-                     "shuffle_seed", "guides", "guides_out", "follow_hairs")),
+                     "shuffle_seed", "guides", "guides_out", "follow_hairs"), frame="y-up"),
     Format("data", (".data",), "USC-HairSalon (.data)",
            "The USC-HairSalon strand file: points only",
-           usc.read_usc, _convert_then(usc.write_usc), _PLAIN),
+           usc.read_usc, _convert_then(usc.write_usc), _PLAIN, frame="y-up"),
     Format("abc", (".abc",), "Alembic groom (.abc)",
            "Unreal's Alembic groom: widths, colours, groups, root UVs, guides and their weights",
            alembic.read_abc, _groom_export(alembic.write_abc), _GROOM, alembic.AXES,
