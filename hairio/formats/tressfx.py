@@ -199,9 +199,9 @@ def _points_at(pts, g, roots, tips, arc, seg=None):
 
 
 # Equal chords within this fraction of their mean, inside the 1 % a simulation's rest
-# lengths are asked to share; strands still apart after the iterations keep their best try
-# (measured on the curly preset: every strand within 1 % at 4, 32 and 64 vertices; at 8 and
-# 16 vertices, whose chords cross whole curls, about 1 % of strands stay up to 10 % apart).
+# lengths are asked to share; strands the scaling leaves apart are marched
+# (`_march_equal_chords`) and keep the better of the two. A few strands whose chords cross
+# whole curls stay further apart (how many: the benchmark report's export section).
 CHORD_TOLERANCE = 5e-3
 CHORD_ITERATIONS = 80
 
@@ -216,7 +216,8 @@ def chord_parameters(strands, n):
     equal arc steps, each step is scaled by mean chord / its chord and the steps rescaled to
     the strand's length: where a step's chord-to-arc ratio is locally constant this lands on
     equal chords at once, so a few iterations suffice; only strands not yet equal within
-    CHORD_TOLERANCE iterate again."""
+    CHORD_TOLERANCE iterate again, with damped steps after a quarter of the iterations; those
+    still apart are marched (`_march_equal_chords`), and each strand keeps its best try."""
     pts, g, roots, tips = _arc_table(strands)
     # Chords are compared to 0.5 %: float32 points (relative error 1e-7 of a coordinate) do,
     # at half the memory traffic of the gathers that are this loop's cost.
@@ -248,7 +249,70 @@ def chord_parameters(strands, n):
         step *= (length[todo] / step.sum(axis=1))[:, None]
         arc[todo, 1:] = np.cumsum(step, axis=1)
         arc[todo, -1] = length[todo]
+    rest = np.flatnonzero(np.isfinite(best_apart) & (best_apart > CHORD_TOLERANCE))
+    if len(rest):
+        marched, apart = _march_equal_chords(pts, g, roots[rest], tips[rest], n)
+        better = apart < best_apart[rest]
+        best[rest[better]] = marched[better]
     return best
+
+
+def _march_equal_chords(pts, g, roots, tips, n, iterations=16):
+    """Equal chords by construction, for the strands the scaling left apart (sharp bends
+    that a vertex crossing them changes the chord of at once): from the root, each vertex is
+    the first point along the strand at distance c from the one before; c is solved so the
+    tip lies c from vertex n - 2 (regula falsi, Illinois' variant, kept bracketed: at c -> 0
+    the tip is farther than c; at c = length / (n - 1) every chord used at least c of arc,
+    so it is nearer). Returns (arc (A, n), largest chord deviation (A,))."""
+    pts = np.asarray(pts, np.float64)
+    m = int((tips - roots).max()) + 1
+    idx = np.minimum(roots[:, None] + np.arange(m)[None, :], tips[:, None])     # padded with the tip
+    P, G = pts[idx], g[idx] - g[roots][:, None]
+    rows = np.arange(len(roots))
+    after = np.arange(m)[None, :]
+
+    def march(c):
+        """(arc (A, n), f = |tip - vertex n-2| - c) for chord lengths c (A,)."""
+        arc = np.zeros((len(c), n))
+        q, k = P[:, 0].copy(), np.zeros(len(c), np.int64)
+        fell = np.zeros(len(c), bool)
+        for v in range(1, n - 1):
+            ahead = (after > k[:, None]) & (np.linalg.norm(P - q[:, None, :], axis=2) >= c[:, None])
+            fell |= ~ahead.any(axis=1)
+            i = np.maximum(np.argmax(ahead, axis=1), 1)
+            a, ab = P[rows, i - 1], P[rows, i] - P[rows, i - 1]
+            aq = a - q
+            qa = np.einsum("ij,ij->i", ab, ab)
+            qb = 2 * np.einsum("ij,ij->i", ab, aq)
+            qc = np.einsum("ij,ij->i", aq, aq) - c * c
+            with np.errstate(invalid="ignore", divide="ignore"):
+                t = np.where(qa > 0, (-qb + np.sqrt(np.maximum(qb * qb - 4 * qa * qc, 0))) / (2 * qa), 0.0)
+            t = np.clip(t, 0.0, 1.0)
+            q, k = a + t[:, None] * ab, i - 1
+            arc[:, v] = G[rows, i - 1] + t * (G[rows, i] - G[rows, i - 1])
+        arc[:, -1] = G[:, -1]
+        f = np.where(fell, -c, np.linalg.norm(P[:, -1] - q, axis=1) - c)
+        return arc, f
+
+    lo, hi = np.zeros(len(roots)), G[:, -1] / (n - 1)
+    f_lo, f_hi = G[:, -1].copy(), march(hi)[1]      # c -> 0: the tip is the whole chord away
+    side = np.zeros(len(roots), np.int64)
+    for _ in range(iterations):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            c = np.where(f_lo != f_hi, (lo * f_hi - hi * f_lo) / (f_hi - f_lo), 0.5 * (lo + hi))
+        c = np.clip(np.nan_to_num(c, nan=0.0), lo + 1e-3 * (hi - lo), hi - 1e-3 * (hi - lo))
+        _, f = march(c)
+        pos = f > 0
+        # Illinois: halve the value kept at the end that stays, so the bracket shrinks from both sides.
+        f_hi = np.where(pos & (side == 1), 0.5 * f_hi, f_hi)
+        f_lo = np.where(~pos & (side == -1), 0.5 * f_lo, f_lo)
+        lo, f_lo = np.where(pos, c, lo), np.where(pos, f, f_lo)
+        hi, f_hi = np.where(pos, hi, c), np.where(pos, f_hi, f)
+        side = np.where(pos, 1, -1)
+    arc, _ = march(np.where(np.abs(f_lo) < np.abs(f_hi), lo, hi))
+    q = _points_at(pts, g, roots, tips, arc)
+    chord = np.linalg.norm(np.diff(q, axis=1), axis=2)
+    return arc, np.abs(chord / chord.mean(axis=1, keepdims=True) - 1.0).max(axis=1)
 
 
 def resample_strands(strands, vertices_per_strand):

@@ -100,6 +100,24 @@ def test_equal_arc_steps_would_leave_curled_chords_far_apart():
     assert np.abs(chord / chord.mean(axis=1, keepdims=True) - 1).max() < 0.01
 
 
+def test_marching_places_equal_chords_across_a_corner():
+    """A right-angled corner: the chord across it is shorter than its arc, and which chord
+    crosses it changes as vertices move. Marching chords of one length (solved so the last
+    one ends at the tip) makes them equal all the same, every vertex on the strand."""
+    from hairio.formats.tressfx import _arc_table, _march_equal_chords, _points_at
+    t = np.linspace(0, 1, 40)[:, None]
+    corner = np.concatenate([t * [0, 0, 1.0], [0, 0, 1.0] + t[1:] * [0.7, 0, 0]])
+    s = Strands.from_arrays(corner, [len(corner)])
+    pts, g, roots, tips = _arc_table(s)
+    for n in (5, 8, 13):
+        arc, apart = _march_equal_chords(pts, g, roots, tips, n)
+        q = _points_at(pts, g, roots, tips, arc)[0]
+        chord = np.linalg.norm(np.diff(q, axis=0), axis=1)
+        assert apart[0] < 1e-6 and np.ptp(chord) < 1e-6 * chord.mean(), n
+        np.testing.assert_allclose(q[[0, -1]], corner[[0, -1]], atol=1e-12)
+        assert (np.diff(arc[0]) > 0).all()
+
+
 def test_round_trip_within_the_resampling_error(tmp_path, wavy):
     p = tmp_path / "w.tfx"
     write_tfx(p, wavy, vertices_per_strand=64)
