@@ -10,7 +10,7 @@ whose library is not installed are named, not measured. TressFX twice: the stran
 and with guides taken from the wisps for TressFX's follow hairs (4 per guide). Then how
 equal the TressFX chords are per preset and vertex count (the writer asks for 1 %).
 
-Regenerate alone: `python -m benchmarks --full --only export` (REPORT_PARTIAL.md).
+Regenerate alone: `python -m benchmarks --full --only export`.
 """
 import os
 import tempfile
@@ -32,8 +32,10 @@ def run(sec, cfg):
     count = cfg.int_strands
     _, keys, params, result = groom_scene("wavy", count, resolution="fixed", points=32)
     groom = strands_with_guides(result, keys, params)
+    # Times on a shared machine depend on what else runs: say how loaded it was.
     sec.settings(strands=f"{groom.num_strands:,}", points=f"{groom.num_points:,}",
-                 keys=groom.guides.keys.num_strands, runs=cfg.runs)
+                 keys=groom.guides.keys.num_strands, runs=cfg.runs,
+                 load_average=f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     jobs = [(f, {}, f.label) for f in FORMATS]
     tfx = next(f for f in FORMATS if f.name == "tfx")
     jobs.insert(FORMATS.index(tfx) + 1, (tfx, {"follow_hairs": FOLLOW_HAIRS},
