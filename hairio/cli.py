@@ -41,7 +41,7 @@ def export_file(input_path, out, format=None, up="z", **options):
     if options.get("root_uv") is not None:
         options["root_uv"] = _load_root_uv(options["root_uv"], strands.num_strands)
     if options.get("guides") is not None:
-        options["guides"] = read_strands(options["guides"])
+        options["guides"] = strands_to_z_up(read_strands(options["guides"]), options["guides"], up)
     if "source" in fmt.options and options.get("source") is None:
         options["source"] = os.path.basename(os.fspath(input_path))
     return fmt.export(out, strands, **options)
@@ -49,9 +49,9 @@ def export_file(input_path, out, format=None, up="z", **options):
 
 def export_strands(strands, out, format=None, **options):
     """Write hairio.Strands to `out` in `format` (default: by its extension) with the
-    format's export options; returns the list of files written. What `export_file` runs
-    once it has read its input, and what the extension's Export runs on the hair it holds,
-    so both write the same files. Raises InputError."""
+    format's export options; returns the list of files written. The same checks and writer
+    as `export_file` once it has read its input: what the extension's Export runs on the
+    hair it holds, so both write the same files. Raises InputError."""
     out = os.fspath(out)
     fmt = _checked(out, format, options)
     return fmt.export(out, strands, **options)
