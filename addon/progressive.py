@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The progressive preview: Render Preview shows its first image at once, then a timer adds
-one pass of samples at a time (preview.render with sample_pass = 1, 2, ...: new sub-pixel
-positions each pass) and shows the running mean in the image, until TARGET_SAMPLES samples
+one pass of samples at a time (preview.begin_render with sample_pass = 1, 2, ...: new
+sub-pixel positions each pass) and shows the running mean in the image, until TARGET_SAMPLES samples
 per pixel; a change of what the image shows (the hair, a key's regrown wisps, the camera, a
 preview setting, the meshes, the lights) starts it over from a first image.
 
@@ -22,6 +22,7 @@ from bpy.app.handlers import persistent
 from hairio import InputError
 
 from . import preview, scene_data
+from .properties import RENDER_FIELDS
 from .transaction import clear_background, report_background, transaction
 
 # Samples per pixel the refinement stops at (the benchmark's reference counts as many).
@@ -39,7 +40,7 @@ class Session:
         self.signature = None
         self.sum = None            # (H, W, 4) float64 sum of passes, each times its samples
         self.samples = 0           # samples per pixel in `sum`
-        self.passes = 0            # passes rendered since the last start
+        self.passes = 0            # passes in `sum` since the last start
         self.starts = 0            # how many times it started over
         self.note = None           # the mesh budget's note of the last start, or None
         self.meshes = None         # scene_data.SceneMeshes of the last start
@@ -73,7 +74,6 @@ def signature(context, session):
     size, the camera and its lens, the hair (its revision, see preview.bump), the scene's
     lights, and the meshes' objects, places and data with the scene's geometry edits
     (counted by on_depsgraph_update)."""
-    from .properties import RENDER_FIELDS
     scene, s = context.scene, session.scalp.keystrand_hair
     settings = tuple(_value(getattr(s, name)) for name in RENDER_FIELDS)
     cam = session.camera
@@ -187,7 +187,7 @@ def _alive(context, session):
         names = [o.name for o in objects]      # a removed object's reference fails here
     except ReferenceError:
         return False
-    return (all(bpy.data.objects.get(n) is o for n, o in zip(names, objects))
+    return (all(bpy.data.objects.get(n) == o for n, o in zip(names, objects))
             and preview.IMAGE_NAME in bpy.data.images and context.scene.camera == session.camera)
 
 
