@@ -13,8 +13,9 @@ come from the frame's middle 480×270 (Camera.window: the same pixels, samples a
 Times: the median of the harness's runs for the one-sample settings; the many-sample
 renders, a single run.
 
-Run alone: `python -m benchmarks --quick --only preview_defaults` (about 15 minutes on 2
-cores, most of it the 64-sample references of `wavy`).
+Run alone: `python -m benchmarks --full --only preview_defaults` (15-30 minutes on 2 cores,
+most of it the 64-sample references of `wavy`; the quick run's time limit stops it before
+`wavy`).
 """
 import os
 
