@@ -227,7 +227,9 @@ def begin_render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass
     rs.check()
     camera = _shifted(camera_for(scene, camera_obj, size), sample_pass, rs.spp_n)
     mesh_list = [] if meshes is None else meshes.meshes
-    mesh_key = _meshes_key(mesh_list)
+    if meshes is not None and meshes.digest is None:
+        meshes.digest = _meshes_key(mesh_list)     # once per reading, not once per refinement pass
+    mesh_key = _meshes_key(mesh_list) if meshes is None else meshes.digest
     t1 = time.perf_counter()
     with _renderer_failures():
         renderer = get_renderer(in_process_requested(settings))

@@ -391,10 +391,11 @@ def read_world_mesh(obj, depsgraph):
 class SceneMeshes:
     """What the preview shows beside the hair: `meshes` as tracer.Renderer.set_meshes takes
     them, `triangles` their count, `skipped` the triangles of the visible meshes left out
-    for the budget (0 when none were)."""
+    for the budget (0 when none were). The arrays are not changed once read."""
     meshes: list
     triangles: int
     skipped: int = 0
+    digest: str = None      # the preview's digest of the arrays, made on first upload
 
 
 def preview_mesh_objects(scene, view_layer, scalp):
