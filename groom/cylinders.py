@@ -32,7 +32,7 @@ _RELAX = 1.25
 
 
 def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=parallel.RANGE_SIZE, table_step=0.0,
-                   threads=None):
+                   threads=None, clump=None):
     """Per-strand adaptive resolution: curve parameters σ of the fewest points whose polyline
     provably stays within `tolerance` (S,) of the exact strand, for the curvature bound below.
 
@@ -55,11 +55,24 @@ def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=
     meet, and `met` says which; only a strand that fits no tolerance so (none does after 60
     steps) falls back to equal steps, met = inf.
 
+    With clump (interpolate.evaluate_strands's `clump` argument, (scale, exponent,
+    towards)), the strand is (1-c)·its blend + c·its wisp key (guide 0) carried over, so
+    its bound per bin is the blend's plus c·(the key's - the blend's) where the key bends
+    more, plus |c''| times its root's distance to the key's root (shaping.py; what is the
+    same for every strand is already in `bins`, shaping.shaping_bound).
+
     Returns an AdaptiveResolution. Each strand's numbers depend only on its own inputs
     (incremental regeneration relies on it)."""
     tolerance = np.asarray(tolerance, np.float64)
+    mix = None
+    if clump is not None:
+        from .shaping import clump_bins
+        scale, exponent, towards = clump
+        c, _, c2 = clump_bins(scale, exponent, bins.shape[1])
+        gap = np.sqrt((np.asarray(towards, np.float64) ** 2).sum(axis=0))
+        mix = (c, c2 if c2.any() else None, gap)
     sigma, counts, capped, needed = _greedy_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk,
-                                                  table_step, threads)
+                                                  table_step, threads, mix)
     met = tolerance.copy()
     todo = np.flatnonzero(capped & (frac > 0))
     if todo.size:
@@ -67,8 +80,9 @@ def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=
         trial = tolerance[todo] * np.maximum(_RELAX, (needed[todo] / max_cylinders) ** 2)
         done_idx, done_sig, done_counts = [], [], []
         for _ in range(60):
+            sub = None if mix is None else (mix[0], mix[1], mix[2][todo])
             sig2, cnt2, cap2, _ = _greedy_sigma(frac[todo], guides[todo], weights[todo], bins, trial, max_cylinders,
-                                                chunk, table_step, threads)
+                                                chunk, table_step, threads, sub)
             ends = np.cumsum(cnt2)
             fits = np.flatnonzero(~cap2)
             if fits.size:
@@ -102,21 +116,26 @@ def _replace_strands(sigma, counts, sel, new_sigma, new_counts):
     return np.concatenate([sigma, new_sigma])[src], out_counts
 
 
-def _greedy_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=8192, table_step=0.0, threads=None):
+def _greedy_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=8192, table_step=0.0, threads=None,
+                  mix=None):
     """The greedy placement of adaptive_sigma: (sigma flat, counts, capped (S,) bool: the
     cap stopped the strand, which got max_cylinders equal steps, needed (S,) the count's
-    lower bound). Ranges of `chunk` strands on `threads` threads (parallel.run_jobs); a
-    strand's numbers do not depend on its range."""
+    lower bound). mix: None or clump's (c (NB,), |c''| (NB,) or None, root gap (S,)).
+    Ranges of `chunk` strands on `threads` threads (parallel.run_jobs); a strand's numbers
+    do not depend on its range."""
     bins_t = np.ascontiguousarray(np.asarray(bins, np.float64).T)   # (NB, K): a bin's row is contiguous
-    parts = parallel.run_jobs([partial(_greedy_range, frac[lo:hi], guides[lo:hi], weights[lo:hi], bins_t,
-                                       tolerance[lo:hi], max_cylinders, table_step)
-                               for lo, hi in parallel.ranges(len(frac), size=chunk)], threads)
+
+    def part(lo, hi):
+        m = None if mix is None else (mix[0], mix[1], mix[2][lo:hi])
+        return _greedy_range(frac[lo:hi], guides[lo:hi], weights[lo:hi], bins_t, tolerance[lo:hi], max_cylinders,
+                             table_step, m)
+    parts = parallel.run_jobs([partial(part, lo, hi) for lo, hi in parallel.ranges(len(frac), size=chunk)], threads)
     if not parts:
         return np.zeros(0), np.zeros(0, np.int64), np.zeros(0, bool), np.zeros(0)
     return tuple(np.concatenate([p[i] for p in parts]) for i in range(4))
 
 
-def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step):
+def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step, mix=None):
     """_greedy_sigma on one range of strands, sweeping the bins from the root.
 
     Per strand the sweep carries the open segment's start c and the longest step its bins
@@ -132,12 +151,22 @@ def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step):
     s = len(f)
     step2 = float(table_step) ** 2
     # A (NB, S): the blend of the guides' bounds, bin-major (one contiguous row per bin).
-    a = np.take(bins_t, g[:, 0], axis=1)
-    a *= w[:, 0]
+    key = np.take(bins_t, g[:, 0], axis=1)
+    a = key * w[:, 0]
     for k in (1, 2):
         term = np.take(bins_t, g[:, k], axis=1)
         term *= w[:, k]
         a += term
+    if mix is not None:
+        # Clump: + c·(the wisp key's bound - the blend's) where the key bends more, and
+        # |c''| times the root gap (adaptive_sigma).
+        c, c2, gap = mix
+        np.subtract(key, a, out=key)
+        np.maximum(key, 0.0, out=key)
+        key *= c[:, None]
+        a += key
+        if c2 is not None:
+            a += c2[:, None] * gap[None, :]
     last_bin = np.clip(np.ceil(f * nb).astype(np.int64) - 1, 0, nb - 1)
     a[np.arange(nb)[:, None] > last_bin[None, :]] = 0.0  # bins past the tip do not count
     # The tables' lerp moves each point by up to (the strand's largest bound)·step²/8.

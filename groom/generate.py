@@ -317,7 +317,7 @@ class Generator:
             asked = p.tolerance * (base_radius if p.tolerance_units == "radius" else np.ones(len(frac)))
             tol = np.maximum(asked, 1e-300)
             bins = shaping_bound(np.stack([d["bound"] for d in kd]), rows, p)
-            res = adaptive_sigma(frac, g.T, w.T, bins, tol, max_cyl, table_step=1.0 / (self._samples - 1))
+            res = adaptive_sigma(frac, g.T, w.T, bins, tol, max_cyl, table_step=1.0 / (self._samples - 1), clump=clump)
             sigma, counts = res.sigma, res.counts
             self._note_resolution(sel, res.met, tol, res.needed)
             pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma, threads=_threads_for(len(frac)), clump=clump)
