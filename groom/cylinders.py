@@ -251,19 +251,45 @@ def strand_attributes(seed, ids, counts, along, base_radius, base_color, params)
         return out
     if along.shape != (n_pts,):
         s = np.tile(s, len(counts))
+    if not var_p.any():
+        return _flat_attributes(s, counts, base_radius, color, params)
     radius = np.repeat(base_radius.astype(np.float32), counts) * radius_profile(s, params)
     color = np.repeat(color, counts, axis=0)
-    if var_p.any():
-        strand = np.repeat(np.arange(len(counts)), counts)
-        offsets = np.zeros(len(counts), np.int64)
-        np.cumsum(counts[:-1], out=offsets[1:])
-        k = np.arange(n_pts) - offsets[strand]
-        sid = ids[strand]
-        u = np.stack([rng.uniform(seed, sid, rng.CH_COLOR_POINT + 3 * k + c) for c in range(3)], 1)
-        color += ((2.0 * u - 1.0) * var_p).astype(np.float32)
+    strand = np.repeat(np.arange(len(counts)), counts)
+    offsets = np.zeros(len(counts), np.int64)
+    np.cumsum(counts[:-1], out=offsets[1:])
+    k = np.arange(n_pts) - offsets[strand]
+    sid = ids[strand]
+    u = np.stack([rng.uniform(seed, sid, rng.CH_COLOR_POINT + 3 * k + c) for c in range(3)], 1)
+    color += ((2.0 * u - 1.0) * var_p).astype(np.float32)
     np.clip(color, 0.0, 1.0, out=color)
     alpha = alpha_profile(s, params)
     return radius, color, np.ones(n_pts, np.float32) if alpha is None else alpha
+
+
+def _flat_attributes(s, counts, base_radius, color, params, threads=None):
+    """strand_attributes without per-point colour variation, for strands of any counts at
+    fractions s (P,) float32: ranges of strands on the worker threads, each writing its own
+    rows (a colour channel at a time: np.repeat of 12-byte rows is slow)."""
+    n_pts = len(s)
+    ends = np.cumsum(counts)
+    out = (np.empty(n_pts, np.float32), np.empty((n_pts, 3), np.float32), np.empty(n_pts, np.float32))
+    radius, rgb, alpha = out
+    base = base_radius.astype(np.float32)
+    clamped = np.clip(color, 0.0, 1.0)
+
+    def fill(lo, hi):
+        start, stop = (int(ends[lo - 1]) if lo else 0), int(ends[hi - 1])
+        n = counts[lo:hi]
+        part = s[start:stop]
+        np.multiply(np.repeat(base[lo:hi], n), radius_profile(part, params), out=radius[start:stop])
+        for c in range(3):
+            rgb[start:stop, c] = np.repeat(clamped[lo:hi, c], n)
+        a = alpha_profile(part, params)
+        alpha[start:stop] = 1.0 if a is None else a
+    if len(counts):
+        parallel.run_jobs([partial(fill, lo, hi) for lo, hi in parallel.ranges(len(counts))], threads)
+    return out
 
 
 def strand_colors(seed, ids, base_color, params):
