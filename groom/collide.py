@@ -475,15 +475,21 @@ class Collider:
         beyond the grid fall in its border cells, which are all clear (the grid's padding)."""
         p = np.asarray(points)
         dt = p.dtype if p.dtype in (np.float32, np.float64) else np.float64
-        scaled = (p - self.origin.astype(dt)) * dt.type(1.0 / self.cell)
-        idx = np.empty(len(p), np.int64)
-        for axis, n in enumerate(self.shape):
-            i = np.clip(scaled[:, axis], 0, n - 2).astype(np.int64)
+        scaled = np.subtract(p, self.origin.astype(dt), dtype=dt)
+        scaled *= dt.type(1.0 / self.cell)
+        # The flat cell index in int32 (the grid has some 2 M nodes), built in place: about a
+        # third less memory traffic than fresh int64 arrays per axis.
+        n = len(p)
+        itype = np.int32 if np.prod(self.shape) < 2 ** 31 else np.int64
+        idx, i, col = np.empty(n, itype), np.empty(n, itype), np.empty(n, dt)
+        for axis, m in enumerate(self.shape):
+            np.clip(scaled[:, axis], 0, m - 2, out=col)
             if axis:
-                idx *= n
+                idx *= m
+                np.copyto(i, col, casting="unsafe")   # truncation = floor, col >= 0
                 idx += i
             else:
-                idx[:] = i
+                np.copyto(idx, col, casting="unsafe")
         return self.cell_lower[idx] >= clearance + 1e-6 * self.cell
 
     def value(self, points, gradient=False):
