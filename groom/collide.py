@@ -99,6 +99,8 @@ def _fibonacci_sphere(n):
 _SEARCH_DIRECTIONS = _fibonacci_sphere(200)
 # Strands walked together at most (see resolve_strands).
 _WALK_PART = 32768
+# Points a strand's translated rest is checked ahead at a time (_first_offence).
+_CHECK_AHEAD = 16
 # Samples along each key strand when looking for keys inside the collider, and how deep
 # (of the collider's size: 1 mm on the bundled head) a key may dip before it is reported.
 _KEY_CHECK_SAMPLES = 257
@@ -788,8 +790,8 @@ def _offending(collider, points, offsets, counts, radius, margin, lo, hi):
     if not look.size:
         return none
     # A closer look at those, with the clearance near the root.
-    strand_of = np.repeat(np.arange(len(cnt)), cnt)
-    suspect, which = np.unique(strand_of[look], return_inverse=True)
+    strand_of = np.searchsorted(off, look, side="right") - 1
+    suspect, which = np.unique(strand_of, return_inverse=True)
     which = which.ravel()
     roots = pts[off[suspect]].astype(np.float64)
     root_value = collider.value(roots)
@@ -1002,16 +1004,18 @@ def _push_out(collider, p0, u, length, target, root_value, root, short):
 
 def _first_offence(collider, pts, target, off, cnt, k, prev, root_value, roots):
     """For strands whose rest (points k..) would be their original translated to put point
-    k-1 at prev: the first point of the rest that it or its segment's middle would bring too
-    close (cnt where none)."""
-    rest = cnt - k
+    k-1 at prev: the first point of the next _CHECK_AHEAD of the rest that it or its
+    segment's middle would bring too close (the end of those where none: the walk steps on
+    and looks again). Looking at the whole rest each time a strand came free looked at
+    twice the points the walk goes through."""
+    rest = np.minimum(cnt - k, _CHECK_AHEAD)
     idx = _flat_points(off + k, rest)
     s_of = np.repeat(np.arange(len(off)), rest)
     delta = (prev - pts[off + k - 1])[s_of]
     p = pts[idx] + delta
     m = 0.5 * (pts[idx] + pts[idx - 1]) + delta
     look = np.flatnonzero(~(collider.clear_of(p, target[idx]) & collider.clear_of(m, target[idx])))
-    first = cnt.copy()
+    first = k + rest
     if look.size:
         sl = s_of[look]
         bad = _shortfall(collider, p[look], m[look], target[idx[look]], root_value[sl], roots[sl]) > 0

@@ -123,7 +123,7 @@ def _greedy_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=8
     lower bound). mix: None or clump's (c (NB,), |c''| (NB,) or None, root gap (S,)).
     Ranges of `chunk` strands on `threads` threads (parallel.run_jobs); a strand's numbers
     do not depend on its range."""
-    bins_t = np.ascontiguousarray(np.asarray(bins, np.float64).T)   # (NB, K): a bin's row is contiguous
+    bins_t = np.ascontiguousarray(np.asarray(bins, np.float32).T)   # (NB, K): a bin's row is contiguous
 
     def part(lo, hi):
         m = None if mix is None else (mix[0], mix[1], mix[2][lo:hi])
@@ -135,52 +135,75 @@ def _greedy_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=8
     return tuple(np.concatenate([p[i] for p in parts]) for i in range(4))
 
 
+def _running(op, x, out):
+    """out[b] = op(out[b-1], x[b]) down the rows of x (NB, S): np.maximum.accumulate and
+    np.cumsum along axis 0, a row at a time (numpy's own walk the columns with a stride of a
+    row, some twenty times slower)."""
+    out[0] = x[0]
+    for b in range(1, len(x)):
+        op(out[b - 1], x[b], out=out[b])
+    return out
+
+
 def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step, mix=None):
     """_greedy_sigma on one range of strands, sweeping the bins from the root.
 
     Per strand the sweep carries the open segment's start c and the longest step its bins
     allow so far, hm = sqrt(budget / max A) (the running minimum of each bin's own step
-    H = sqrt(budget / A)). A bin the segment can cross (c + hm reaches its far edge) only
-    lowers hm; otherwise the segment ends inside it, at c + hm, or at the bin's near edge
-    when even that is out of reach (the bins before allowed it), and the bin is then covered
-    by steps of its own H. So a segment is always the longest whose h² times the largest
-    bound over the bins it touches fits the budget, as in the greedy search bin by bin, but
-    the work per bin is a few whole-array operations over the strands, not a search per
-    segment (a tenth of the time at 100,000 strands)."""
+    H = sqrt(budget / A)). A bin the segment can cross (c + hm reaches its far edge, the
+    tip in the strand's last bin) only lowers hm; otherwise the segment ends inside it, at
+    c + hm, or at the bin's near edge when even that is out of reach (the bins before
+    allowed it), and the bin is then covered by steps of its own H. So a segment is always
+    the longest whose h² times the largest bound over the bins it touches fits the budget,
+    as in the greedy search bin by bin, but the work per bin is a few whole-array
+    operations over the strands, not a search per segment (a tenth of the time at 100,000
+    strands). A strand leaves the sweep after its last bin, or when the cap stops it."""
     nb = bins_t.shape[0]
     s = len(f)
+    lanes = np.arange(s)
     step2 = float(table_step) ** 2
-    # A (NB, S): the blend of the guides' bounds, bin-major (one contiguous row per bin).
+    # A (NB, S): the blend of the guides' bounds, bin-major (one contiguous row per bin), in
+    # float32 (half the memory traffic of the work over strands x bins; a bound off by a few
+    # parts in 10^7 is nothing beside its 5 % margin, interpolate._CURVATURE_SAFETY).
+    f32 = np.float32
     key = np.take(bins_t, g[:, 0], axis=1)
-    a = key * w[:, 0]
+    a = key * w[:, 0].astype(f32)
+    term = np.empty_like(a)
     for k in (1, 2):
-        term = np.take(bins_t, g[:, k], axis=1)
-        term *= w[:, k]
+        np.take(bins_t, g[:, k], axis=1, out=term)
+        term *= w[:, k].astype(f32)
         a += term
     if mix is not None:
         # Clump: + c·(the wisp key's bound - the blend's) where the key bends more, and
         # |c''| times the root gap (adaptive_sigma).
         c, c2, gap = mix
         np.subtract(key, a, out=key)
-        np.maximum(key, 0.0, out=key)
-        key *= c[:, None]
+        np.maximum(key, f32(0.0), out=key)
+        key *= c.astype(f32)[:, None]
         a += key
         if c2 is not None:
-            a += c2[:, None] * gap[None, :]
+            a += (c2[:, None] * gap[None, :]).astype(f32)
     last_bin = np.clip(np.ceil(f * nb).astype(np.int64) - 1, 0, nb - 1)
-    a[np.arange(nb)[:, None] > last_bin[None, :]] = 0.0  # bins past the tip do not count
+    # Bins past the tip do not count: the largest bound up to the last bin.
+    _running(np.maximum, a, key)
     # The tables' lerp moves each point by up to (the strand's largest bound)·step²/8.
-    budget = np.maximum(8.0 * tolerance - a.max(axis=0) * step2, 1e-300)
+    budget = np.maximum(8.0 * tolerance - key[last_bin, lanes] * step2, 1e-300)
     # Lower bound on the count: a segment that fits has ∫ sqrt(A / 8tol) <= 1 over it, so a
     # strand with more than max_cylinders of that integral cannot fit: cap it right away.
-    covered = np.clip(f[None, :] * nb - np.arange(nb)[:, None], 0.0, 1.0)
-    covered /= nb
-    with np.errstate(divide="ignore"):
+    np.sqrt(a, out=key)
+    _running(np.add, key, term)
+    whole = np.where(last_bin > 0, term[np.maximum(last_bin - 1, 0), lanes], 0.0)
+    need = (whole / nb + key[last_bin, lanes] * (f - last_bin / nb)) / np.sqrt(budget)
+    h_bin = term
+    with np.errstate(divide="ignore", over="ignore"):
         # A straight bin's step is unbounded; a finite stand-in keeps 0·h a number.
-        h_bin = np.minimum(np.sqrt(budget / a), 1e300)
-    need = (covered / h_bin).sum(axis=0)
-    # Far edge of each bin, the tip in the last one.
-    far = np.minimum((np.arange(nb)[:, None] + 1.0) / nb, f[None, :])
+        np.divide(budget.astype(f32), a, out=h_bin)
+    np.sqrt(h_bin, out=h_bin)
+    np.minimum(h_bin, f32(1e30), out=h_bin)
+    del key
+    # Strands by last bin: they leave the sweep there.
+    order = np.argsort(last_bin, kind="stable")
+    leave = np.searchsorted(last_bin[order], np.arange(nb + 1))
     active = (f > 0) & (need <= max_cylinders)
     c = np.where(active, 0.0, np.inf)   # a strand out of the sweep: no segment of it ever ends
     hm = np.full(s, np.inf)
@@ -189,40 +212,41 @@ def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step, mix=Non
     grid = np.full((s, width), np.nan)
     grid[:, 0] = 0.0
     flat = grid.ravel()
-    reach = np.empty(s)
+    reach, hi = np.empty(s), np.empty(s)
     for b in range(nb):
         np.minimum(hm, h_bin[b], out=hm)
         np.add(c, hm, out=reach)
-        ends = np.flatnonzero(reach < far[b])   # inf (out of the sweep) is never below
-        if not ends.size:
-            continue
-        hi, h = far[b, ends], h_bin[b, ends]
-        first = np.maximum(reach[ends], b / nb)
-        # Steps of h from `first` until one reaches hi: the least k with first + k·h + h >= hi.
-        k = np.maximum(np.ceil((hi - first) / h) - 1.0, 0.0)
-        k = np.where(first + k * h + h >= hi, k, k + 1.0)
-        k = np.where((k > 0) & (first + (k - 1.0) * h + h >= hi), k - 1.0, k)
-        k = np.minimum(k, max_cylinders).astype(np.int64)
-        at = count[ends] + 1
-        flat[ends * width + np.minimum(at, width - 1)] = first
-        more = np.flatnonzero(k > 0)
-        if more.size:
-            km = k[more]
-            i = np.arange(int(km.sum())) - np.repeat(np.cumsum(km) - km, km) + 1
-            rows = np.repeat(ends[more], km)
-            flat[rows * width + np.minimum(np.repeat(at[more], km) + i, width - 1)] = (
-                np.repeat(first[more], km) + i * np.repeat(h[more], km))
-        count[ends] += 1 + k
-        c[ends] = first + k * h
-        hm[ends] = h
-        over = ends[count[ends] + 1 > max_cylinders]
-        c[over] = np.inf     # the cap stops it: out of the sweep
-    capped = (f > 0) & ~(np.isfinite(c))
-    done = np.flatnonzero(np.isfinite(c) & (f > 0))
+        np.minimum(f, (b + 1.0) / nb, out=hi)
+        ends = np.flatnonzero(reach < hi)   # inf (out of the sweep) is never below
+        if ends.size:
+            h = h_bin[b, ends]
+            first = np.maximum(reach[ends], b / nb)
+            at = count[ends] + 1
+            flat[ends * width + np.minimum(at, width - 1)] = first
+            hm[ends] = h
+            # Steps of h from `first` until one reaches hi: the least k with first + k·h + h >= hi.
+            more = np.flatnonzero(first + h < hi[ends])
+            if more.size:
+                fm, hh, hm_ = first[more], h[more], hi[ends[more]]
+                k = np.maximum(np.ceil((hm_ - fm) / hh) - 1.0, 1.0)
+                k = np.where(fm + k * hh + hh >= hm_, k, k + 1.0)
+                k = np.where((k > 1) & (fm + (k - 1.0) * hh + hh >= hm_), k - 1.0, k)
+                km = np.minimum(k, max_cylinders).astype(np.int64)
+                i = np.arange(int(km.sum())) - np.repeat(np.cumsum(km) - km, km) + 1
+                rows = np.repeat(ends[more], km)
+                flat[rows * width + np.minimum(np.repeat(at[more], km) + i, width - 1)] = (
+                    np.repeat(fm, km) + i * np.repeat(hh, km))
+                at[more] += km
+                first[more] = fm + km * hh
+            count[ends] = at
+            c[ends] = first
+        gone = order[leave[b]:leave[b + 1]]
+        c[gone] = np.inf     # past its tip
+    capped = (f > 0) & (~active | (count + 1 > max_cylinders))
+    done = np.flatnonzero((f > 0) & ~capped)
     grid[done, count[done] + 1] = f[done]
     grid = grid[:, :max_cylinders + 1]
-    rows = ~capped & (f > 0)
-    _merge_sliver_tips(grid, rows, a, nb, last_bin, budget)
+    _merge_sliver_tips(grid, ~capped & (f > 0), a, nb, last_bin, budget)
     if capped.any():
         kk = np.arange(max_cylinders + 1)
         grid[capped] = f[capped, None] * (kk / max_cylinders)
@@ -344,7 +368,7 @@ def _merge_sliver_tips(grid, rows, a, nb, last_bin, budget):
     stops at the edge and leaves a sliver of a last segment, whose end repeats its start to
     within float32 (renderers then drop or special-case it). The last two segments [a, b],
     [b, c] become one when the bound holds over [a, c] (the largest curvature bound `a` (NB, S)
-    from a's bin to the tip, times (c - a)² within `budget`); otherwise b moves to the middle
+    from a's bin to the last bin, times (c - a)² within `budget`); otherwise b moves to the middle
     of [a, c]: [a, b'] is a part of the accepted [a, b], and [b', c] has a quarter of
     (c - a)², which fits whenever [a, c] misses by less than 4x (the greedy segment before a
     sliver nearly always reaches the bound exactly, so it misses by a hair)."""
@@ -359,7 +383,8 @@ def _merge_sliver_tips(grid, rows, a, nb, last_bin, budget):
         return
     last, prev2 = grid[r, k], grid[r, k - 2]
     b0 = np.minimum(np.floor(prev2 * nb).astype(np.int64), last_bin[r])
-    suffix = np.where(np.arange(nb)[:, None] >= b0[None, :], a[:, r], 0.0).max(axis=0)
+    span = (np.arange(nb)[:, None] >= b0[None, :]) & (np.arange(nb)[:, None] <= last_bin[r][None, :])
+    suffix = np.where(span, a[:, r], 0.0).max(axis=0)
     miss = suffix * (last - prev2) ** 2 / budget[r]
     merge = miss <= 1.0
     grid[r[merge], k[merge] - 1] = last[merge]
