@@ -262,13 +262,18 @@ def strand_attributes(seed, ids, counts, along, base_radius, base_color, params)
     at fractions `along` of their length (0 at the root, 1 at the tip), so a profile is the
     same whatever the resolution: `along` is flat (P,), or (n,) shared by every strand when
     all counts are n (fixed resolution: the profiles are then made once and copied).
+    `along` may also be (sigma (P,), frac (S,)), the fractions σ / f_j made a range at a time.
     Radius: r(1 - s) ('linear', the thesis's r(1 - i/res)), r ('constant'), or constant up to
     taper_start then linear to 0 ('taper_from'). Colour: base + U(-1,1)·variation per strand
     and per point, clamped to [0, 1]. Alpha: 1 up to alpha_start, then linear to alpha_tip."""
     n_pts = int(counts.sum())
-    s = along.astype(np.float32)
     color = strand_colors(seed, ids, base_color, params)
     var_p = np.asarray(params.color_variation_point)
+    if isinstance(along, tuple):    # (sigma (P,), frac (S,)): along = σ / f_j, made per range
+        if not var_p.any():
+            return _flat_attributes(along, counts, base_radius, color, params)
+        along = along[0] / np.repeat(along[1], counts)
+    s = along.astype(np.float32)
     if along.shape != (n_pts,) and not var_p.any():
         out = (np.empty(n_pts, np.float32), np.empty((n_pts, 3), np.float32), np.empty(n_pts, np.float32))
         fill_strand_rows(*out, base_radius, color, radius_profile(s, params), alpha_profile(s, params))
@@ -293,10 +298,11 @@ def strand_attributes(seed, ids, counts, along, base_radius, base_color, params)
 
 def _flat_attributes(s, counts, base_radius, color, params, threads=None):
     """strand_attributes without per-point colour variation, for strands of any counts at
-    fractions s (P,) float32: ranges of strands on the worker threads, each writing its own
-    rows (a colour channel at a time: np.repeat of 12-byte rows is slow)."""
-    n_pts = len(s)
+    fractions s (P,) float32, or (sigma (P,), frac (S,)) whose quotient they are: ranges of
+    strands on the worker threads, each writing its own rows (a colour channel at a time:
+    np.repeat of 12-byte rows is slow)."""
     ends = np.cumsum(counts)
+    n_pts = int(ends[-1]) if len(ends) else 0
     out = (np.empty(n_pts, np.float32), np.empty((n_pts, 3), np.float32), np.empty(n_pts, np.float32))
     radius, rgb, alpha = out
     base = base_radius.astype(np.float32)
@@ -305,7 +311,10 @@ def _flat_attributes(s, counts, base_radius, color, params, threads=None):
     def fill(lo, hi):
         start, stop = (int(ends[lo - 1]) if lo else 0), int(ends[hi - 1])
         n = counts[lo:hi]
-        part = s[start:stop]
+        if isinstance(s, tuple):
+            part = (s[0][start:stop] / np.repeat(s[1][lo:hi], n)).astype(np.float32)
+        else:
+            part = s[start:stop]
         np.multiply(np.repeat(base[lo:hi], n), radius_profile(part, params), out=radius[start:stop])
         for c in range(3):
             rgb[start:stop, c] = np.repeat(clamped[lo:hi, c], n)

@@ -321,7 +321,7 @@ class Generator:
             sigma, counts = res.sigma, res.counts
             self._note_resolution(sel, res.met, tol, res.needed)
             pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma, threads=_threads_for(len(frac)), clump=clump)
-            attrs = self._attributes(ids, counts, sigma / np.repeat(frac, counts), g, w, base_radius)
+            attrs = self._attributes(ids, counts, (sigma, frac), g, w, base_radius)
         threads = _threads_for(len(frac))
         self._report(0.6, "frizz and curl")
         shape_strands(pts, counts, sigma, frac, args[1], g[0], ids, rows, p, threads)
