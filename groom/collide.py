@@ -797,8 +797,9 @@ def _offending(collider, points, offsets, counts, radius, margin, lo, hi):
     root_value = collider.value(roots)
     p = pts[look].astype(np.float64)
     m = 0.5 * (p + pts[look - 1])
-    short = _shortfall(collider, p, m, target[look].astype(np.float64), root_value[which], roots[which])
-    inside = int((collider.value(p) < -rad[look]).sum())
+    short, at_end = _shortfall(collider, p, m, target[look].astype(np.float64), root_value[which], roots[which],
+                               values=True)
+    inside = int((at_end < -rad[look]).sum())
     bad = short > 0
     first_bad = np.full(len(suspect), np.iinfo(np.int64).max)
     np.minimum.at(first_bad, which[bad], (look - off[suspect][which])[bad])
@@ -830,13 +831,14 @@ def _clearance(target, root_value, p, root):
     return np.minimum(target, root_value + RAMP_SLOPE * d)
 
 
-def _shortfall(collider, end, mid, target, root_value, root):
+def _shortfall(collider, end, mid, target, root_value, root, values=False):
     """How far the end (or twice how far the middle) of a segment falls short of its
-    clearance; <= 0 where it is clear."""
+    clearance; <= 0 where it is clear. values: also the ends' sampled distances."""
     both = collider.value(np.concatenate([end, mid]))
     n = len(end)
-    return np.maximum(_clearance(target, root_value, end, root) - both[:n],
-                      2.0 * (_clearance(target, root_value, mid, root) - both[n:]))
+    short = np.maximum(_clearance(target, root_value, end, root) - both[:n],
+                       2.0 * (_clearance(target, root_value, mid, root) - both[n:]))
+    return (short, both[:n]) if values else short
 
 
 def _turn_limits(pts, off, cnt):
