@@ -26,12 +26,17 @@ class AdaptiveResolution:
     needed: np.ndarray
 
 
+# Strands per range of the adaptive resolution's sweep: its bins x strands arrays (three of
+# float32, 8 MB at this size) stay modest, and each of its many small steps per bin has
+# enough strands that the threads are not held up by the interpreter between them.
+_CHUNK = 16384
+
 # A strand the cap stops gets the cap's cylinders placed for a looser tolerance, raised by
 # this factor until they suffice (so it is within 25 % of the best the cap allows).
 _RELAX = 1.25
 
 
-def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=parallel.RANGE_SIZE, table_step=0.0,
+def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=_CHUNK, table_step=0.0,
                    threads=None, clump=None):
     """Per-strand adaptive resolution: curve parameters σ of the fewest points whose polyline
     provably stays within `tolerance` (S,) of the exact strand, for the curvature bound below.
@@ -116,7 +121,7 @@ def _replace_strands(sigma, counts, sel, new_sigma, new_counts):
     return np.concatenate([sigma, new_sigma])[src], out_counts
 
 
-def _greedy_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=8192, table_step=0.0, threads=None,
+def _greedy_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=_CHUNK, table_step=0.0, threads=None,
                   mix=None):
     """The greedy placement of adaptive_sigma: (sigma flat, counts, capped (S,) bool: the
     cap stopped the strand, which got max_cylinders equal steps, needed (S,) the count's
