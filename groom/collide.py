@@ -908,7 +908,13 @@ def _walk(collider, pts, target, cnt, k0, root_value):
             u_new[li] = cos_lim[act[li], None] * up[li] + sin_lim[act[li], None] * w
         p0 = prev[act]
         need, rv, rt = target[at], root_value[act], roots[act]
-        short = _shortfall(collider, p0 + length[:, None] * u_new, p0 + 0.5 * length[:, None] * u_new, need, rv, rt)
+        end, mid = p0 + length[:, None] * u_new, p0 + 0.5 * length[:, None] * u_new
+        # Only segments the cells' lower bounds do not clear get the closer look (the bound
+        # clears a point for its target, so for the smaller clearance near a root too).
+        short = np.full(len(act), -1.0)
+        near = np.flatnonzero(~(collider.clear_of(end, need) & collider.clear_of(mid, need)))
+        if near.size:
+            short[near] = _shortfall(collider, end[near], mid[near], need[near], rv[near], rt[near])
         push = (short > 0) & (length > 0)
         if push.any():
             pi = np.flatnonzero(push)
