@@ -46,8 +46,10 @@ def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=
     `bins` (K, NB) from interpolate.curvature_bound. Points are placed greedily from the root:
     each segment is the longest whose h² times the largest bound over the bins it touches
     stays <= 8·tol. Greedy covering is optimal for such a monotone constraint, so straight
-    stretches get one long cylinder and bends get short ones. Each segment scans the bins it
-    covers once, so the work is about (strands x bins) whatever the resolution.
+    stretches get one long cylinder and bends get short ones. The placement sweeps the bins
+    from the root for all strands of a range at once (_greedy_range), so the work is about
+    (strands x bins) whatever the resolution, in ranges of `chunk` strands on `threads`
+    worker threads.
 
     The points themselves come from key tables of `table_step` (in σ) between samples, whose
     lerp strays from the curve by up to A·table_step²/8 (A the strand's largest bound), so
