@@ -99,6 +99,12 @@ def _root():
     return os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
+def _kill(client):
+    """Kill the worker and wait until it is gone (no guessed sleep)."""
+    os.kill(client.pid, signal.SIGKILL)
+    client._proc.wait(timeout=60)
+
+
 def test_worker_renders_keeps_the_scene_and_restarts_after_a_crash():
     s = curls(6, 6)
     cam = Camera.look_at((0, -2.5, 0.5), (0, 0, 0.5), size=(24, 24))
@@ -111,8 +117,7 @@ def test_worker_renders_keeps_the_scene_and_restarts_after_a_crash():
         assert client.stats.bytes_uploaded == sent          # the scene stayed uploaded
         with pytest.raises(InputError):
             client.render(cam, RenderSettings(spp=2))           # bad input comes back as InputError
-        os.kill(client.pid, signal.SIGKILL)
-        time.sleep(0.2)
+        _kill(client)
         with pytest.raises(WorkerError):
             client.render(cam, RenderSettings())
         np.testing.assert_array_equal(client.render(cam, RenderSettings()), first)   # fresh worker, same scene
@@ -191,8 +196,7 @@ def test_worker_draws_meshes_and_keeps_them_across_a_restart():
             client.set_meshes([(np.eye(3), np.zeros((0, 3), int), (1, 1, 1))])     # refused before it travels
         client.set_meshes(meshes)
         np.testing.assert_allclose(client.render(cam, RenderSettings()), want, atol=1e-6)
-        os.kill(client.pid, signal.SIGKILL)
-        time.sleep(0.2)
+        _kill(client)
         with pytest.raises(WorkerError):
             client.render(cam, RenderSettings())
         np.testing.assert_allclose(client.render(cam, RenderSettings()), want, atol=1e-6)   # meshes re-sent
