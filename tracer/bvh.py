@@ -1,0 +1,325 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""A linear BVH over cylinders (Morton order), built and refitted in whole-array numpy.
+
+Build: every cylinder's padded box (Cylinders.bounds, the grid's bound) gives a centre; the
+centres, quantised to MORTON_BITS per axis in the scene box, interleave into 63-bit Morton
+codes, and the cylinders are sorted by code. The tree is the binary radix tree of the sorted
+codes (Karras, HPG 2012), made top-down one level at a time for all ranges of a level
+together: a range is split where its highest differing code bit flips (found by one
+searchsorted on the sorted codes), in the middle where all its codes are equal, and becomes
+a leaf once it holds at most LEAF_MAX cylinders. A leaf is a run of `order` (cylinder ids in
+code order), so every cylinder sits in exactly one leaf and keeps its id: the trace shader
+orders equal distances by id and finds a strand's neighbours at id ± 1.
+
+Nodes are stored for the trace shader in depth-first order, each holding both children's
+boxes (one fetch of 64 bytes tests both; the near one is visited first, the far one pushed),
+so the left child of node i is i + 1 wherever it is a node.
+
+Refit: boxes are remade bottom-up for new cylinder positions with the tree kept (a strand
+edit keeps its cylinders' ids); the renderer then uploads only the node texels that changed.
+
+A child link (NODE_TEXELS int texels per node, see node_texels): >= 0 the child node's
+index; < 0 a leaf, -(first * LEAF_SLOTS + count) - 1 with `first` its first slot in `order`.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+# Cylinders per leaf at most (the shader's LEAF_MAX). Fewer means more nodes per ray, more
+# means more cylinder tests; see benchmarks/sections/accel.py for the measurement.
+LEAF_MAX = 4
+LEAF_SLOTS = 8          # a leaf link holds its count in the low 3 bits (LEAF_MAX < 8)
+NODE_TEXELS = 4         # RGBA32I texels per node: (lo_L, link_L) (hi_L, link_R) (lo_R, -) (hi_R, -)
+MORTON_BITS = 21        # per axis: 63-bit codes
+# Boxes are widened by this fraction of the scene's scale (its extent or its distance from
+# the origin, the larger): the shader's slab test runs in float32 from a camera that may be
+# far off, and a hit point must never fall outside its box by rounding.
+BOX_EPS = 2.0 ** -18
+assert LEAF_MAX < LEAF_SLOTS
+
+
+@dataclass(eq=False)
+class Bvh:
+    """`order` (N,) int32 cylinder ids, leaf by leaf; per internal node (M of them, depth
+    first, root 0): `lo`, `hi` (M, 2, 3) float32 boxes of its two children, `link` (M, 2)
+    int32 (see the module); `level` (M,) depth of each node (root 0); `depth` the most nodes
+    on a path from the root (the shader's stack needs depth - 1 slots); `leaf_first`,
+    `leaf_count`, `leaf_node`, `leaf_side` per leaf (its slots in `order` and the child slot
+    that links it), for refits."""
+    order: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    link: np.ndarray
+    level: np.ndarray
+    depth: int
+    leaf_first: np.ndarray
+    leaf_count: np.ndarray
+    leaf_node: np.ndarray
+    leaf_side: np.ndarray
+
+    @property
+    def num_nodes(self):
+        return len(self.link)
+
+    @property
+    def nbytes(self):
+        """Bytes the shader reads: node texels and the leaf order."""
+        return self.num_nodes * NODE_TEXELS * 16 + self.order.nbytes
+
+
+def leaf_link(first, count):
+    return -(np.asarray(first, np.int64) * LEAF_SLOTS + count) - 1
+
+
+def unpack_leaf(link):
+    """(first, count) of leaf links (< 0)."""
+    v = -np.asarray(link, np.int64) - 1
+    return v // LEAF_SLOTS, v % LEAF_SLOTS
+
+
+def _spread_bits(x):
+    """The 21 low bits of x (uint64) moved to every third bit (bit i -> bit 3i)."""
+    x = x & np.uint64(0x1FFFFF)
+    for shift, mask in ((32, 0x1F00000000FFFF), (16, 0x1F0000FF0000FF), (8, 0x100F00F00F00F00F),
+                        (4, 0x10C30C30C30C30C3), (2, 0x1249249249249249)):
+        x = (x | (x << np.uint64(shift))) & np.uint64(mask)
+    return x
+
+
+def morton_codes(centres, lo, hi):
+    """63-bit Morton codes (uint64) of points (N,3) in the box lo..hi."""
+    scale = (1 << MORTON_BITS) - 1
+    q = (centres - lo) / np.maximum(hi - lo, 1e-300) * scale
+    q = np.clip(q, 0, scale).astype(np.uint64)
+    return (_spread_bits(q[:, 0]) << np.uint64(2)) | (_spread_bits(q[:, 1]) << np.uint64(1)) | _spread_bits(q[:, 2])
+
+
+def _highest_bit(x):
+    """Index of the highest set bit of uint64 x > 0, exactly (float64 rounds above 2^53, so
+    the two 32-bit halves are taken apart)."""
+    hi32 = (x >> np.uint64(32)).astype(np.float64)
+    lo32 = (x & np.uint64(0xFFFFFFFF)).astype(np.float64)
+    return np.where(hi32 > 0, np.frexp(hi32)[1] + 31, np.frexp(lo32)[1] - 1)
+
+
+def cylinder_boxes(cylinders, pad_factor=1.0):
+    """float64 (lo, hi) per cylinder: the grid's padded capsule bound (Cylinders.bounds)."""
+    lo, hi = cylinders.bounds(pad_factor)
+    return lo.astype(np.float64), hi.astype(np.float64)
+
+
+def build_bvh(cylinders, pad_factor=1.0):
+    """Bvh over `cylinders` (tracer.cylinders.Cylinders), boxes padded as the grid's are."""
+    blo, bhi = cylinder_boxes(cylinders, pad_factor)
+    n = len(blo)
+    if n == 0:
+        return _assemble(np.zeros(0, np.int32), [], blo, bhi)
+    lo, hi = blo.min(axis=0), bhi.max(axis=0)
+    codes = morton_codes(0.5 * (blo + bhi), lo, hi)
+    order = np.argsort(codes, kind="stable").astype(np.int32)
+    codes = codes[order]
+    # Ranges of one level at a time: [a, b) of the sorted codes, their parent and side.
+    a, b = np.array([0]), np.array([n])
+    levels = []
+    while len(a):
+        x = codes[a] ^ codes[b - 1]
+        same = x == 0
+        bit = _highest_bit(np.where(same, np.uint64(1), x)).astype(np.uint64)
+        # All codes of a range share the bits above `bit`: the split is the first code with
+        # that bit set, i.e. the first code >= (the common prefix | that bit).
+        prefix = (codes[a] >> (bit + np.uint64(1))) << (bit + np.uint64(1))
+        split = np.searchsorted(codes, prefix | (np.uint64(1) << bit), side="left")
+        split = np.where(same, (a + b) // 2, split)
+        levels.append((a, b, split))
+        # Children that still hold more than LEAF_MAX cylinders are the next level's ranges.
+        ca, cb = np.concatenate([a, split]), np.concatenate([split, b])
+        inner = cb - ca > LEAF_MAX
+        a, b = ca[inner], cb[inner]
+    if n <= LEAF_MAX:       # one leaf: a root whose right child is empty
+        levels = [(np.array([0]), np.array([n]), np.array([n]))]
+    return _assemble(order, levels, blo, bhi)
+
+
+def _assemble(order, levels, blo, bhi):
+    """Nodes in depth-first order from the levels' ranges (level k: arrays a, b, split, the
+    ranges in the order their parents listed them: all left children, then all right ones)."""
+    if not levels:
+        z = np.zeros(0, np.int64)
+        return Bvh(order, np.zeros((0, 2, 3), np.float32), np.zeros((0, 2, 3), np.float32),
+                   np.zeros((0, 2), np.int32), z, 0, z, z, z, z)
+    # Per level: for each node its children's ranges and which of them are nodes; the index
+    # of each child node within the next level follows from the concatenation order.
+    info = []
+    for a, b, s in levels:
+        ca, cb = np.concatenate([a, s]), np.concatenate([s, b])
+        inner = cb - ca > LEAF_MAX
+        nxt = np.cumsum(inner) - 1          # index in the next level where inner
+        m = len(a)
+        info.append((a, b, s, inner.reshape(2, m).T, nxt.reshape(2, m).T))
+    # Subtree sizes (internal nodes), deepest level first.
+    sizes = [None] * len(levels)
+    below = None
+    for k in range(len(levels) - 1, -1, -1):
+        inner, nxt = info[k][3], info[k][4]
+        size = np.ones(len(inner), np.int64)
+        if below is not None:
+            for side in (0, 1):
+                size += np.where(inner[:, side], below[np.where(inner[:, side], nxt[:, side], 0)], 0)
+        sizes[k] = size
+        below = size
+    # Depth-first positions, root first: left child at parent + 1, right child after the
+    # left subtree.
+    pos = [None] * len(levels)
+    pos[0] = np.zeros(1, np.int64)
+    for k in range(len(levels) - 1):
+        inner, nxt = info[k][3], info[k][4]
+        child_pos = np.empty(len(sizes[k + 1]), np.int64)
+        left_size = np.where(inner[:, 0], sizes[k + 1][np.where(inner[:, 0], nxt[:, 0], 0)], 0)
+        for side in (0, 1):
+            sel = inner[:, side]
+            child_pos[nxt[sel, side]] = pos[k][sel] + 1 + (left_size[sel] if side else 0)
+        pos[k + 1] = child_pos
+    m = int(sizes[0][0])
+    link = np.zeros((m, 2), np.int64)
+    level = np.zeros(m, np.int64)
+    leaves = []
+    for k, (a, b, s, inner, nxt) in enumerate(info):
+        p = pos[k]
+        level[p] = k
+        for side in (0, 1):
+            first, end = (a, s) if side == 0 else (s, b)
+            sel = inner[:, side]
+            if sel.any():
+                link[p[sel], side] = pos[k + 1][nxt[sel, side]]
+            leaves.append((first[~sel], end[~sel] - first[~sel], p[~sel], np.full((~sel).sum(), side)))
+    leaf_first, leaf_count, leaf_node, leaf_side = (np.concatenate(x) for x in zip(*leaves))
+    link[leaf_node, leaf_side] = leaf_link(leaf_first, leaf_count)
+    bvh = Bvh(order, np.zeros((m, 2, 3), np.float32), np.zeros((m, 2, 3), np.float32),
+              link.astype(np.int32), level, len(levels), leaf_first, leaf_count, leaf_node, leaf_side)
+    _fit(bvh, blo, bhi)
+    return bvh
+
+
+def _fit(bvh, blo, bhi):
+    """Every node's child boxes from the cylinder boxes (float64 (N,3) each), bottom-up."""
+    if not bvh.num_nodes:
+        return
+    scale = max(float(np.max(bhi.max(axis=0) - blo.min(axis=0))),
+                float(np.max(np.abs(np.concatenate([blo, bhi])))), 1e-30)
+    eps = BOX_EPS * scale
+    lo = np.full((bvh.num_nodes, 2, 3), np.inf)
+    hi = np.full((bvh.num_nodes, 2, 3), -np.inf)
+    slo, shi = blo[bvh.order], bhi[bvh.order]
+    full = bvh.leaf_count > 0
+    if full.any():
+        starts = bvh.leaf_first[full]
+        # Leaves tile `order` in some order; reduceat wants increasing starts.
+        srt = np.argsort(starts)
+        llo = np.minimum.reduceat(slo, starts[srt], axis=0)
+        lhi = np.maximum.reduceat(shi, starts[srt], axis=0)
+        ends = np.append(starts[srt][1:], len(slo))
+        assert np.array_equal(ends - starts[srt], bvh.leaf_count[full][srt])
+        lo[bvh.leaf_node[full][srt], bvh.leaf_side[full][srt]] = llo
+        hi[bvh.leaf_node[full][srt], bvh.leaf_side[full][srt]] = lhi
+    # Internal children, deepest level first: a child's box is the union of its own two.
+    for k in range(bvh.depth - 1, -1, -1):
+        nodes = np.flatnonzero(bvh.level == k)
+        for side in (0, 1):
+            child = bvh.link[nodes, side]
+            sel = child >= 0
+            c = child[sel]
+            lo[nodes[sel], side] = np.minimum(lo[c, 0], lo[c, 1])
+            hi[nodes[sel], side] = np.maximum(hi[c, 0], hi[c, 1])
+    empty = ~np.isfinite(lo)
+    # Rounded outwards to float32 and widened (see BOX_EPS); an empty child gets an inverted
+    # box that no slab test passes.
+    bvh.lo[:] = np.where(empty, 1.0, np.nextafter((lo - eps).astype(np.float32), np.float32(-np.inf)))
+    bvh.hi[:] = np.where(empty, -1.0, np.nextafter((hi + eps).astype(np.float32), np.float32(np.inf)))
+
+
+def refit_bvh(bvh, cylinders, pad_factor=1.0):
+    """New boxes for moved cylinders (same count and ids), the tree kept; returns `bvh`."""
+    blo, bhi = cylinder_boxes(cylinders, pad_factor)
+    if len(blo) != len(bvh.order):
+        raise ValueError(f"refit_bvh: {len(blo)} cylinders for a tree over {len(bvh.order)}")
+    _fit(bvh, blo, bhi)
+    return bvh
+
+
+def node_texels(bvh):
+    """(M * NODE_TEXELS, 4) int32: per node (lo_L, link_L) (hi_L, link_R) (lo_R, 0) (hi_R, 0),
+    the boxes as float32 bit patterns (an integer buffer keeps every bit; the shader reads
+    them back with intBitsToFloat)."""
+    m = bvh.num_nodes
+    out = np.zeros((m, NODE_TEXELS, 4), np.int32)
+    out[:, 0, :3] = bvh.lo[:, 0].view(np.int32)
+    out[:, 1, :3] = bvh.hi[:, 0].view(np.int32)
+    out[:, 2, :3] = bvh.lo[:, 1].view(np.int32)
+    out[:, 3, :3] = bvh.hi[:, 1].view(np.int32)
+    out[:, 0, 3] = bvh.link[:, 0]
+    out[:, 1, 3] = bvh.link[:, 1]
+    return out.reshape(-1, 4)
+
+
+def bvh_stats(bvh):
+    """Node count, leaves, mean cylinders per leaf, depth and bytes, for reports."""
+    full = bvh.leaf_count > 0
+    return {"nodes": bvh.num_nodes, "leaves": int(full.sum()),
+            "cylinders_per_leaf": float(bvh.leaf_count[full].mean()) if full.any() else 0.0,
+            "depth": bvh.depth, "bytes": bvh.nbytes}
+
+
+# --- traversal in numpy (the shader's walk, one ray at a time: for tests and work counts) ---
+
+def slab(lo, hi, o, inv, t0, t1):
+    """Entry distances of a ray into boxes (K,3) clipped to [t0, t1]; inf where it misses."""
+    ta, tb = (lo - o) * inv, (hi - o) * inv
+    tn = np.maximum(np.minimum(ta, tb).max(axis=-1), t0)
+    tf = np.minimum(np.maximum(ta, tb).min(axis=-1), t1)
+    return np.where(tn <= tf, tn, np.inf)
+
+
+def safe_inverse(d):
+    s = np.where(d != 0, np.sign(d), 1.0)
+    return 1.0 / (s * np.maximum(np.abs(d), 1e-30))
+
+
+def traverse(bvh, o, d, hit, t_max=np.inf, any_hit=False):
+    """The nearest hit of one ray as the shader walks: near child first, the far one pushed
+    with its entry distance, entries beyond the nearest hit so far skipped. `hit(ids)` ->
+    distances (inf on a miss). Returns (t, id, nodes visited, cylinders tested); (inf, -1, ...)
+    on no hit in (0, t_max). `any_hit`: stop at the first hit (hard shadows)."""
+    o, d = np.asarray(o, np.float64), np.asarray(d, np.float64)
+    inv = safe_inverse(d)
+    best_t, best_id = np.inf, -1
+    nodes = tests = 0
+    if not bvh.num_nodes:
+        return best_t, best_id, nodes, tests
+    stack = [(0, 0.0)]
+    while stack:
+        node, tn = stack.pop()
+        if tn > min(best_t, t_max):
+            continue
+        nodes += 1
+        te = slab(bvh.lo[node], bvh.hi[node], o, inv, 0.0, min(best_t, t_max))
+        inner = []
+        for side in (0, 1):
+            if not np.isfinite(te[side]):
+                continue
+            link = int(bvh.link[node, side])
+            if link >= 0:
+                inner.append((te[side], link))
+                continue
+            first, count = unpack_leaf(link)
+            ids = bvh.order[first:first + count]
+            tests += len(ids)
+            t = hit(ids)
+            ok = (t > 0) & (t < t_max)
+            for ti, ci in zip(t[ok], ids[ok]):
+                if ti < best_t or (ti == best_t and ci < best_id):
+                    best_t, best_id = float(ti), int(ci)
+            if any_hit and best_id >= 0:
+                return best_t, best_id, nodes, tests
+        inner.sort(key=lambda e: e[0], reverse=True)
+        stack.extend((child, t) for t, child in inner)
+    return best_t, best_id, nodes, tests
