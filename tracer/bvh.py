@@ -323,3 +323,47 @@ def traverse(bvh, o, d, hit, t_max=np.inf, any_hit=False):
         inner.sort(key=lambda e: e[0], reverse=True)
         stack.extend((child, t) for t, child in inner)
     return best_t, best_id, nodes, tests
+
+
+def threaded_texels(bvh):
+    """(K * 2, 4) int32: every node and leaf (K of them) in depth-first order, each as
+    (lo, skip) (hi, leaf): box corners as float bits, `skip` the position after its subtree,
+    `leaf` -1 for a node and first * LEAF_SLOTS + count for a leaf. A walk needs no stack:
+    from position i it goes on to i + 1 when the ray enters box i and i is a node, else to
+    skip."""
+    m = bvh.num_nodes
+    if not m:
+        return np.zeros((0, 4), np.int32)
+    is_leaf = bvh.link < 0
+    size = np.ones(m, np.int64)           # nodes and leaves in each node's subtree
+    for k in range(bvh.depth - 1, -1, -1):
+        nodes = np.flatnonzero(bvh.level == k)
+        for side in (0, 1):
+            child = bvh.link[nodes, side]
+            size[nodes] += np.where(child < 0, 1, size[np.maximum(child, 0)])
+    pos = np.zeros(m, np.int64)
+    for k in range(bvh.depth):
+        nodes = np.flatnonzero(bvh.level == k)
+        for side in (0, 1):
+            child = bvh.link[nodes, side]
+            inner = child >= 0
+            left = bvh.link[nodes, 0]
+            left_size = np.where(left < 0, 1, size[np.maximum(left, 0)])
+            pos[child[inner]] = pos[nodes[inner]] + 1 + (left_size[inner] if side else 0)
+    total = int(size[0])
+    out = np.zeros((total, 2, 4), np.int32)
+    # Nodes: their box is the union of their children's.
+    out[pos, 0, :3] = bvh.lo.min(axis=1).view(np.int32)
+    out[pos, 1, :3] = bvh.hi.max(axis=1).view(np.int32)
+    out[pos, 0, 3] = pos + size
+    out[pos, 1, 3] = -1
+    # Leaves: right after their node (left) or after the left subtree (right).
+    left_size = np.where(is_leaf[:, 0], 1, size[np.maximum(bvh.link[:, 0], 0)])
+    for side in (0, 1):
+        sel = np.flatnonzero(is_leaf[:, side])
+        lp = pos[sel] + 1 + (left_size[sel] if side else 0)
+        out[lp, 0, :3] = bvh.lo[sel, side].view(np.int32)
+        out[lp, 1, :3] = bvh.hi[sel, side].view(np.int32)
+        out[lp, 0, 3] = lp + 1
+        out[lp, 1, 3] = -bvh.link[sel, side] - 1
+    return out.reshape(-1, 4)

@@ -16,6 +16,9 @@ from hairio import InputError, Strands
 from hairio.validate import check_memory
 from .cylinders import (SHARP_BEND_DEG, CylinderPlan, column_bounds, cylinders_from_plan, plan_cylinders,
                         repeat_distance, strands_to_cylinders)
+from .bvh import LEAF_MAX, build_bvh, node_texels, refit_bvh, threaded_texels
+import os
+BVH_THREADED = int(os.environ.get('BVH_THREADED', '1'))
 from .grid import Grid, build_grid, grid_frame
 from .gl_buffers import BufferTexture, set_samplers
 from .gl_context import create_context
@@ -57,6 +60,13 @@ _CONTEXT = None
 _BACKEND = None
 _BUILDER = None
 BUILDS = ("auto", "gpu", "numpy")
+# The acceleration structures the trace shader can walk: a BVH over cylinders (tracer/bvh.py)
+# or the thesis's uniform grid (tracer/grid.py). Same hits, same image; the default is the one
+# that measured faster (benchmarks/sections/accel.py).
+ACCELS = ("bvh", "grid")
+DEFAULT_ACCEL = "bvh"
+# Partial BVH uploads: node texels in chunks of this many nodes (see UPLOAD_CHUNK).
+NODE_CHUNK = 1024
 
 
 def shared_context():
@@ -78,6 +88,19 @@ def load_shader(name):
     return (SHADER_DIR / name).read_text()
 
 
+def shader_source(name):
+    """A shader with its `#include "file"` lines replaced by those files (GLSL 3.3 has no
+    include of its own); an included part's #if around the line still decides."""
+    out = []
+    for line in load_shader(name).splitlines(keepends=True):
+        s = line.strip()
+        if s.startswith("#include"):
+            out.append(shader_source(s.split('"')[1]))
+        else:
+            out.append(line)
+    return "".join(out)
+
+
 def gpu_builder():
     """The compute passes of the shared context (compiled on first use)."""
     global _BUILDER
@@ -97,12 +120,13 @@ class Renderer:
     shadow_rays, layers_traced, cells_visited, cylinder_tests (summed over samples), and
     gl_backend (the shared context's: egl, glx, wgl or cgl)."""
 
-    def __init__(self, max_buffer_texels=None, build="auto"):
+    def __init__(self, max_buffer_texels=None, build="auto", accel=DEFAULT_ACCEL):
         """`max_buffer_texels`: the most texels one buffer texture may hold (default: the
         driver's GL_MAX_TEXTURE_BUFFER_SIZE, 2^27 on llvmpipe and current desktop GPUs, i.e.
         33 M cylinders or 134 M grid references); scenes past it get an InputError.
         `build`: where cylinders and grid are made — "gpu" (compute shaders, GL 4.3+),
-        "numpy", or "auto" (the GPU where the driver has compute shaders)."""
+        "numpy", or "auto" (the GPU where the driver has compute shaders).
+        `accel`: what rays walk — "bvh" (tracer/bvh.py) or "grid" (tracer/grid.py)."""
         self.ctx = shared_context()
         self.max_buffer_texels = int(max_buffer_texels or self.ctx.info["GL_MAX_TEXTURE_BUFFER_SIZE"])
         if build not in BUILDS:
@@ -111,6 +135,10 @@ class Renderer:
             raise InputError(f"build: 'gpu' needs compute shaders (OpenGL 4.3); this driver offers "
                              f"{self.ctx.info['GL_VERSION']}; use 'numpy' or 'auto'")
         self.build = "numpy" if build == "numpy" or not compute_available(self.ctx) else "gpu"
+        if accel not in ACCELS:
+            raise InputError(f"accel: expected one of {', '.join(ACCELS)}, got {accel!r}")
+        self.accel = accel
+        self.bvh = None
         self._programs = {}
         self._fbos = {}
         self._tex = {}       # name -> BufferTexture: tex_cyl, tex_idx, tex_cell (+ points for the GPU build)
@@ -154,7 +182,7 @@ class Renderer:
             raise
 
     def _forget_scene(self):
-        self.strands = self.grid = self._plan = self._cylinders = self.num_cylinders = None
+        self.strands = self.grid = self.bvh = self._plan = self._cylinders = self.num_cylinders = None
 
     def _set_strands(self, strands, plan, t0):
         self.strands = strands
@@ -181,7 +209,7 @@ class Renderer:
             self.stats["uploads"] += 1
             self._set_all_opaque(plan)
             t3 = time.perf_counter()
-            self._build_and_upload_grid(bounds)
+            self._build_and_upload_accel(bounds)
             self.stats["cylinders_s"] = (t1 - t0) + (t3 - t2)
             self.stats["upload_s"] = (t2 - t1) + self.stats.pop("_grid_upload_s")
         else:
@@ -191,7 +219,7 @@ class Renderer:
             self.stats["uploads"] += 1
             self._upload_cylinders(0, len(self._cylinders), full=True)
             t2 = time.perf_counter()
-            self._build_and_upload_grid()
+            self._build_and_upload_accel()
             self.stats["cylinders_s"] = t1 - t0
             self.stats["upload_s"] = t2 - t1 + self.stats.pop("_grid_upload_s")
         self.stats["num_cylinders"] = self.num_cylinders
@@ -248,7 +276,7 @@ class Renderer:
         for a, b in _runs(dest // per):
             self._upload_cylinders(a * per, min(len(old), b * per))
         t2 = time.perf_counter()
-        self._build_and_upload_grid()
+        self._build_and_upload_accel(refit=True)
         self.stats["cylinders_s"] = t1 - t0
         self.stats["upload_s"] = t2 - t1 + self.stats.pop("_grid_upload_s")
 
@@ -286,7 +314,7 @@ class Renderer:
         first, last = int(cyl_first[ids[0]]), int(cyl_first[ids[-1] + 1])
         self._make_cylinders_gpu(0.0, first, last - first)
         t3 = time.perf_counter()
-        self._build_and_upload_grid()
+        self._build_and_upload_accel(refit=True)
         self.stats["cylinders_s"] = (t1 - t0) + (t3 - t2)
         self.stats["upload_s"] = (t2 - t1) + self.stats.pop("_grid_upload_s")
 
@@ -368,6 +396,57 @@ class Renderer:
             self._tex["tex_cyl"].write(data, first=a * TEXELS_PER_CYL)
             self.stats["bytes_uploaded"] += data.nbytes
 
+    def _build_and_upload_accel(self, bounds=None, refit=False):
+        """The structure of `self.accel` for the current cylinders; `refit`: the cylinders
+        moved but kept their ids (update_strands), so a BVH keeps its tree. Sets
+        stats["accel_s"] (build or refit time) and the internal "_grid_upload_s"."""
+        if self.accel == "grid":
+            self.bvh = None
+            self._build_and_upload_grid(bounds)
+            self.stats["accel_s"] = self.stats["grid_s"]
+        else:
+            self.grid = None
+            self._build_and_upload_bvh(refit)
+
+    def _build_and_upload_bvh(self, refit=False):
+        """BVH over the cylinders (numpy, tracer/bvh.py): built anew, or refitted when
+        `refit` and one is there; a refit uploads only the chunks of NODE_CHUNK nodes whose
+        texels changed (the nodes above the moved cylinders)."""
+        t0 = time.perf_counter()
+        old = None
+        if refit and self.bvh is not None and len(self.bvh.order) == self.num_cylinders:
+            old = threaded_texels(self.bvh) if BVH_THREADED else node_texels(self.bvh)
+            bvh = refit_bvh(self.bvh, self.cylinders, self._grid_pad)
+        else:
+            bvh = build_bvh(self.cylinders, self._grid_pad)
+        self.bvh = bvh
+        texels = threaded_texels(bvh) if BVH_THREADED else node_texels(bvh)
+        self._bvh_entries = len(texels) // (2 if BVH_THREADED else 4)
+        t1 = time.perf_counter()
+        if old is None:
+            self._upload("tex_node", texels, 4, "i4", slack=4)
+            self._upload("tex_order", bvh.order, 1, "i4", slack=1)
+        else:
+            per = NODE_CHUNK * 4
+            changed = np.flatnonzero(np.any(old != texels, axis=1)) // per
+            for a, b in _runs(changed) if changed.size else ():
+                chunk = texels[a * per:b * per]
+                self._tex["tex_node"].write(chunk, first=a * per)
+                self.stats["bytes_uploaded"] += chunk.nbytes
+        t2 = time.perf_counter()
+        self.stats["bvh_s"] = self.stats["accel_s"] = t1 - t0
+        self.stats["_grid_upload_s"] = t2 - t1
+        self.stats["bvh_refit"] = old is not None
+        self.stats["bvh_nodes"], self.stats["bvh_depth"] = bvh.num_nodes, bvh.depth
+        self.stats["accel_bytes"] = bvh.nbytes
+
+    def scene_bounds(self):
+        """(lo, hi) float64 (3,) of the structure rays walk (every padded cylinder inside)."""
+        if self.grid is not None:
+            return self.grid.lo, self.grid.hi
+        b = self.bvh
+        return (b.lo[0].min(axis=0).astype(np.float64), b.hi[0].max(axis=0).astype(np.float64))
+
     def _build_and_upload_grid(self, bounds=None):
         """`bounds`: column_bounds of the plan's points when the caller has them already."""
         t0 = time.perf_counter()
@@ -397,6 +476,7 @@ class Renderer:
         self.stats["_grid_upload_s"] = upload_s + (t3 - t2)
         self.stats["grid_dims"] = tuple(int(x) for x in g.dims)
         self.stats["grid_refs"] = self._grid_refs
+        self.stats["accel_bytes"] = self._grid_refs * 4 + g.num_cells * 8
         self.stats["cylinders_per_full_cell"], self.stats["full_cell_fraction"] = g.occupancy()
 
     @property
@@ -453,7 +533,7 @@ class Renderer:
     def _program(self, settings, camera, layers):
         key = (layers, settings.shadows and (1 if settings.shadow_mode == "hard" else 2),
                settings.shading, len(settings.lights), settings.spp_n, settings.min_pixel_width,
-               camera.type, settings.count)
+               camera.type, settings.count, self.accel, self.bvh.depth if self.bvh is not None else 0)
         prog = self._programs.get(key)
         if prog is None:
             defines = {
@@ -466,9 +546,13 @@ class Renderer:
                 "ORTHO": int(camera.type == "ORTHO"),
                 "COUNT": int(settings.count),
                 "BLOCK": BLOCK,
+                "ACCEL_BVH": int(self.accel == "bvh"),
+                "BVH_STACK": max(1, key[-1]),
+                "BVH_LEAF_MAX": LEAF_MAX,
+                "BVH_THREADED": BVH_THREADED,
             }
             head = "#version 330 core\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items())
-            prog = self.ctx.program(vertex_shader=_VERTEX, fragment_shader=head + load_shader("trace.glsl"))
+            prog = self.ctx.program(vertex_shader=_VERTEX, fragment_shader=head + shader_source("trace.glsl"))
             set_samplers(prog, **{name: unit for unit, name in enumerate(self._TRACE_BUFFERS)})
             vao = self.ctx.vertex_array(prog, [])
             prog = (prog, vao)
@@ -525,7 +609,7 @@ class Renderer:
         None when nothing can be seen."""
         if not self.num_cylinders:
             return None
-        lo, hi = self.grid.lo, self.grid.hi
+        lo, hi = self.scene_bounds()
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         w, h = camera.size
         x, y, depth = camera.project(corners)
@@ -551,7 +635,7 @@ class Renderer:
         t0 = time.perf_counter()
         if settings.min_pixel_width and self._grid_pad < GRID_WIDEN_CAP:
             self._grid_pad = GRID_WIDEN_CAP
-            self._build_and_upload_grid()
+            self._build_and_upload_accel(refit=True)
             self.stats.pop("_grid_upload_s")
             self.stats["grid_rebuilds"] = self.stats.get("grid_rebuilds", 0) + 1
         w, h = camera.size
@@ -601,16 +685,21 @@ class Renderer:
                               cells_visited=int(counts[2]), cylinder_tests=int(counts[3]))
         return img
 
-    _TRACE_BUFFERS = ("tex_cyl", "tex_idx", "tex_cell")     # on texture units 0, 1, 2
+    # On texture units 0, 1, ...: the grid's or the BVH's buffers after the cylinders.
+    _TRACE_BUFFERS = ("tex_cyl", "tex_idx", "tex_cell", "tex_node", "tex_order")
 
     def _set_uniforms(self, prog, camera, settings):
         g = self.grid
-        for unit, name in enumerate(self._TRACE_BUFFERS):
-            self._tex[name].use(unit)
-        set_uniforms(prog, grid_lo=tuple(float(x) for x in g.lo),
-                     cell_size=tuple(float(x) for x in g.cell_size),
-                     dims=tuple(int(x) for x in g.dims),
-                     cam_pos=tuple(float(x) for x in camera.position),
+        used = ("tex_cyl", "tex_idx", "tex_cell") if g is not None else ("tex_cyl", "tex_node", "tex_order")
+        for name in used:
+            self._tex[name].use(self._TRACE_BUFFERS.index(name))
+        if g is not None:
+            set_uniforms(prog, grid_lo=tuple(float(x) for x in g.lo),
+                         cell_size=tuple(float(x) for x in g.cell_size),
+                         dims=tuple(int(x) for x in g.dims))
+        else:
+            set_uniforms(prog, bvh_nodes=int(self._bvh_entries))
+        set_uniforms(prog, cam_pos=tuple(float(x) for x in camera.position),
                      cam_rot=tuple(float(x) for x in camera.rotation.T.ravel()),
                      pixel_size=float(camera.pixel_size),
                      shift_px=tuple(float(x) for x in camera.shift_px),

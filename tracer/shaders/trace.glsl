@@ -11,6 +11,7 @@
 //   ORTHO         1: orthographic camera
 //   COUNT         1: write per-pixel work counters to a second target
 //   BLOCK         cells per side of the blocks whose emptiness lets the DDA jump ahead
+//   ACCEL_BVH     1: walk the BVH (accel_bvh.glsl) instead of the grid
 
 // Per cylinder, 4 consecutive texels (one 64-byte cache line on a CPU driver):
 //   TOP: xyz top, w radius   TIP: xyz tip, w alpha   N2: xyz unit normal of plane 2, w cap
@@ -263,6 +264,10 @@ vec3 safe_inverse(vec3 d) {
     return 1.0 / (s * max(abs(d), vec3(1e-30)));
 }
 
+#if ACCEL_BVH
+#include "accel_bvh.glsl"
+#endif
+
 #if SHADOWS
 // Transmittance toward a light from p (1 = lit). Hard mode stops at the first hit anywhere;
 // transmittance mode multiplies (1 - alpha) of every cylinder hit, each counted once (in the
@@ -285,6 +290,9 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint
         if (hint >= 0 && h != own && th > tmin && th < tmax) return 0.0;
     }
 #endif
+#if ACCEL_BVH
+    return bvh_shadow(p, d, tmax, own, tmin, hint);
+#else
     vec3 inv = safe_inverse(d);
     float t0 = 0.0, t1 = tmax;
     if (!enter_grid(p, inv, t0, t1)) return 1.0;
@@ -322,6 +330,7 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint
         w = next;
     }
     return trans;
+#endif
 }
 #endif
 
@@ -401,6 +410,9 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
     // Every array index in this function is a constant for that reason.
     float ht[LAYERS]; float ha[LAYERS]; int hid[LAYERS]; int hs[LAYERS];
     for (int i = 0; i < LAYERS; ++i) { ht[i] = BIG; ha[i] = 0.0; hid[i] = NO_ID; hs[i] = 0; }
+#if ACCEL_BVH
+    bvh_nearest(o, d, widen_per_t, widen_const, ht, ha, hid, hs);
+#else
     if (enter_grid(o, inv, t0, t1)) {
         ivec3 stp; vec3 tdelta;
         Walk w = begin_walk(o, d, inv, t0, stp, tdelta);
@@ -452,6 +464,7 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
             w = next;
         }
     }
+#endif
     int n = 0;
     for (int i = 0; i < LAYERS; ++i) n += ht[i] < BIG ? 1 : 0;
     vec3 C = vec3(0.0);
