@@ -11,15 +11,16 @@ a leaf once it holds at most LEAF_MAX cylinders. A leaf is a run of `order` (cyl
 code order), so every cylinder sits in exactly one leaf and keeps its id: the trace shader
 orders equal distances by id and finds a strand's neighbours at id ± 1.
 
-Nodes are stored for the trace shader in depth-first order, each holding both children's
-boxes (one fetch of 64 bytes tests both; the near one is visited first, the far one pushed),
-so the left child of node i is i + 1 wherever it is a node.
+Internal nodes are kept in depth-first order, each holding both children's boxes, so the
+left child of node i is i + 1 wherever it is a node. The trace shader walks another layout
+of the same tree (walk_texels): nodes and leaves in depth-first order, each with its own box
+and the entry after its subtree, so that a walk needs no stack (accel_bvh.glsl says why).
 
 Refit: boxes are remade bottom-up for new cylinder positions with the tree kept (a strand
 edit keeps its cylinders' ids); the renderer then uploads only the node texels that changed.
 
-A child link (NODE_TEXELS int texels per node, see node_texels): >= 0 the child node's
-index; < 0 a leaf, -(first * LEAF_SLOTS + count) - 1 with `first` its first slot in `order`.
+A child link: >= 0 the child node's index; < 0 a leaf, -(first * LEAF_SLOTS + count) - 1
+with `first` its first slot in `order`.
 """
 from dataclasses import dataclass
 
@@ -29,7 +30,7 @@ import numpy as np
 # means more cylinder tests; see benchmarks/sections/accel.py for the measurement.
 LEAF_MAX = 4
 LEAF_SLOTS = 8          # a leaf link holds its count in the low 3 bits (LEAF_MAX < 8)
-NODE_TEXELS = 4         # RGBA32I texels per node: (lo_L, link_L) (hi_L, link_R) (lo_R, -) (hi_R, -)
+WALK_TEXELS = 2         # RGBA32I texels per entry of the shader's walk (walk_texels)
 MORTON_BITS = 21        # per axis: 63-bit codes
 # Boxes are widened by this fraction of the scene's scale (its extent or its distance from
 # the origin, the larger): the shader's slab test runs in float32 from a camera that may be
@@ -63,8 +64,9 @@ class Bvh:
 
     @property
     def nbytes(self):
-        """Bytes the shader reads: node texels and the leaf order."""
-        return self.num_nodes * NODE_TEXELS * 16 + self.order.nbytes
+        """Bytes the shader reads: the walk's texels (nodes and leaves) and the leaf order."""
+        entries = self.num_nodes + int(np.count_nonzero(self.link < 0))
+        return entries * WALK_TEXELS * 16 + self.order.nbytes
 
 
 def leaf_link(first, count):
@@ -246,21 +248,6 @@ def refit_bvh(bvh, cylinders, pad_factor=1.0):
     return bvh
 
 
-def node_texels(bvh):
-    """(M * NODE_TEXELS, 4) int32: per node (lo_L, link_L) (hi_L, link_R) (lo_R, 0) (hi_R, 0),
-    the boxes as float32 bit patterns (an integer buffer keeps every bit; the shader reads
-    them back with intBitsToFloat)."""
-    m = bvh.num_nodes
-    out = np.zeros((m, NODE_TEXELS, 4), np.int32)
-    out[:, 0, :3] = bvh.lo[:, 0].view(np.int32)
-    out[:, 1, :3] = bvh.hi[:, 0].view(np.int32)
-    out[:, 2, :3] = bvh.lo[:, 1].view(np.int32)
-    out[:, 3, :3] = bvh.hi[:, 1].view(np.int32)
-    out[:, 0, 3] = bvh.link[:, 0]
-    out[:, 1, 3] = bvh.link[:, 1]
-    return out.reshape(-1, 4)
-
-
 def bvh_stats(bvh):
     """Node count, leaves, mean cylinders per leaf, depth and bytes, for reports."""
     full = bvh.leaf_count > 0
@@ -284,33 +271,25 @@ def safe_inverse(d):
     return 1.0 / (s * np.maximum(np.abs(d), 1e-30))
 
 
-def traverse(bvh, o, d, hit, t_max=np.inf, any_hit=False):
-    """The nearest hit of one ray as the shader walks: near child first, the far one pushed
-    with its entry distance, entries beyond the nearest hit so far skipped. `hit(ids)` ->
-    distances (inf on a miss). Returns (t, id, nodes visited, cylinders tested); (inf, -1, ...)
-    on no hit in (0, t_max). `any_hit`: stop at the first hit (hard shadows)."""
+def traverse(bvh, o, d, hit, t_max=np.inf, any_hit=False, texels=None):
+    """The nearest hit of one ray as the shader walks walk_texels: depth-first, into a node
+    the ray enters, else past its subtree; boxes clipped to the distance of the hit past
+    which nothing can change the image (here: the nearest so far). `hit(ids)` -> distances
+    (inf on a miss). Returns (t, id, boxes tested, cylinders tested); (inf, -1, ...) on no
+    hit in (0, t_max). `any_hit`: stop at the first hit (hard shadows)."""
     o, d = np.asarray(o, np.float64), np.asarray(d, np.float64)
     inv = safe_inverse(d)
+    tex = (walk_texels(bvh) if texels is None else texels).reshape(-1, WALK_TEXELS, 4)
+    lo, hi = tex[:, 0, :3].view(np.float32).astype(np.float64), tex[:, 1, :3].view(np.float32).astype(np.float64)
+    skip, leaf = tex[:, 0, 3], tex[:, 1, 3]
     best_t, best_id = np.inf, -1
-    nodes = tests = 0
-    if not bvh.num_nodes:
-        return best_t, best_id, nodes, tests
-    stack = [(0, 0.0)]
-    while stack:
-        node, tn = stack.pop()
-        if tn > min(best_t, t_max):
-            continue
-        nodes += 1
-        te = slab(bvh.lo[node], bvh.hi[node], o, inv, 0.0, min(best_t, t_max))
-        inner = []
-        for side in (0, 1):
-            if not np.isfinite(te[side]):
-                continue
-            link = int(bvh.link[node, side])
-            if link >= 0:
-                inner.append((te[side], link))
-                continue
-            first, count = unpack_leaf(link)
+    boxes = tests = 0
+    i = 0
+    while i < len(tex):
+        boxes += 1
+        enter = np.isfinite(slab(lo[i], hi[i], o, inv, 0.0, min(best_t, t_max)))
+        if enter and leaf[i] >= 0:
+            first, count = leaf[i] // LEAF_SLOTS, leaf[i] % LEAF_SLOTS
             ids = bvh.order[first:first + count]
             tests += len(ids)
             t = hit(ids)
@@ -319,13 +298,12 @@ def traverse(bvh, o, d, hit, t_max=np.inf, any_hit=False):
                 if ti < best_t or (ti == best_t and ci < best_id):
                     best_t, best_id = float(ti), int(ci)
             if any_hit and best_id >= 0:
-                return best_t, best_id, nodes, tests
-        inner.sort(key=lambda e: e[0], reverse=True)
-        stack.extend((child, t) for t, child in inner)
-    return best_t, best_id, nodes, tests
+                break
+        i = i + 1 if enter and leaf[i] < 0 else int(skip[i])
+    return best_t, best_id, boxes, tests
 
 
-def threaded_texels(bvh):
+def walk_texels(bvh):
     """(K * 2, 4) int32: every node and leaf (K of them) in depth-first order, each as
     (lo, skip) (hi, leaf): box corners as float bits, `skip` the position after its subtree,
     `leaf` -1 for a node and first * LEAF_SLOTS + count for a leaf. A walk needs no stack:

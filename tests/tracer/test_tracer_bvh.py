@@ -4,8 +4,7 @@ what is below it, and its walk finds the hit a test of every cylinder finds."""
 import numpy as np
 import pytest
 
-from tracer.bvh import (LEAF_MAX, NODE_TEXELS, build_bvh, node_texels, refit_bvh, traverse,
-                        unpack_leaf)
+from tracer.bvh import LEAF_MAX, LEAF_SLOTS, WALK_TEXELS, build_bvh, refit_bvh, traverse, unpack_leaf, walk_texels
 from tracer.cylinders import strands_to_cylinders
 from tracer.reference import _Cyl, intersect
 
@@ -74,13 +73,24 @@ def test_boxes_contain_their_children_and_cylinders(name, pad):
     _assert_boxes_contain(build_bvh(c, pad), c, pad)
 
 
-def test_node_texels_keep_every_bit():
+def test_walk_texels_hold_every_box_and_leaf_once_in_depth_first_order():
     c = strands_to_cylinders(SCENES["tuft"])
     bvh = build_bvh(c)
-    tex = node_texels(bvh).reshape(-1, NODE_TEXELS, 4)
-    assert np.array_equal(tex[:, 0, :3].view(np.float32), bvh.lo[:, 0])
-    assert np.array_equal(tex[:, 3, :3].view(np.float32), bvh.hi[:, 1])
-    assert np.array_equal(tex[:, 0, 3], bvh.link[:, 0]) and np.array_equal(tex[:, 1, 3], bvh.link[:, 1])
+    tex = walk_texels(bvh).reshape(-1, WALK_TEXELS, 4)
+    lo, hi = tex[:, 0, :3].view(np.float32), tex[:, 1, :3].view(np.float32)
+    skip, leaf = tex[:, 0, 3], tex[:, 1, 3]
+    n = len(tex)
+    assert n == bvh.num_nodes + np.count_nonzero(bvh.link < 0)
+    assert skip[0] == n                     # the root's subtree is everything
+    assert np.all(skip > np.arange(n)) and np.all(skip <= n)
+    is_leaf = leaf >= 0
+    assert np.all(skip[is_leaf] == np.flatnonzero(is_leaf) + 1)
+    # Every leaf's cylinders once; a node's box holds every box of its subtree.
+    ids = np.concatenate([bvh.order[v // LEAF_SLOTS:v // LEAF_SLOTS + v % LEAF_SLOTS] for v in leaf[is_leaf]])
+    assert np.array_equal(np.sort(ids), np.arange(len(c)))
+    for i in np.flatnonzero(~is_leaf):
+        sub = slice(i + 1, skip[i])
+        assert np.all(lo[i] <= lo[sub]) and np.all(hi[i] >= hi[sub])
 
 
 def _rays(c, n, seed):
