@@ -65,7 +65,7 @@ BUILDS = ("auto", "gpu", "numpy")
 ACCELS = ("bvh", "grid")
 DEFAULT_ACCEL = "grid"
 # Partial BVH uploads: the walk's texels in chunks of this many entries (see UPLOAD_CHUNK).
-NODE_CHUNK = 1024
+NODE_CHUNK = 256
 
 
 def shared_context():
