@@ -32,6 +32,14 @@ LEAF_MAX = 4
 LEAF_SLOTS = 8          # a leaf link holds its count in the low 3 bits (LEAF_MAX < 8)
 WALK_TEXELS = 2         # RGBA32I texels per entry of the shader's walk (walk_texels)
 MORTON_BITS = 21        # per axis: 63-bit codes
+# Long cylinders are cut into pieces no longer than this times the median cylinder length
+# (at most MAX_PIECES): a thin diagonal segment's box is mostly air, and a ray entering it
+# tests the cylinder for nothing. A piece is one entry of the tree with its own box; the
+# shader keeps a hit only in the piece whose stretch of the axis holds the entry point, so
+# every cylinder still counts once. 0 = no cuts. See benchmarks/sections/accel.py.
+SPLIT_LENGTH = 1.0
+MAX_PIECES = 8
+OUTER_FIRST = int(__import__("os").environ.get("OUTER_FIRST", "1"))
 # Boxes are widened by this fraction of the scene's scale (its extent or its distance from
 # the origin, the larger): the shader's slab test runs in float32 from a camera that may be
 # far off, and a hit point must never fall outside its box by rounding.
@@ -57,6 +65,13 @@ class Bvh:
     leaf_count: np.ndarray
     leaf_node: np.ndarray
     leaf_side: np.ndarray
+    ref_cyl: np.ndarray
+    ref_part: np.ndarray
+
+    def leaf_texels(self):
+        """(R, 2) int32, the shader's tex_order: per slot of `order`, the piece's cylinder id
+        and k | K << 8 (piece k of K)."""
+        return np.stack([self.ref_cyl[self.order], self.ref_part[self.order]], axis=1)
 
     @property
     def num_nodes(self):
@@ -66,7 +81,7 @@ class Bvh:
     def nbytes(self):
         """Bytes the shader reads: the walk's texels (nodes and leaves) and the leaf order."""
         entries = self.num_nodes + int(np.count_nonzero(self.link < 0))
-        return entries * WALK_TEXELS * 16 + self.order.nbytes
+        return entries * WALK_TEXELS * 16 + len(self.order) * 8
 
 
 def leaf_link(first, count):
@@ -110,12 +125,45 @@ def cylinder_boxes(cylinders, pad_factor=1.0):
     return lo.astype(np.float64), hi.astype(np.float64)
 
 
-def build_bvh(cylinders, pad_factor=1.0):
-    """Bvh over `cylinders` (tracer.cylinders.Cylinders), boxes padded as the grid's are."""
-    blo, bhi = cylinder_boxes(cylinders, pad_factor)
+def split_counts(cylinders, split_length=None):
+    """Pieces per cylinder (int32, 1..MAX_PIECES): ceil(length / split_length), where
+    split_length defaults to SPLIT_LENGTH times the median cylinder length."""
+    n = len(cylinders)
+    if n == 0 or not SPLIT_LENGTH:
+        return np.ones(n, np.int32)
+    ax = cylinders.tip.astype(np.float64) - cylinders.top
+    length = np.sqrt(np.einsum("ij,ij->i", ax, ax))
+    if split_length is None:
+        split_length = SPLIT_LENGTH * float(np.median(length))
+    return np.clip(np.ceil(length / max(split_length, 1e-300)), 1, MAX_PIECES).astype(np.int32)
+
+
+def piece_boxes(cylinders, ref_cyl, ref_part, pad_factor=1.0):
+    """float64 (lo, hi) per piece: piece k of K of cylinder c covers the axis parameter
+    u in [k/K, (k+1)/K] (u = 0 at the top, 1 at the tip; the last piece on to the tip's
+    extension, where a bent cut reaches past it), padded by the radius times pad_factor."""
+    top = cylinders.top[ref_cyl].astype(np.float64)
+    ax = cylinders.tip[ref_cyl].astype(np.float64) - top
+    length = np.sqrt(np.einsum("ij,ij->i", ax, ax))
+    k, K = (ref_part & 255).astype(np.float64), (ref_part >> 8).astype(np.float64)
+    u0 = k / K
+    u1 = np.where(k == K - 1, 1.0 + cylinders.extension[ref_cyl] / np.maximum(length, 1e-30), (k + 1) / K)
+    a, b = top + u0[:, None] * ax, top + u1[:, None] * ax
+    r = (cylinders.radius[ref_cyl].astype(np.float64) * pad_factor)[:, None]
+    return np.minimum(a, b) - r, np.maximum(a, b) + r
+
+
+def build_bvh(cylinders, pad_factor=1.0, split_length=None):
+    """Bvh over `cylinders` (tracer.cylinders.Cylinders), boxes padded as the grid's are;
+    long cylinders are cut into pieces (split_counts)."""
+    pieces = split_counts(cylinders, split_length)
+    ref_cyl = np.repeat(np.arange(len(cylinders), dtype=np.int32), pieces)
+    first = np.cumsum(pieces) - pieces
+    ref_part = ((np.arange(len(ref_cyl)) - np.repeat(first, pieces)) | (np.repeat(pieces, pieces) << 8)).astype(np.int32)
+    blo, bhi = piece_boxes(cylinders, ref_cyl, ref_part, pad_factor)
     n = len(blo)
     if n == 0:
-        return _assemble(np.zeros(0, np.int32), [], blo, bhi)
+        return _assemble(np.zeros(0, np.int32), [], blo, bhi, ref_cyl, ref_part)
     lo, hi = blo.min(axis=0), bhi.max(axis=0)
     codes = morton_codes(0.5 * (blo + bhi), lo, hi)
     order = np.argsort(codes, kind="stable").astype(np.int32)
@@ -133,22 +181,22 @@ def build_bvh(cylinders, pad_factor=1.0):
         split = np.searchsorted(codes, prefix | (np.uint64(1) << bit), side="left")
         split = np.where(same, (a + b) // 2, split)
         levels.append((a, b, split))
-        # Children that still hold more than LEAF_MAX cylinders are the next level's ranges.
+        # Children that still hold more than LEAF_MAX pieces are the next level's ranges.
         ca, cb = np.concatenate([a, split]), np.concatenate([split, b])
         inner = cb - ca > LEAF_MAX
         a, b = ca[inner], cb[inner]
     if n <= LEAF_MAX:       # one leaf: a root whose right child is empty
         levels = [(np.array([0]), np.array([n]), np.array([n]))]
-    return _assemble(order, levels, blo, bhi)
+    return _assemble(order, levels, blo, bhi, ref_cyl, ref_part)
 
 
-def _assemble(order, levels, blo, bhi):
+def _assemble(order, levels, blo, bhi, ref_cyl, ref_part):
     """Nodes in depth-first order from the levels' ranges (level k: arrays a, b, split, the
     ranges in the order their parents listed them: all left children, then all right ones)."""
     if not levels:
         z = np.zeros(0, np.int64)
         return Bvh(order, np.zeros((0, 2, 3), np.float32), np.zeros((0, 2, 3), np.float32),
-                   np.zeros((0, 2), np.int32), z, 0, z, z, z, z)
+                   np.zeros((0, 2), np.int32), z, 0, z, z, z, z, ref_cyl, ref_part)
     # Per level: for each node its children's ranges and which of them are nodes; the index
     # of each child node within the next level follows from the concatenation order.
     info = []
@@ -197,7 +245,8 @@ def _assemble(order, levels, blo, bhi):
     leaf_first, leaf_count, leaf_node, leaf_side = (np.concatenate(x) for x in zip(*leaves))
     link[leaf_node, leaf_side] = leaf_link(leaf_first, leaf_count)
     bvh = Bvh(order, np.zeros((m, 2, 3), np.float32), np.zeros((m, 2, 3), np.float32),
-              link.astype(np.int32), level, len(levels), leaf_first, leaf_count, leaf_node, leaf_side)
+              link.astype(np.int32), level, len(levels), leaf_first, leaf_count, leaf_node, leaf_side,
+              ref_cyl, ref_part)
     _fit(bvh, blo, bhi)
     return bvh
 
@@ -240,10 +289,11 @@ def _fit(bvh, blo, bhi):
 
 
 def refit_bvh(bvh, cylinders, pad_factor=1.0):
-    """New boxes for moved cylinders (same count and ids), the tree kept; returns `bvh`."""
-    blo, bhi = cylinder_boxes(cylinders, pad_factor)
-    if len(blo) != len(bvh.order):
-        raise ValueError(f"refit_bvh: {len(blo)} cylinders for a tree over {len(bvh.order)}")
+    """New boxes for moved cylinders (same count and ids), the tree and pieces kept; returns
+    `bvh`."""
+    if len(bvh.ref_cyl) and bvh.ref_cyl[-1] != len(cylinders) - 1:
+        raise ValueError(f"refit_bvh: {len(cylinders)} cylinders for a tree over {bvh.ref_cyl[-1] + 1}")
+    blo, bhi = piece_boxes(cylinders, bvh.ref_cyl, bvh.ref_part, pad_factor)
     _fit(bvh, blo, bhi)
     return bvh
 
@@ -271,11 +321,21 @@ def safe_inverse(d):
     return 1.0 / (s * np.maximum(np.abs(d), 1e-30))
 
 
+def piece_holds(ref_part, u):
+    """Whether piece k of K (ref_part = k | K << 8) holds axis parameter u: [k/K, (k+1)/K),
+    open to -inf for the first piece and to +inf for the last (the shader's rule)."""
+    k, K = ref_part & 255, ref_part >> 8
+    lo = np.where(k == 0, -np.inf, k / K)
+    hi = np.where(k == K - 1, np.inf, (k + 1) / K)
+    return (u >= lo) & (u < hi)
+
+
 def traverse(bvh, o, d, hit, t_max=np.inf, any_hit=False, texels=None):
     """The nearest hit of one ray as the shader walks walk_texels: depth-first, into a node
     the ray enters, else past its subtree; boxes clipped to the distance of the hit past
-    which nothing can change the image (here: the nearest so far). `hit(ids)` -> distances
-    (inf on a miss). Returns (t, id, boxes tested, cylinders tested); (inf, -1, ...) on no
+    which nothing can change the image (here: the nearest so far). `hit(ids)` -> (distances,
+    inf on a miss; axis parameters u of the entry points). A hit counts only in the piece
+    that holds its u. Returns (t, id, boxes tested, pieces tested); (inf, -1, ...) on no
     hit in (0, t_max). `any_hit`: stop at the first hit (hard shadows)."""
     o, d = np.asarray(o, np.float64), np.asarray(d, np.float64)
     inv = safe_inverse(d)
@@ -290,10 +350,11 @@ def traverse(bvh, o, d, hit, t_max=np.inf, any_hit=False, texels=None):
         enter = np.isfinite(slab(lo[i], hi[i], o, inv, 0.0, min(best_t, t_max)))
         if enter and leaf[i] >= 0:
             first, count = leaf[i] // LEAF_SLOTS, leaf[i] % LEAF_SLOTS
-            ids = bvh.order[first:first + count]
+            refs = bvh.order[first:first + count]
+            ids = bvh.ref_cyl[refs]
             tests += len(ids)
-            t = hit(ids)
-            ok = (t > 0) & (t < t_max)
+            t, u = hit(ids)
+            ok = (t > 0) & (t < t_max) & piece_holds(bvh.ref_part[refs], u)
             for ti, ci in zip(t[ok], ids[ok]):
                 if ti < best_t or (ti == best_t and ci < best_id):
                     best_t, best_id = float(ti), int(ci)
@@ -312,6 +373,17 @@ def walk_texels(bvh):
     m = bvh.num_nodes
     if not m:
         return np.zeros((0, 4), np.int32)
+    if OUTER_FIRST:
+        # Hair is a shell seen from outside: of two children, the one farther from the
+        # scene's centre is walked first, so a camera ray tends to meet the near hair first.
+        centre = 0.5 * (bvh.lo[0].min(axis=0) + bvh.hi[0].max(axis=0)).astype(np.float64)
+        mid = 0.5 * (bvh.lo.astype(np.float64) + bvh.hi)
+        dist = np.einsum("ijk,ijk->ij", mid - centre, mid - centre)
+        swap = dist[:, 1] > dist[:, 0]
+        sw = swap[:, None]
+        bvh = Bvh(bvh.order, np.where(sw[..., None], bvh.lo[:, ::-1], bvh.lo),
+                  np.where(sw[..., None], bvh.hi[:, ::-1], bvh.hi), np.where(sw, bvh.link[:, ::-1], bvh.link),
+                  bvh.level, bvh.depth, None, None, None, None, bvh.ref_cyl, bvh.ref_part)
     is_leaf = bvh.link < 0
     size = np.ones(m, np.int64)           # nodes and leaves in each node's subtree
     for k in range(bvh.depth - 1, -1, -1):

@@ -413,7 +413,7 @@ class Renderer:
         texels changed (the nodes above the moved cylinders)."""
         t0 = time.perf_counter()
         old = None
-        if refit and self.bvh is not None and len(self.bvh.order) == self.num_cylinders:
+        if refit and self.bvh is not None and len(self.bvh.ref_cyl) and self.bvh.ref_cyl[-1] == self.num_cylinders - 1:
             old = walk_texels(self.bvh)
             bvh = refit_bvh(self.bvh, self.cylinders, self._grid_pad)
         else:
@@ -424,7 +424,7 @@ class Renderer:
         t1 = time.perf_counter()
         if old is None:
             self._upload("tex_node", texels, 4, "i4")
-            self._upload("tex_order", bvh.order, 1, "i4", slack=1)
+            self._upload("tex_order", bvh.leaf_texels(), 2, "i4")
         else:
             per = NODE_CHUNK * WALK_TEXELS
             changed = np.flatnonzero(np.any(old != texels, axis=1)) // per

@@ -6,8 +6,9 @@
 //
 // Entry i (a node or a leaf, depth-first): texels 2i, 2i+1 of tex_node (RGBA32I), (lo, skip)
 // (hi, leaf), box corners as float bits (an integer buffer keeps every bit). `leaf` is -1 for
-// a node, else first * 8 + count: the leaf's cylinder ids are tex_order[first .. first +
-// count). `skip` is the entry after the subtree. The tree has bvh_nodes entries.
+// a node, else first * 8 + count: the leaf's pieces are tex_order[first .. first + count),
+// each (cylinder id, k | K << 8): piece k of K of the cylinder's axis (tracer/bvh.py cuts long
+// cylinders). `skip` is the entry after the subtree. The tree has bvh_nodes entries.
 //
 // Measured and dropped (llvmpipe, 2 cores, 10,000 wavy strands, 256², 4 layers, 1 sun):
 // an ordered walk with a stack (each node holding both children's boxes, the near child
@@ -30,6 +31,19 @@ float box_entry(vec3 lo, vec3 hi, vec3 o, vec3 inv, float t0, float t1) {
     float ex = min(t1, min(tf.x, min(tf.y, tf.z)));
     ex += 1e-6 * abs(ex);
     return en <= ex ? en : BIG;
+}
+
+// Whether piece k of K (part = k | K << 8) holds the entry point at t: its axis parameter u
+// (0 at the top, 1 at the tip) in [k/K, (k+1)/K), open-ended for the first and last piece.
+// All pieces of a cylinder compute the same u from the same numbers, so a hit counts in
+// exactly one of them.
+bool piece_holds(int part, vec3 o, vec3 d, float t, vec4 A4, vec4 B4) {
+    int k = part & 255, K = part >> 8;
+    vec3 ax = B4.xyz - A4.xyz;
+    float u = dot(o + t * d - A4.xyz, ax) / dot(ax, ax);
+    float lo = k == 0 ? -BIG : float(k) / float(K);
+    float hi = k == K - 1 ? BIG : float(k + 1) / float(K);
+    return K == 1 || (u >= lo && u < hi);
 }
 
 // The walk goes on to i + 1 into an entered node, else to skip (past the subtree): no stack.
@@ -67,11 +81,12 @@ void bvh_nearest(vec3 o, vec3 d, float widen_per_t, float widen_const,
         counter.w += float(cnt);
 #endif
         for (int k = 0; k < cnt; ++k) {
-            int id = texelFetch(tex_order, first + k).x;
+            ivec2 ref = texelFetch(tex_order, first + k).xy;
+            int id = ref.x;
+            vec4 A4 = cyl(id, TOP), B4 = cyl(id, TIP);
             int surf; float asc, alpha;
-            float t = hit_cylinder_ab(id, cyl(id, TOP), cyl(id, TIP), o, d, widen_per_t, widen_const,
-                                      surf, asc, alpha);
-            bool ok = t > 0.0;
+            float t = hit_cylinder_ab(id, A4, B4, o, d, widen_per_t, widen_const, surf, asc, alpha);
+            bool ok = t > 0.0 && piece_holds(ref.y, o, d, t, A4, B4);
             float ct = ok ? t : BIG, ca = alpha * asc;
             int cid = ok ? id : NO_ID, cs = surf;
             for (int j = 0; j < LAYERS; ++j) {
@@ -106,11 +121,13 @@ float bvh_shadow(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint
         counter.w += float(cnt);
 #endif
         for (int k = 0; k < cnt; ++k) {
-            int id = texelFetch(tex_order, first + k).x;
+            ivec2 ref = texelFetch(tex_order, first + k).xy;
+            int id = ref.x;
             if (id == own) continue;
+            vec4 A4 = cyl(id, TOP), B4 = cyl(id, TIP);
             int surf; float asc, alpha;
-            float t = hit_cylinder_ab(id, cyl(id, TOP), cyl(id, TIP), p, d, 0.0, 0.0, surf, asc, alpha);
-            if (t > tmin && t < tmax) {
+            float t = hit_cylinder_ab(id, A4, B4, p, d, 0.0, 0.0, surf, asc, alpha);
+            if (t > tmin && t < tmax && piece_holds(ref.y, p, d, t, A4, B4)) {
 #if SHADOWS == 1
                 hint = id;
                 return 0.0;
