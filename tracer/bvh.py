@@ -7,30 +7,30 @@ codes, and the cylinders are sorted by code. The tree is the binary radix tree o
 codes (Karras, HPG 2012), made top-down one level at a time for all ranges of a level
 together: a range is split where its highest differing code bit flips (found by one
 searchsorted on the sorted codes), in the middle where all its codes are equal, and becomes
-a leaf once it holds at most LEAF_MAX cylinders. A leaf is a run of `order` (cylinder ids in
-code order), so every cylinder sits in exactly one leaf and keeps its id: the trace shader
-orders equal distances by id and finds a strand's neighbours at id ± 1.
+a leaf once it holds at most layout.LEAF_MAX entries. Long cylinders enter the tree as
+pieces (SPLIT_LENGTH), each with its own box; a leaf is a run of `order` (piece numbers in
+code order), so every piece sits in exactly one leaf, and every cylinder keeps its id: the
+trace shader orders equal distances by id and finds a strand's neighbours at id ± 1.
 
 Internal nodes are kept in depth-first order, each holding both children's boxes, so the
 left child of node i is i + 1 wherever it is a node. The trace shader walks another layout
 of the same tree (walk_texels): nodes and leaves in depth-first order, each with its own box
 and the entry after its subtree, so that a walk needs no stack (accel_bvh.glsl says why).
 
-Refit: boxes are remade bottom-up for new cylinder positions with the tree kept (a strand
-edit keeps its cylinders' ids); the renderer then uploads only the node texels that changed.
+Refit: boxes are remade bottom-up for new cylinder positions with the tree and the pieces
+kept (a strand edit keeps its cylinders' ids); the renderer then uploads only the chunks of
+the walk's texels that changed.
 
-A child link: >= 0 the child node's index; < 0 a leaf, -(first * LEAF_SLOTS + count) - 1
-with `first` its first slot in `order`.
+A child link: >= 0 the child node's index; < 0 a leaf, -layout.leaf_code(first, count) - 1
+with `first` its first slot in `order`. Leaf size, codes and texel counts are the shader's
+too: tracer/layout.py.
 """
 from dataclasses import dataclass
 
 import numpy as np
 
-# Cylinders per leaf at most (the shader's LEAF_MAX). Fewer means more nodes per ray, more
-# means more cylinder tests; see benchmarks/sections/accel.py for the measurement.
-LEAF_MAX = 4
-LEAF_SLOTS = 8          # a leaf link holds its count in the low 3 bits (LEAF_MAX < 8)
-WALK_TEXELS = 2         # RGBA32I texels per entry of the shader's walk (walk_texels)
+from . import layout
+
 MORTON_BITS = 21        # per axis: 63-bit codes
 # Long cylinders are cut into pieces no longer than this times the median cylinder length
 # (at most MAX_PIECES): a thin diagonal segment's box is mostly air, and a ray entering it
@@ -38,13 +38,10 @@ MORTON_BITS = 21        # per axis: 63-bit codes
 # shader keeps a hit only in the piece whose stretch of the axis holds the entry point, so
 # every cylinder still counts once. 0 = no cuts. See benchmarks/sections/accel.py.
 SPLIT_LENGTH = 1.0
-MAX_PIECES = 8
-OUTER_FIRST = int(__import__("os").environ.get("OUTER_FIRST", "1"))
 # Boxes are widened by this fraction of the scene's scale (its extent or its distance from
 # the origin, the larger): the shader's slab test runs in float32 from a camera that may be
 # far off, and a hit point must never fall outside its box by rounding.
 BOX_EPS = 2.0 ** -18
-assert LEAF_MAX < LEAF_SLOTS
 
 
 @dataclass(eq=False)
@@ -70,7 +67,7 @@ class Bvh:
 
     def leaf_texels(self):
         """(R, 2) int32, the shader's tex_order: per slot of `order`, the piece's cylinder id
-        and k | K << 8 (piece k of K)."""
+        and layout.piece_code(k, K) (piece k of K)."""
         return np.stack([self.ref_cyl[self.order], self.ref_part[self.order]], axis=1)
 
     @property
@@ -81,17 +78,17 @@ class Bvh:
     def nbytes(self):
         """Bytes the shader reads: the walk's texels (nodes and leaves) and the leaf order."""
         entries = self.num_nodes + int(np.count_nonzero(self.link < 0))
-        return entries * WALK_TEXELS * 16 + len(self.order) * 8
+        return entries * layout.WALK_TEXELS * 16 + len(self.order) * 8
 
 
 def leaf_link(first, count):
-    return -(np.asarray(first, np.int64) * LEAF_SLOTS + count) - 1
+    return -layout.leaf_code(first, count) - 1
 
 
 def unpack_leaf(link):
     """(first, count) of leaf links (< 0)."""
     v = -np.asarray(link, np.int64) - 1
-    return v // LEAF_SLOTS, v % LEAF_SLOTS
+    return v >> layout.LEAF_BITS, v & ((1 << layout.LEAF_BITS) - 1)
 
 
 def _spread_bits(x):
@@ -126,7 +123,7 @@ def cylinder_boxes(cylinders, pad_factor=1.0):
 
 
 def split_counts(cylinders, split_length=None):
-    """Pieces per cylinder (int32, 1..MAX_PIECES): ceil(length / split_length), where
+    """Pieces per cylinder (int32, 1..layout.MAX_PIECES): ceil(length / split_length), where
     split_length defaults to SPLIT_LENGTH times the median cylinder length."""
     n = len(cylinders)
     if n == 0 or not SPLIT_LENGTH:
@@ -135,7 +132,7 @@ def split_counts(cylinders, split_length=None):
     length = np.sqrt(np.einsum("ij,ij->i", ax, ax))
     if split_length is None:
         split_length = SPLIT_LENGTH * float(np.median(length))
-    return np.clip(np.ceil(length / max(split_length, 1e-300)), 1, MAX_PIECES).astype(np.int32)
+    return np.clip(np.ceil(length / max(split_length, 1e-300)), 1, layout.MAX_PIECES).astype(np.int32)
 
 
 def piece_boxes(cylinders, ref_cyl, ref_part, pad_factor=1.0):
@@ -145,7 +142,8 @@ def piece_boxes(cylinders, ref_cyl, ref_part, pad_factor=1.0):
     top = cylinders.top[ref_cyl].astype(np.float64)
     ax = cylinders.tip[ref_cyl].astype(np.float64) - top
     length = np.sqrt(np.einsum("ij,ij->i", ax, ax))
-    k, K = (ref_part & 255).astype(np.float64), (ref_part >> 8).astype(np.float64)
+    k, K = _unpack_piece(ref_part)
+    k, K = k.astype(np.float64), K.astype(np.float64)
     u0 = k / K
     u1 = np.where(k == K - 1, 1.0 + cylinders.extension[ref_cyl] / np.maximum(length, 1e-30), (k + 1) / K)
     a, b = top + u0[:, None] * ax, top + u1[:, None] * ax
@@ -159,7 +157,8 @@ def build_bvh(cylinders, pad_factor=1.0, split_length=None):
     pieces = split_counts(cylinders, split_length)
     ref_cyl = np.repeat(np.arange(len(cylinders), dtype=np.int32), pieces)
     first = np.cumsum(pieces) - pieces
-    ref_part = ((np.arange(len(ref_cyl)) - np.repeat(first, pieces)) | (np.repeat(pieces, pieces) << 8)).astype(np.int32)
+    ref_part = layout.piece_code(np.arange(len(ref_cyl)) - np.repeat(first, pieces),
+                                 np.repeat(pieces, pieces)).astype(np.int32)
     blo, bhi = piece_boxes(cylinders, ref_cyl, ref_part, pad_factor)
     n = len(blo)
     if n == 0:
@@ -183,9 +182,9 @@ def build_bvh(cylinders, pad_factor=1.0, split_length=None):
         levels.append((a, b, split))
         # Children that still hold more than LEAF_MAX pieces are the next level's ranges.
         ca, cb = np.concatenate([a, split]), np.concatenate([split, b])
-        inner = cb - ca > LEAF_MAX
+        inner = cb - ca > layout.LEAF_MAX
         a, b = ca[inner], cb[inner]
-    if n <= LEAF_MAX:       # one leaf: a root whose right child is empty
+    if n <= layout.LEAF_MAX:       # one leaf: a root whose right child is empty
         levels = [(np.array([0]), np.array([n]), np.array([n]))]
     return _assemble(order, levels, blo, bhi, ref_cyl, ref_part)
 
@@ -202,7 +201,7 @@ def _assemble(order, levels, blo, bhi, ref_cyl, ref_part):
     info = []
     for a, b, s in levels:
         ca, cb = np.concatenate([a, s]), np.concatenate([s, b])
-        inner = cb - ca > LEAF_MAX
+        inner = cb - ca > layout.LEAF_MAX
         nxt = np.cumsum(inner) - 1          # index in the next level where inner
         m = len(a)
         info.append((a, b, s, inner.reshape(2, m).T, nxt.reshape(2, m).T))
@@ -321,10 +320,15 @@ def safe_inverse(d):
     return 1.0 / (s * np.maximum(np.abs(d), 1e-30))
 
 
+def _unpack_piece(ref_part):
+    return ref_part & ((1 << layout.PIECE_BITS) - 1), ref_part >> layout.PIECE_BITS
+
+
 def piece_holds(ref_part, u):
-    """Whether piece k of K (ref_part = k | K << 8) holds axis parameter u: [k/K, (k+1)/K),
-    open to -inf for the first piece and to +inf for the last (the shader's rule)."""
-    k, K = ref_part & 255, ref_part >> 8
+    """Whether piece k of K (ref_part = layout.piece_code(k, K)) holds axis parameter u:
+    [k/K, (k+1)/K), open to -inf for the first piece and to +inf for the last (the shader's
+    rule)."""
+    k, K = _unpack_piece(ref_part)
     lo = np.where(k == 0, -np.inf, k / K)
     hi = np.where(k == K - 1, np.inf, (k + 1) / K)
     return (u >= lo) & (u < hi)
@@ -339,7 +343,7 @@ def traverse(bvh, o, d, hit, t_max=np.inf, any_hit=False, texels=None):
     hit in (0, t_max). `any_hit`: stop at the first hit (hard shadows)."""
     o, d = np.asarray(o, np.float64), np.asarray(d, np.float64)
     inv = safe_inverse(d)
-    tex = (walk_texels(bvh) if texels is None else texels).reshape(-1, WALK_TEXELS, 4)
+    tex = (walk_texels(bvh) if texels is None else texels).reshape(-1, layout.WALK_TEXELS, 4)
     lo, hi = tex[:, 0, :3].view(np.float32).astype(np.float64), tex[:, 1, :3].view(np.float32).astype(np.float64)
     skip, leaf = tex[:, 0, 3], tex[:, 1, 3]
     best_t, best_id = np.inf, -1
@@ -348,8 +352,8 @@ def traverse(bvh, o, d, hit, t_max=np.inf, any_hit=False, texels=None):
     while i < len(tex):
         boxes += 1
         enter = np.isfinite(slab(lo[i], hi[i], o, inv, 0.0, min(best_t, t_max)))
-        if enter and leaf[i] >= 0:
-            first, count = leaf[i] // LEAF_SLOTS, leaf[i] % LEAF_SLOTS
+        if enter and leaf[i] != layout.BVH_NODE:
+            first, count = leaf[i] >> layout.LEAF_BITS, leaf[i] & ((1 << layout.LEAF_BITS) - 1)
             refs = bvh.order[first:first + count]
             ids = bvh.ref_cyl[refs]
             tests += len(ids)
@@ -360,30 +364,30 @@ def traverse(bvh, o, d, hit, t_max=np.inf, any_hit=False, texels=None):
                     best_t, best_id = float(ti), int(ci)
             if any_hit and best_id >= 0:
                 break
-        i = i + 1 if enter and leaf[i] < 0 else int(skip[i])
+        i = i + 1 if enter and leaf[i] == layout.BVH_NODE else int(skip[i])
     return best_t, best_id, boxes, tests
 
 
 def walk_texels(bvh):
-    """(K * 2, 4) int32: every node and leaf (K of them) in depth-first order, each as
-    (lo, skip) (hi, leaf): box corners as float bits, `skip` the position after its subtree,
-    `leaf` -1 for a node and first * LEAF_SLOTS + count for a leaf. A walk needs no stack:
-    from position i it goes on to i + 1 when the ray enters box i and i is a node, else to
-    skip."""
+    """(K * WALK_TEXELS, 4) int32: every node and leaf (K of them) in depth-first order,
+    each as (lo, skip) (hi, code): box corners as float bits, `skip` the position after its
+    subtree, `code` layout.BVH_NODE for a node, layout.leaf_code(first, count) for a leaf.
+    A walk needs no stack: from position i it goes on to i + 1 when the ray enters box i and
+    i is a node, else to skip."""
     m = bvh.num_nodes
     if not m:
         return np.zeros((0, 4), np.int32)
-    if OUTER_FIRST:
-        # Hair is a shell seen from outside: of two children, the one farther from the
-        # scene's centre is walked first, so a camera ray tends to meet the near hair first.
-        centre = 0.5 * (bvh.lo[0].min(axis=0) + bvh.hi[0].max(axis=0)).astype(np.float64)
-        mid = 0.5 * (bvh.lo.astype(np.float64) + bvh.hi)
-        dist = np.einsum("ijk,ijk->ij", mid - centre, mid - centre)
-        swap = dist[:, 1] > dist[:, 0]
-        sw = swap[:, None]
-        bvh = Bvh(bvh.order, np.where(sw[..., None], bvh.lo[:, ::-1], bvh.lo),
-                  np.where(sw[..., None], bvh.hi[:, ::-1], bvh.hi), np.where(sw, bvh.link[:, ::-1], bvh.link),
-                  bvh.level, bvh.depth, None, None, None, None, bvh.ref_cyl, bvh.ref_part)
+    # Hair is a shell seen from outside: of two children, the one farther from the
+    # scene's centre is walked first, so a camera ray tends to meet the near hair first
+    # (10,000 wavy strands: 1 % fewer boxes and 5 % fewer tests per primary ray).
+    centre = 0.5 * (bvh.lo[0].min(axis=0) + bvh.hi[0].max(axis=0)).astype(np.float64)
+    mid = 0.5 * (bvh.lo.astype(np.float64) + bvh.hi)
+    dist = np.einsum("ijk,ijk->ij", mid - centre, mid - centre)
+    swap = dist[:, 1] > dist[:, 0]
+    sw = swap[:, None]
+    bvh = Bvh(bvh.order, np.where(sw[..., None], bvh.lo[:, ::-1], bvh.lo),
+              np.where(sw[..., None], bvh.hi[:, ::-1], bvh.hi), np.where(sw, bvh.link[:, ::-1], bvh.link),
+              bvh.level, bvh.depth, None, None, None, None, bvh.ref_cyl, bvh.ref_part)
     is_leaf = bvh.link < 0
     size = np.ones(m, np.int64)           # nodes and leaves in each node's subtree
     for k in range(bvh.depth - 1, -1, -1):
@@ -406,7 +410,7 @@ def walk_texels(bvh):
     out[pos, 0, :3] = bvh.lo.min(axis=1).view(np.int32)
     out[pos, 1, :3] = bvh.hi.max(axis=1).view(np.int32)
     out[pos, 0, 3] = pos + size
-    out[pos, 1, 3] = -1
+    out[pos, 1, 3] = layout.BVH_NODE
     # Leaves: right after their node (left) or after the left subtree (right).
     left_size = np.where(is_leaf[:, 0], 1, size[np.maximum(bvh.link[:, 0], 0)])
     for side in (0, 1):

@@ -57,7 +57,7 @@ def test_bvh_matches_the_float64_reference(pair):
     settings = RenderSettings(layers=4, shadow_mode="transmittance", count=True)
     assert_matches_reference(pair[1], curls(25, 10, alpha=0.6), CAM, settings)
     st = pair[1].stats
-    assert st["cells_visited"] > 0 and st["cylinder_tests"] > 0     # boxes and cylinders tested
+    assert st.cells_visited > 0 and st.cylinder_tests > 0     # boxes and cylinders tested
 
 
 def test_camera_moves_upload_nothing_and_edits_refit_only_what_changed(pair):
@@ -65,9 +65,9 @@ def test_camera_moves_upload_nothing_and_edits_refit_only_what_changed(pair):
     strands = curls(2000, 10, seed=4)
     r.set_strands(strands)
     r.render(CAM)
-    before = r.stats["bytes_uploaded"]
+    before = r.stats.bytes_uploaded
     r.render(Camera.look_at((-1.5, -1.9, 0.4), (0, 0, 0.4), fov_deg=50, size=(64, 64)))
-    assert r.stats["bytes_uploaded"] == before
+    assert r.stats.bytes_uploaded == before
     # Move three strands: the tree is refitted, and only the chunks of it that changed go up
     # (the nodes above the moved cylinders), with the moved cylinders' chunks.
     pts = strands.points.copy()
@@ -76,22 +76,22 @@ def test_camera_moves_upload_nothing_and_edits_refit_only_what_changed(pair):
     pts[moved_pts] += np.array([0.05, 0.02, -0.03])
     edited = type(strands).from_arrays(pts, strands.counts, radius=strands.radius, color=strands.color,
                                        alpha=strands.alpha)
-    before = r.stats["bytes_uploaded"]
+    before = r.stats.bytes_uploaded
     r.update_strands(ids, edited)
-    sent = r.stats["bytes_uploaded"] - before
-    assert r.stats["bvh_refit"] and sent > 0
+    sent = r.stats.bytes_uploaded - before
+    assert r.stats.bvh_refit and sent > 0
     img = r.render(CAM)
     fresh = Renderer(build=r.build, accel="bvh")
     fresh.set_strands(edited)
     assert np.abs(img - fresh.render(CAM)).max() <= 1e-6
-    assert sent < 0.5 * fresh.stats["bytes_uploaded"]
+    assert sent < 0.5 * fresh.stats.bytes_uploaded
 
 
 def test_only_the_hair_box_is_traced_with_either_structure(pair):
     s = make_strands([[(0, 0, 0), (0.1, 0, 0.3)], [(0.05, 0.02, 0), (0.12, 0.0, 0.25)]], radius=0.01)
     cam = Camera.look_at((0, -3, 0.15), (0, 0, 0.15), fov_deg=40, size=(96, 96))
     _render_both(pair, s, cam, RenderSettings())
-    grid_px, bvh_px = (r.stats["traversed_pixels"] for r in pair)
+    grid_px, bvh_px = (r.stats.traversed_pixels for r in pair)
     assert 0 < bvh_px <= grid_px < 96 * 96 // 4
 
 
