@@ -21,16 +21,16 @@ uniform isamplerBuffer tex_node;
 uniform isamplerBuffer tex_order;
 uniform int bvh_entries;
 
-// Where the ray enters the box within [t0, t1], or BIG when it misses it there. The far
-// side gets a little slack: the boxes are padded (tracer/bvh.py BOX_EPS), and this only
-// keeps float32 rounding of a far camera from losing a box whose hit lies at its edge.
-float box_entry(vec3 lo, vec3 hi, vec3 o, vec3 inv, float t0, float t1) {
-    vec3 ta = (lo - o) * inv, tb = (hi - o) * inv;
+// Whether the ray enters the box within [t0, t1]; `oi` is o * inv, so each slab distance
+// is one multiply-add (lo * inv - oi). The far side gets a little slack: the boxes are
+// padded (tracer/bvh.py BOX_EPS), and this only keeps float32 rounding of a far camera from
+// losing a box whose hit lies at its edge.
+bool box_entered(vec3 lo, vec3 hi, vec3 inv, vec3 oi, float t0, float t1) {
+    vec3 ta = lo * inv - oi, tb = hi * inv - oi;
     vec3 tn = min(ta, tb), tf = max(ta, tb);
     float en = max(t0, max(tn.x, max(tn.y, tn.z)));
     float ex = min(t1, min(tf.x, min(tf.y, tf.z)));
-    ex += 1e-6 * abs(ex);
-    return en <= ex ? en : BIG;
+    return en <= ex + 1e-6 * abs(ex);
 }
 
 // The next leaf the ray enters within [0, t1] from entry i on: its code (i left on it), or
@@ -39,9 +39,10 @@ float box_entry(vec3 lo, vec3 hi, vec3 o, vec3 inv, float t0, float t1) {
 // node step makes every lane pay for a leaf whenever any lane is at one.
 int next_leaf(inout int i, vec3 o, vec3 inv, float t1) {
     int code = -1;
+    vec3 oi = o * inv;
     for (int it = 0; it < bvh_entries && i < bvh_entries; ++it) {
         ivec4 a = texelFetch(tex_node, WALK_TEXELS * i), b = texelFetch(tex_node, WALK_TEXELS * i + 1);
-        bool enter = box_entry(intBitsToFloat(a.xyz), intBitsToFloat(b.xyz), o, inv, 0.0, t1) < BIG;
+        bool enter = box_entered(intBitsToFloat(a.xyz), intBitsToFloat(b.xyz), inv, oi, 0.0, t1);
 #if COUNT
         counter.z += 1.0;
 #endif
