@@ -103,9 +103,11 @@ def _spread_bits(x):
 def morton_codes(centres, lo, hi):
     """63-bit Morton codes (uint64) of points (N,3) in the box lo..hi."""
     scale = (1 << MORTON_BITS) - 1
-    q = (centres - lo) / np.maximum(hi - lo, 1e-300) * scale
-    q = np.clip(q, 0, scale).astype(np.uint64)
-    return (_spread_bits(q[:, 0]) << np.uint64(2)) | (_spread_bits(q[:, 1]) << np.uint64(1)) | _spread_bits(q[:, 2])
+    code = np.zeros(len(centres), np.uint64)
+    for j in range(3):
+        q = (centres[:, j] - lo[j]) * (scale / max(hi[j] - lo[j], 1e-300))
+        code |= _spread_bits(np.clip(q, 0, scale).astype(np.uint64)) << np.uint64(2 - j)
+    return code
 
 
 def _highest_bit(x):
@@ -136,19 +138,33 @@ def split_counts(cylinders, split_length=None):
 
 
 def piece_boxes(cylinders, ref_cyl, ref_part, pad_factor=1.0):
-    """float64 (lo, hi) per piece: piece k of K of cylinder c covers the axis parameter
-    u in [k/K, (k+1)/K] (u = 0 at the top, 1 at the tip; the last piece on to the tip's
-    extension, where a bent cut reaches past it), padded by the radius times pad_factor."""
-    top = cylinders.top[ref_cyl].astype(np.float64)
-    ax = cylinders.tip[ref_cyl].astype(np.float64) - top
-    length = np.sqrt(np.einsum("ij,ij->i", ax, ax))
+    """float64 (lo, hi), each (R, 3), per piece: piece k of K of cylinder c covers the axis
+    parameter u in [k/K, (k+1)/K] (u = 0 at the top, 1 at the tip; the last piece on to the
+    tip's extension, where a bent cut reaches past it), padded by the radius times
+    pad_factor."""
+    lo, hi = _piece_rows(cylinders, ref_cyl, ref_part, pad_factor)
+    return lo.T, hi.T
+
+
+def _piece_rows(cylinders, ref_cyl, ref_part, pad_factor):
+    """piece_boxes as (3, R) rows: numpy walks an (R, 3) array three values at a time, and
+    row by row the build ran twice as fast."""
+    top = np.ascontiguousarray(cylinders.top.T, np.float64)
+    ax = np.ascontiguousarray(cylinders.tip.T, np.float64) - top
+    length = np.sqrt(np.einsum("ij,ij->j", ax, ax))
     k, K = _unpack_piece(ref_part)
-    k, K = k.astype(np.float64), K.astype(np.float64)
-    u0 = k / K
-    u1 = np.where(k == K - 1, 1.0 + cylinders.extension[ref_cyl] / np.maximum(length, 1e-30), (k + 1) / K)
-    a, b = top + u0[:, None] * ax, top + u1[:, None] * ax
-    r = (cylinders.radius[ref_cyl].astype(np.float64) * pad_factor)[:, None]
-    return np.minimum(a, b) - r, np.maximum(a, b) + r
+    kf, Kf = k.astype(np.float64), K.astype(np.float64)
+    u0 = kf / Kf
+    reach = 1.0 + cylinders.extension.astype(np.float64) / np.maximum(length, 1e-30)
+    u1 = np.where(k == K - 1, reach[ref_cyl], (kf + 1) / Kf)
+    r = cylinders.radius.astype(np.float64)[ref_cyl] * pad_factor
+    lo, hi = np.empty((3, len(ref_cyl))), np.empty((3, len(ref_cyl)))
+    for j in range(3):
+        t, a = top[j][ref_cyl], ax[j][ref_cyl]
+        e0, e1 = t + u0 * a, t + u1 * a
+        lo[j] = np.minimum(e0, e1) - r
+        hi[j] = np.maximum(e0, e1) + r
+    return lo, hi
 
 
 def build_bvh(cylinders, pad_factor=1.0, split_length=None):
@@ -159,12 +175,12 @@ def build_bvh(cylinders, pad_factor=1.0, split_length=None):
     first = np.cumsum(pieces) - pieces
     ref_part = layout.piece_code(np.arange(len(ref_cyl)) - np.repeat(first, pieces),
                                  np.repeat(pieces, pieces)).astype(np.int32)
-    blo, bhi = piece_boxes(cylinders, ref_cyl, ref_part, pad_factor)
-    n = len(blo)
+    blo, bhi = _piece_rows(cylinders, ref_cyl, ref_part, pad_factor)
+    n = blo.shape[1]
     if n == 0:
         return _assemble(np.zeros(0, np.int32), [], blo, bhi, ref_cyl, ref_part)
-    lo, hi = blo.min(axis=0), bhi.max(axis=0)
-    codes = morton_codes(0.5 * (blo + bhi), lo, hi)
+    lo, hi = blo.min(axis=1), bhi.max(axis=1)
+    codes = morton_codes((0.5 * (blo + bhi)).T, lo, hi)
     order = np.argsort(codes, kind="stable").astype(np.int32)
     codes = codes[order]
     # Ranges of one level at a time: [a, b) of the sorted codes, their parent and side.
@@ -251,29 +267,29 @@ def _assemble(order, levels, blo, bhi, ref_cyl, ref_part):
 
 
 def _fit(bvh, blo, bhi):
-    """Every node's child boxes from the cylinder boxes (float64 (N,3) each), bottom-up."""
+    """Every node's child boxes from the piece boxes (float64 (3, R) rows), bottom-up."""
     if not bvh.num_nodes:
         return
-    scale = max(float(np.max(bhi.max(axis=0) - blo.min(axis=0))),
-                float(np.max(np.abs(np.concatenate([blo, bhi])))), 1e-30)
+    lo_all, hi_all = blo.min(axis=1), bhi.max(axis=1)
+    scale = max(float(np.max(hi_all - lo_all)), float(np.max(np.abs(np.concatenate([lo_all, hi_all])))), 1e-30)
     eps = BOX_EPS * scale
-    lo = np.full((bvh.num_nodes, 2, 3), np.inf)
-    hi = np.full((bvh.num_nodes, 2, 3), -np.inf)
-    slo, shi = blo[bvh.order], bhi[bvh.order]
+    m = bvh.num_nodes
+    lo = np.full((m, 2, 3), np.inf)
+    hi = np.full((m, 2, 3), -np.inf)
     full = bvh.leaf_count > 0
     if full.any():
-        starts = bvh.leaf_first[full]
-        # Leaves tile `order` in some order; reduceat wants increasing starts.
-        srt = np.argsort(starts)
-        llo = np.minimum.reduceat(slo, starts[srt], axis=0)
-        lhi = np.maximum.reduceat(shi, starts[srt], axis=0)
-        ends = np.append(starts[srt][1:], len(slo))
-        assert np.array_equal(ends - starts[srt], bvh.leaf_count[full][srt])
-        lo[bvh.leaf_node[full][srt], bvh.leaf_side[full][srt]] = llo
-        hi[bvh.leaf_node[full][srt], bvh.leaf_side[full][srt]] = lhi
+        # Leaves tile `order`; reduceat wants increasing starts.
+        srt = np.argsort(bvh.leaf_first[full])
+        starts = bvh.leaf_first[full][srt]
+        node, side = bvh.leaf_node[full][srt], bvh.leaf_side[full][srt]
+        for j in range(3):
+            lo[node, side, j] = np.minimum.reduceat(blo[j][bvh.order], starts)
+            hi[node, side, j] = np.maximum.reduceat(bhi[j][bvh.order], starts)
     # Internal children, deepest level first: a child's box is the union of its own two.
+    by_level = np.argsort(bvh.level, kind="stable")
+    bounds = np.searchsorted(bvh.level[by_level], np.arange(bvh.depth + 1))
     for k in range(bvh.depth - 1, -1, -1):
-        nodes = np.flatnonzero(bvh.level == k)
+        nodes = by_level[bounds[k]:bounds[k + 1]]
         for side in (0, 1):
             child = bvh.link[nodes, side]
             sel = child >= 0
@@ -292,7 +308,7 @@ def refit_bvh(bvh, cylinders, pad_factor=1.0):
     `bvh`."""
     if len(bvh.ref_cyl) and bvh.ref_cyl[-1] != len(cylinders) - 1:
         raise ValueError(f"refit_bvh: {len(cylinders)} cylinders for a tree over {bvh.ref_cyl[-1] + 1}")
-    blo, bhi = piece_boxes(cylinders, bvh.ref_cyl, bvh.ref_part, pad_factor)
+    blo, bhi = _piece_rows(cylinders, bvh.ref_cyl, bvh.ref_part, pad_factor)
     _fit(bvh, blo, bhi)
     return bvh
 
