@@ -21,7 +21,9 @@ from benchmarks.scenes import groom_scene, real_strands, settings, tracer_api, t
 from benchmarks.sections import left, over_budget
 
 QUICK_SCENES = (("straight.hair", None), ("wavy", 1000), ("wavy", 10000))
-FULL_SCENES = QUICK_SCENES + (("wavy", 100000), ("wavy", 1000000))
+# 1,000,000 wavy strands make ~61 M cylinders, past the 33 M one buffer texture holds
+# (set_strands refuses them; the scaling section shows where the limit lies).
+FULL_SCENES = QUICK_SCENES + (("wavy", 100000),)
 ACCELS = ("grid", "bvh")
 
 
