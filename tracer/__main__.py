@@ -19,6 +19,8 @@ import numpy as np
 
 from hairio import InputError
 
+from .settings import ACCELS, DEFAULT_ACCEL
+
 MAX_SIZE = 16384
 # Pixels per tile: 4 MiB of float32 RGBA from the GPU; tiles are at most TILE_SIDE wide, so
 # a band of them is at most 16384 x 128 pixels (8 MiB of 8-bit rows). Smaller tiles cost
@@ -137,6 +139,9 @@ def build_parser():
     r.add_argument("--shading", choices=[m.name for m in SHADING_MODELS], default=DEFAULT_SHADING,
                    help="shading model: " + "; ".join(f"{m.name}: {m.description}" for m in SHADING_MODELS)
                         + " (default %(default)s)")
+    r.add_argument("--accel", choices=ACCELS, default=DEFAULT_ACCEL,
+                   help="what rays walk: the uniform grid or the BVH over cylinders; same image "
+                        "(default %(default)s)")
     r.add_argument("--camera", default="auto",
                    help="auto (frame the strands' bounds from the front) or EYE:TARGET:FOV as "
                         "x,y,z:tx,ty,tz:degrees, e.g. 0,-3,1:0,0,1:40 (default %(default)s)")
@@ -158,7 +163,7 @@ def main(argv=None):
         strands = read_any(args.input)
         t1 = time.perf_counter()
         from .renderer import Renderer
-        renderer = Renderer()
+        renderer = Renderer(accel=args.accel)
         try:
             renderer.set_strands(strands)
         except InputError as e:     # strands the tracer cannot resolve: name the file they came from
@@ -176,7 +181,10 @@ def main(argv=None):
         return 2
     print(f"read {t1 - t0:.3f} s: {strands.num_strands} strands, {st['num_cylinders']} cylinders")
     print(f"upload {st['upload_s']:.3f} s (cylinders {st['cylinders_s']:.3f} s)")
-    print(f"grid build {st['grid_s']:.3f} s: {st['grid_dims']} cells, {st['grid_refs']} references")
+    if args.accel == "grid":
+        print(f"grid build {st['grid_s']:.3f} s: {st['grid_dims']} cells, {st['grid_refs']} references")
+    else:
+        print(f"BVH build {st['accel_s']:.3f} s: {st['bvh_pieces']} pieces, {st['bvh_entries']} nodes and leaves")
     print(f"render {render_s:.3f} s at {size[0]}x{size[1]}, {args.spp} spp")
     print(f"wrote {args.out}")
     return 0

@@ -22,7 +22,7 @@ from .gpu_build import compute_available
 from .scene_buffers import SceneBuffers
 from .scene_bvh import build_scene_bvh, bvh_bounds
 from .scene_grid import build_scene_grid, grid_indices
-from .settings import GRID_WIDEN_CAP, RenderSettings
+from .settings import ACCELS, DEFAULT_ACCEL, GRID_WIDEN_CAP, RenderSettings
 from .stats import RenderStats
 from .strand_upload import GpuUpload, NumpyUpload, Scene, select_strands
 
@@ -32,11 +32,6 @@ from .strand_upload import GpuUpload, NumpyUpload, Scene, select_strands
 # MAX_CAMERA_COORDINATE keep every squared distance finite.
 MAX_POINT_COORDINATE = 1e18
 BUILDS = ("auto", "gpu", "numpy")
-# What rays walk: the thesis's uniform grid (tracer/grid.py) or a BVH over cylinder pieces
-# (tracer/bvh.py). Same hits, same image (the tests render both). The default is the one
-# that measured faster on the benchmark scenes (benchmarks/sections/accel.py).
-ACCELS = ("grid", "bvh")
-DEFAULT_ACCEL = "grid"
 
 
 class Renderer:

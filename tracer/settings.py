@@ -97,6 +97,12 @@ class RenderSettings:
         return (r * a, g * a, b * a, a)
 
 
+# What rays walk (Renderer(accel=...)): the thesis's uniform grid (tracer/grid.py) or a BVH
+# over cylinder pieces (tracer/bvh.py). Same hits, same image (the tests render both). The
+# default is the one that measured faster on the benchmark scenes (benchmarks/sections/accel.py).
+ACCELS = ("grid", "bvh")
+DEFAULT_ACCEL = "grid"
+
 # The grid lists every cylinder with its radius times this factor, so minimum pixel width can
 # widen a radius up to it without hits falling outside the cells the cylinder is listed in.
 GRID_WIDEN_CAP = 8.0

@@ -98,3 +98,16 @@ def test_only_the_hair_box_is_traced_with_either_structure(pair):
 def test_unknown_accelerator_is_refused():
     with pytest.raises(InputError, match="accel"):
         Renderer(accel="octree")
+
+
+def test_command_line_renders_the_same_png_with_either_structure(tmp_path, capsys):
+    from tracer.__main__ import main
+    src = tmp_path / "tuft.npz"
+    curls(20, 8).save_npz(src)
+    pngs = {}
+    for accel in ("grid", "bvh"):
+        out = tmp_path / f"{accel}.png"
+        assert main(["render", str(src), "--out", str(out), "--size", "40x32", "--accel", accel]) == 0
+        pngs[accel] = out.read_bytes()
+    assert "BVH build" in capsys.readouterr().out
+    assert pngs["grid"] == pngs["bvh"]
