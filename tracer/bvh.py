@@ -1,16 +1,17 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """A linear BVH over cylinders (Morton order), built and refitted in whole-array numpy.
 
-Build: every cylinder's padded box (Cylinders.bounds, the grid's bound) gives a centre; the
-centres, quantised to MORTON_BITS per axis in the scene box, interleave into 63-bit Morton
-codes, and the cylinders are sorted by code. The tree is the binary radix tree of the sorted
+Build: long cylinders are cut into pieces along their axis (SPLIT_LENGTH); every piece's
+padded box (the grid's capsule bound, Cylinders.bounds, over its stretch of the axis) gives a
+centre; the centres, quantised to MORTON_BITS per axis in the scene box, interleave into
+63-bit Morton codes, and the pieces are sorted by code. The tree is the binary radix tree of the sorted
 codes (Karras, HPG 2012), made top-down one level at a time for all ranges of a level
 together: a range is split where its highest differing code bit flips (found by one
 searchsorted on the sorted codes), in the middle where all its codes are equal, and becomes
-a leaf once it holds at most layout.LEAF_MAX entries. Long cylinders enter the tree as
-pieces (SPLIT_LENGTH), each with its own box; a leaf is a run of `order` (piece numbers in
-code order), so every piece sits in exactly one leaf, and every cylinder keeps its id: the
-trace shader orders equal distances by id and finds a strand's neighbours at id ± 1.
+a leaf once it holds at most layout.LEAF_MAX pieces. A leaf is a run of `order` (piece
+numbers in code order), so every piece sits in exactly one leaf, and every cylinder keeps
+its id: the trace shader orders equal distances by id and finds a strand's neighbours at
+id ± 1.
 
 Internal nodes are kept in depth-first order, each holding both children's boxes, so the
 left child of node i is i + 1 wherever it is a node. The trace shader walks another layout
@@ -46,12 +47,12 @@ BOX_EPS = 2.0 ** -18
 
 @dataclass(eq=False)
 class Bvh:
-    """`order` (N,) int32 cylinder ids, leaf by leaf; per internal node (M of them, depth
+    """`order` (R,) int32 piece numbers, leaf by leaf; per internal node (M of them, depth
     first, root 0): `lo`, `hi` (M, 2, 3) float32 boxes of its two children, `link` (M, 2)
     int32 (see the module); `level` (M,) depth of each node (root 0); `depth` the most nodes
-    on a path from the root (the shader's stack needs depth - 1 slots); `leaf_first`,
-    `leaf_count`, `leaf_node`, `leaf_side` per leaf (its slots in `order` and the child slot
-    that links it), for refits."""
+    on a path from the root; `leaf_first`, `leaf_count`, `leaf_node`, `leaf_side` per leaf
+    (its slots in `order` and the child slot that links it), for refits; per piece
+    `ref_cyl` (R,) its cylinder and `ref_part` (R,) layout.piece_code(k, K), piece k of K."""
     order: np.ndarray
     lo: np.ndarray
     hi: np.ndarray
@@ -116,12 +117,6 @@ def _highest_bit(x):
     hi32 = (x >> np.uint64(32)).astype(np.float64)
     lo32 = (x & np.uint64(0xFFFFFFFF)).astype(np.float64)
     return np.where(hi32 > 0, np.frexp(hi32)[1] + 31, np.frexp(lo32)[1] - 1)
-
-
-def cylinder_boxes(cylinders, pad_factor=1.0):
-    """float64 (lo, hi) per cylinder: the grid's padded capsule bound (Cylinders.bounds)."""
-    lo, hi = cylinders.bounds(pad_factor)
-    return lo.astype(np.float64), hi.astype(np.float64)
 
 
 def split_counts(cylinders, split_length=None):
