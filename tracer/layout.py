@@ -46,6 +46,8 @@ MAX_PIECES = 8
 # RGBA32I texels per entry (node or leaf) of the walk: (lo, skip) (hi, leaf code or BVH_NODE).
 WALK_TEXELS = 2
 BVH_NODE = -1
+# Slots of the primary rays' near-first walk's stack (kept in registers; shaders/accel_bvh.glsl).
+BVH_SHORT_STACK = 16
 
 # --- Compute passes (GL 4.3) -----------------------------------------------------------------
 GROUP = 64                  # local_size_x of the build shaders
@@ -73,7 +75,7 @@ def glsl_header():
         "MAX_DIM": MAX_DIM, "MAX_CELLS": MAX_CELLS, "BLOCK": BLOCK, "IDX_SLACK": IDX_SLACK,
         "EMPTY_BLOCK": EMPTY_BLOCK,
         "LEAF_MAX": LEAF_MAX, "LEAF_BITS": LEAF_BITS, "PIECE_BITS": PIECE_BITS, "MAX_PIECES": MAX_PIECES,
-        "WALK_TEXELS": WALK_TEXELS, "BVH_NODE": BVH_NODE,
+        "WALK_TEXELS": WALK_TEXELS, "BVH_NODE": BVH_NODE, "BVH_SHORT_STACK": BVH_SHORT_STACK,
         "GROUP": GROUP, "MAX_VISITS": MAX_VISITS, "MAX_REPEATS": MAX_REPEATS,
     }
     lines = ["// Generated from tracer/layout.py when the program is made: edit the numbers there."]

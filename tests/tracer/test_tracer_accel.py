@@ -111,3 +111,28 @@ def test_command_line_renders_the_same_png_with_either_structure(tmp_path, capsy
         pngs[accel] = out.read_bytes()
     assert "BVH build" in capsys.readouterr().out
     assert pngs["grid"] == pngs["bvh"]
+
+
+def test_a_short_stack_that_overflows_loses_no_hit(renderer, monkeypatch):
+    """With one slot the near-first walk overflows on nearly every ray and falls back to the
+    walk in tree order: the image is still the grid's."""
+    from tracer import layout
+    strands, settings = CASES["alpha layers, transmittance"]
+    grid = Renderer(build=renderer.build, accel="grid")
+    grid.set_strands(strands)
+    want = grid.render(CAM, settings)
+    monkeypatch.setattr(layout, "BVH_SHORT_STACK", 1)
+    bvh = Renderer(build=renderer.build, accel="bvh")       # programs compiled with one slot
+    bvh.set_strands(strands)
+    assert np.abs(bvh.render(CAM, settings) - want).max() <= 1e-6
+    opaque, _ = CASES["opaque, hard shadows"]
+    grid.set_strands(opaque)
+    bvh.set_strands(opaque)
+    counted = RenderSettings(shadows=False, count=True)
+    assert np.abs(bvh.render(CAM, counted) - grid.render(CAM, counted)).max() <= 1e-6
+    boxes_one_slot = bvh.stats.cells_visited
+    monkeypatch.undo()
+    roomy = Renderer(build=renderer.build, accel="bvh")
+    roomy.set_strands(opaque)
+    roomy.render(CAM, counted)
+    assert boxes_one_slot > roomy.stats.cells_visited      # the fallback walk ran
