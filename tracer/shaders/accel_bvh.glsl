@@ -138,7 +138,9 @@ void accel_nearest(vec3 o, vec3 d, float widen_per_t, float widen_const) {
         if (cur < 0) {
             for (int p = 0; p < BVH_SHORT_STACK && depth > 0 && cur < 0; ++p) {
                 int ti = st_i[0], tc = st_c[0]; float tt = st_t[0];
-                for (int j = 0; j < BVH_SHORT_STACK - 1; ++j) { st_i[j] = st_i[j + 1]; st_c[j] = st_c[j + 1]; st_t[j] = st_t[j + 1]; }
+                for (int j = 0; j < BVH_SHORT_STACK - 1; ++j) {
+                    st_i[j] = st_i[j + 1]; st_c[j] = st_c[j + 1]; st_t[j] = st_t[j + 1];
+                }
                 --depth;
                 if (tt <= cut) { cur = ti; code = tc; }
             }
@@ -163,7 +165,9 @@ void accel_nearest(vec3 o, vec3 d, float widen_per_t, float widen_const) {
         bool left_first = tl <= tr;
         if (gl && gr) {
             lost = lost || depth == BVH_SHORT_STACK;
-            for (int j = BVH_SHORT_STACK - 1; j > 0; --j) { st_i[j] = st_i[j - 1]; st_c[j] = st_c[j - 1]; st_t[j] = st_t[j - 1]; }
+            for (int j = BVH_SHORT_STACK - 1; j > 0; --j) {
+                st_i[j] = st_i[j - 1]; st_c[j] = st_c[j - 1]; st_t[j] = st_t[j - 1];
+            }
             st_i[0] = left_first ? ri : li; st_c[0] = left_first ? rb.w : lb.w; st_t[0] = left_first ? tr : tl;
             depth = min(depth + 1, BVH_SHORT_STACK);
         }
