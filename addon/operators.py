@@ -2,7 +2,7 @@
 """Operators: Add Key Strand, Generate, Render Preview, presets, export.
 
 Each one checks and computes everything it needs before its first change to the file, and
-makes its changes as one transaction (transaction.py), so a failure is a report in the UI
+its press is one transaction (transaction.reports_errors), so a failure is a report in the UI
 and leaves the scene and the files exactly as they were (and makes no undo step). A bad
 input is reported as the user's to fix; anything else is a bug, reported as an internal
 error with its traceback in the console, and undone all the same. Never a traceback in the
@@ -13,28 +13,24 @@ import os
 import pathlib
 import time
 
+import numpy as np
 import bpy
-from bpy.props import EnumProperty, FloatVectorProperty, BoolProperty, StringProperty
+from bpy.props import EnumProperty, FloatProperty, FloatVectorProperty, BoolProperty, StringProperty
 from bpy.types import Operator
+from bpy_extras import view3d_utils
 from bpy_extras.io_utils import ExportHelper
 
-from . import scene_data
-from .scene_data import SceneError, find_scalp
-from .transaction import report_internal_error, transaction
+from hairio.formats.registry import BY_NAME, FORMATS
 
-EXPORT_FORMATS = (
-    ('npz', "NumPy arrays (.npz)", "Strand arrays (points, counts, radius, color, alpha, wisp)"),
-    ('hair', "Cem Yuksel HAIR (.hair)", "The HAIR file format used by many hair renderers"),
-    ('tfx', "AMD TressFX (.tfx)", "TressFX v4 binary for game engines (strands resampled)"),
-    ('abc', "Alembic (.abc)", "Alembic curves, through Blender's own exporter"),
-    ('usd', "Universal Scene Description (.usd)", "USD BasisCurves, through Blender's own exporter"),
-)
+from . import blender_curves, head, preview, progress, scene_data
+from .hair import existing_hair, generate, read_collider
+from .properties import dict_to_settings, groom_params
+from .scene_data import find_scalp
+from .transaction import reports_errors, transaction
 
-
-def _errors():
-    """The exception types that mean 'the user can fix this': reported, never raised."""
-    from hairio import InputError
-    return (SceneError, InputError)
+# The export formats are hairio's one table (hairio.formats.registry); the operator's list,
+# its file filter and extension, and the File > Export menu are all read from it.
+EXPORT_FORMATS = tuple((f.name, f.label, f.description) for f in FORMATS)
 
 
 def _scalp_or_report(op, context):
@@ -55,7 +51,6 @@ def _poll_scalp(cls, context):
 def _poll_hair(cls, context):
     if not _poll_scalp(cls, context):
         return False
-    from .hair import existing_hair
     if existing_hair(find_scalp(context)) is None:
         cls.poll_message_set("Generate the hair first")
         return False
@@ -132,7 +127,6 @@ class HAIR_OT_add_key_strand(Operator):
 
     @staticmethod
     def _raycast(context, event):
-        from bpy_extras import view3d_utils
         scalp = find_scalp(context)
         region, rv3d = context.region, context.region_data
         if scalp is None or region is None or rv3d is None:
@@ -147,35 +141,28 @@ class HAIR_OT_add_key_strand(Operator):
         ok, loc, _normal, _face = evaluated.ray_cast(o_local, d_local)
         return (scalp.matrix_world @ loc) if ok else None
 
+    @reports_errors
     def execute(self, context):
-        import numpy as np
         from groom import place_key
         from groom.frames import root_frames
-        from . import head
+        from groom.keys import shape_profile
         scalp = _scalp_or_report(self, context)
         if scalp is None:
             return {'CANCELLED'}
         settings = scalp.keystrand_hair
-        try:
-            scalp_data = scene_data.read_scalp(scalp, context.evaluated_depsgraph_get())
-            world = np.append(np.asarray(self.location, np.float64), 1.0)
-            local = (np.linalg.inv(np.array(scalp.matrix_world, np.float64)) @ world)[:3]
-            tri, bary, root = scalp_data.closest_points(local[None])
-            normal = scalp_data.normals_at(tri, bary, settings.normal_mode)
-            # The head's axes in the mesh, the ones Generate grows the hair with.
-            frame = root_frames(normal, *head.scalp_axes(scalp))[0]
-            profile = scene_data.shape_profile(settings.key_shape, settings.key_length)
-            points = place_key(profile, root[0], frame)
-            with transaction() as tx:
-                tx.keep_settings(scalp)
-                settings.role = 'SCALP'
-                key = scene_data.new_key_object(scalp, points, name=f"{scalp.name} Key")
-        except _errors() as e:
-            self.report({'ERROR'}, str(e))
-            return {'CANCELLED'}
-        except Exception as e:
-            report_internal_error(self, e)
-            return {'CANCELLED'}
+        scalp_data = scene_data.read_scalp(scalp, context.evaluated_depsgraph_get())
+        world = np.append(np.asarray(self.location, np.float64), 1.0)
+        local = (np.linalg.inv(np.array(scalp.matrix_world, np.float64)) @ world)[:3]
+        tri, bary, root = scalp_data.closest_points(local[None])
+        normal = scalp_data.normals_at(tri, bary, settings.normal_mode)
+        # The head's axes in the mesh, the ones Generate grows the hair with.
+        frame = root_frames(normal, *head.scalp_axes(scalp))[0]
+        profile = shape_profile(settings.key_shape.lower(), settings.key_length)
+        points = place_key(profile, root[0], frame)
+        with transaction() as tx:
+            tx.keep_settings(scalp)
+            settings.role = 'SCALP'
+            key = scene_data.new_key_object(scalp, points, name=f"{scalp.name} Key")
         for obj in context.selected_objects:
             obj.select_set(False)
         key.select_set(True)
@@ -194,21 +181,13 @@ class HAIR_OT_generate(Operator):
     def poll(cls, context):
         return _poll_scalp(cls, context)
 
+    @reports_errors
     def execute(self, context):
-        from .hair import generate
-        from .progress import BlenderProgress
         scalp = _scalp_or_report(self, context)
         if scalp is None:
             return {'CANCELLED'}
-        try:
-            with BlenderProgress(context.window_manager, context.workspace, "Generating hair") as progress:
-                hair, result, t = generate(scalp, context.evaluated_depsgraph_get(), progress=progress)
-        except _errors() as e:
-            self.report({'ERROR'}, str(e))
-            return {'CANCELLED'}
-        except Exception as e:
-            report_internal_error(self, e)
-            return {'CANCELLED'}
+        with progress.BlenderProgress(context.window_manager, context.workspace, "Generating hair") as shown:
+            hair, result, t = generate(scalp, context.evaluated_depsgraph_get(), progress=shown)
         s = result.strands
         collision = result.collision
         moved = "" if collision is None else f", {collision.strands_moved:,} moved out of {collision.collider!r}"
@@ -232,9 +211,10 @@ class HAIR_OT_render_preview(Operator):
     def poll(cls, context):
         return _poll_scalp(cls, context)
 
+    @reports_errors(failures=((preview.RendererDied, lambda op, e: (
+        f"The preview renderer stopped ({e}). Blender is fine; press Render Preview again to start a "
+        "new renderer")),))
     def execute(self, context):
-        from . import preview
-        from .hair import existing_hair
         scalp = _scalp_or_report(self, context)
         if scalp is None:
             return {'CANCELLED'}
@@ -248,21 +228,9 @@ class HAIR_OT_render_preview(Operator):
                                    "(Ctrl+Numpad 0 on a camera)")
             return {'CANCELLED'}
         t0 = time.perf_counter()
-        try:
-            pixels, t = preview.render(context.scene, hair, camera, scalp.keystrand_hair)
-            with transaction():
-                image = preview.write_image(pixels)
-                preview.show_image(context, image)
-        except _errors() as e:
-            self.report({'ERROR'}, str(e))
-            return {'CANCELLED'}
-        except preview.RendererDied as e:
-            self.report({'ERROR'}, f"The preview renderer stopped ({e}). Blender is fine; "
-                                   "press Render Preview again to start a new renderer")
-            return {'CANCELLED'}
-        except Exception as e:
-            report_internal_error(self, e)
-            return {'CANCELLED'}
+        pixels, t = preview.render(context.scene, hair, camera, scalp.keystrand_hair)
+        image = preview.write_image(pixels)
+        preview.show_image(context, image)
         h, w = pixels.shape[:2]
         self.report({'INFO'}, f"Rendered {w}x{h} in {time.perf_counter() - t0:.2f} s")
         return {'FINISHED'}
@@ -284,11 +252,9 @@ class HAIR_OT_load_preset(Operator):
     def poll(cls, context):
         return _poll_scalp(cls, context)
 
+    @reports_errors
     def execute(self, context):
         from groom import load_preset
-        from . import head
-        from .hair import read_collider
-        from .properties import dict_to_settings
         scalp = _scalp_or_report(self, context)
         if scalp is None:
             return {'CANCELLED'}
@@ -296,34 +262,28 @@ class HAIR_OT_load_preset(Operator):
         if not source:
             self.report({'ERROR'}, f"Preset {self.preset!r} not found")
             return {'CANCELLED'}
-        try:
-            preset = load_preset(source)
-            depsgraph = context.evaluated_depsgraph_get()
-            scalp_data = scene_data.read_scalp(scalp, depsgraph)
-            # The preset's Collision is the scalp's once loaded: its keys are placed with it.
-            collider = read_collider(scalp, depsgraph, scalp_data, preset.params.collision)
-            placement = head.place_preset(preset, scalp, scalp_data, collider)
-            keys = placement.keys
-            with transaction() as tx:
-                tx.keep_settings(scalp)
-                old = scene_data.key_objects(scalp) if self.replace else []
-                settings = scalp.keystrand_hair
-                settings.role = 'SCALP'
-                dict_to_settings(settings, preset.params.to_dict())
-                names = [f"{scalp.name} Key {i:02d}" for i in range(len(keys))]
-                made = [scene_data.key_strand_to_object(scalp, key, name=name)
-                        for key, name in zip(keys, names)]
-                # Removing cannot be undone, so the old keys go last, once every new one is
-                # made; the new ones then take the names the old ones held.
-                scene_data.remove_key_objects(old)
-                for obj, name in zip(made, names):
-                    obj.name = obj.data.name = name
-        except _errors() as e:
-            self.report({'ERROR'}, str(e))
-            return {'CANCELLED'}
-        except Exception as e:
-            report_internal_error(self, e)
-            return {'CANCELLED'}
+        preset = load_preset(source)
+        depsgraph = context.evaluated_depsgraph_get()
+        scalp_data = scene_data.read_scalp(scalp, depsgraph)
+        # The preset's Collision is the scalp's once loaded: its keys are placed with it.
+        collider = read_collider(scalp, depsgraph, scalp_data, preset.params.collision)
+        placement = head.place_preset(preset, scalp, scalp_data, collider)
+        keys = placement.keys
+        with transaction() as tx:
+            tx.keep_settings(scalp)
+            old = scene_data.key_objects(scalp) if self.replace else []
+            settings = scalp.keystrand_hair
+            settings.role = 'SCALP'
+            # The placement's parameters: the preset's, its parting carried onto this head.
+            dict_to_settings(settings, placement.params.to_dict())
+            names = [f"{scalp.name} Key {i:02d}" for i in range(len(keys))]
+            made = [scene_data.key_strand_to_object(scalp, key, name=name)
+                    for key, name in zip(keys, names)]
+            # Removing cannot be undone, so the old keys go last, once every new one is
+            # made; the new ones then take the names the old ones held.
+            scene_data.remove_key_objects(old)
+            for obj, name in zip(made, names):
+                obj.name = obj.data.name = name
         lifted = f", {len(placement.lifted)} lifted out of {collider.name!r}" if placement.lifted else ""
         self.report({'INFO'}, f"Loaded preset {preset.name!r}: {len(keys)} key strands{lifted}")
         warning = placement.warning()
@@ -353,59 +313,61 @@ class HAIR_OT_save_preset(Operator, ExportHelper):
             self.filepath = os.path.join(folder, "my_hairstyle.json")
         return ExportHelper.invoke(self, context, event)
 
+    @reports_errors(failures=((OSError, lambda op, e: f"Cannot write {op.filepath}: {e}"),))
     def execute(self, context):
         from groom import save_preset
-        from .properties import groom_params
         scalp = _scalp_or_report(self, context)
         if scalp is None:
             return {'CANCELLED'}
-        try:
-            keys = scene_data.read_keys(scalp)
-            params = groom_params(scalp.keystrand_hair)
-            # Given the scalp, the preset is stored in the bundled head's space through this
-            # head's frame, so Load Preset places it the same way here and on any other head.
-            scalp_data = scene_data.read_scalp(scalp, context.evaluated_depsgraph_get())
-            save_preset(self.filepath, keys, params, description=self.description, scalp=scalp_data)
-        except _errors() as e:
-            self.report({'ERROR'}, str(e))
-            return {'CANCELLED'}
-        except OSError as e:
-            self.report({'ERROR'}, f"Cannot write {self.filepath}: {e}")
-            return {'CANCELLED'}
-        except Exception as e:
-            report_internal_error(self, e)
-            return {'CANCELLED'}
+        keys = scene_data.read_keys(scalp)
+        params = groom_params(scalp.keystrand_hair)
+        # Given the scalp, the preset is stored in the bundled head's space through this
+        # head's frame, so Load Preset places it the same way here and on any other head.
+        scalp_data = scene_data.read_scalp(scalp, context.evaluated_depsgraph_get())
+        save_preset(self.filepath, keys, params, description=self.description, scalp=scalp_data)
         self.report({'INFO'}, f"Saved preset {self.filepath}")
         return {'FINISHED'}
 
 
-def export_to_file(hair, path, format, world_space=True, blender_exporter=None):
-    """Write a hair object to `path` through the command line's own writers, with the same
-    attributes (`python -m groom export` on the hair's strands writes the same file): numpy
-    formats, and Alembic/USD where their libraries import (alembic3d; pxr, which Blender
-    ships), through hairio.cli.export_strands; Alembic/USD elsewhere through Blender's own
-    exporters (export_blender.export_hair), as the command line falls back too. Alembic and
-    USD are always world space. Root UVs are the ones Generate stored from the scalp's UV
-    map, when it has one."""
-    from hairio.cli import export_strands, groom_library_available
-    from . import blender_curves, preview
+def export_to_file(hair, path, format, world_space=True, scale=1.0):
+    """Write a hair object to `path` in `format` (a registry name) through the command line's
+    own writers (hairio.cli.export_strands), with the guides, root UVs and source it holds, so
+    `python -m groom export` on the hair's .npz writes the same file. Returns (files written,
+    a warning or None). Only where a groom format's library does not import inside Blender
+    (alembic3d missing) does Blender's own exporter write it (export_blender), and the
+    warning says what that file lacks. Groom formats are always world space."""
+    from hairio.cli import export_strands
+    fmt = BY_NAME[format]
     uv = blender_curves.root_uv(hair.data)
-    if format in ('abc', 'usd'):
-        if not groom_library_available(format):
-            return blender_exporter.export_hair(hair, path, format, root_uv=uv)
-        world_space = True
-    strands = preview.world_strands(hair) if world_space else blender_curves.curves_to_strands(hair)
-    source = f"{os.path.basename(bpy.data.filepath) or 'unsaved .blend file'}: {hair.name}"
-    return export_strands(strands, path, format, root_uv=uv, source=source)
-
-
-def export_blender_module():
-    """addon/export_blender.py when present (Alembic/USD through Blender's exporters)."""
-    try:
+    if not fmt.available():
         from . import export_blender
-    except ImportError:
-        return None
-    return export_blender
+        if fmt.name not in export_blender.FORMATS:
+            fmt.require()       # the InputError that says what to install
+        export_blender.export_hair(hair, path, fmt.name, scale=scale, root_uv=uv)
+        return [path], (f"{fmt.library} is not installed in this Blender, so Blender's own exporter wrote "
+                        f"{os.path.basename(path)}: positions and widths only, no guides or groom "
+                        f"attributes; install {fmt.library} into Blender's Python for the full groom")
+    if fmt.library is not None:
+        world_space = True
+    strands = blender_curves.hair_strands(hair, world_space)
+    source = f"{os.path.basename(bpy.data.filepath) or 'unsaved .blend file'}: {hair.name}"
+    given = {"scale": scale, "source": source}
+    options = {name: value for name, value in given.items() if name in fmt.options}
+    return export_strands(strands, path, fmt.name, **options), None
+
+
+def _follow_format(op):
+    """Keep the file browser's extension and filter in step with the chosen format."""
+    fmt = BY_NAME[op.format]
+    op.filename_ext = fmt.extension
+    op.filter_glob = fmt.file_filter
+    return fmt
+
+
+def _cannot_write():
+    """The errors that mean the file could not be written (not the user's input, not a bug)."""
+    from .export_blender import ExporterFailed
+    return (OSError, ExporterFailed)
 
 
 class HAIR_OT_export(Operator, ExportHelper):
@@ -414,66 +376,57 @@ class HAIR_OT_export(Operator, ExportHelper):
     bl_label = "Export Hair"
     bl_options = {'REGISTER'}
 
-    filename_ext = ".npz"
-    filter_glob: StringProperty(default="*.npz;*.hair;*.tfx;*.abc;*.usd;*.usda;*.usdc", options={'HIDDEN'})
-    format: EnumProperty(name="Format", items=EXPORT_FORMATS, default='npz',
+    filename_ext = FORMATS[0].extension
+    filter_glob: StringProperty(default=";".join(f.file_filter for f in FORMATS), options={'HIDDEN'})
+    format: EnumProperty(name="Format", items=EXPORT_FORMATS, default=FORMATS[0].name,
                          description="File format; the file name's extension follows it")
     world_space: BoolProperty(name="World Space", default=True,
-                              description="Write points as placed in the scene (otherwise in the scalp's own space)")
+                              description="Write points as placed in the scene (otherwise in the scalp's own "
+                                          "space; Alembic and USD grooms are always world space)")
+    scale: FloatProperty(name="Scale", default=1.0, min=1e-6, soft_max=1000.0,
+                         description="Multiply points and widths (100 turns metres into Unreal's centimetres)")
 
     @classmethod
     def poll(cls, context):
         return _poll_hair(cls, context)
 
     def check(self, context):
-        # Keep the extension in step with the chosen format.
-        self.filename_ext = "." + self.format
+        fmt = _follow_format(self)
+        if self.filepath.lower().endswith(fmt.extensions):
+            return False        # .usda / .usdc stay as typed
         return ExportHelper.check(self, context)
 
     def invoke(self, context, event):
-        self.filename_ext = "." + self.format
+        _follow_format(self)
         return ExportHelper.invoke(self, context, event)
 
+    # InputError is reported as the user's to fix, a file that cannot be written as such;
+    # anything else is a bug and says so (a ValueError from our own code is one too).
+    @reports_errors(failures=((_cannot_write, lambda op, e: f"Cannot write {op.export_path}: {e}"),))
     def execute(self, context):
-        from .hair import existing_hair
+        from hairio.formats import with_extension
         scalp = find_scalp(context)
         hair = existing_hair(scalp) if scalp is not None else None
         if hair is None:
             self.report({'ERROR'}, "No generated hair to export: select a scalp and press Generate first")
             return {'CANCELLED'}
-        path = self.filepath
-        if not path:
+        if not self.filepath:
             self.report({'ERROR'}, "No file name given")
             return {'CANCELLED'}
-        if not path.lower().endswith("." + self.format) and not (
-                self.format == 'usd' and path.lower().endswith((".usda", ".usdc"))):
-            path = os.path.splitext(path)[0] + "." + self.format
-        module = export_blender_module() if self.format in ('abc', 'usd') else None
-        if self.format in ('abc', 'usd') and module is None:
-            self.report({'ERROR'}, f"Export to .{self.format} is not available in this version")
-            return {'CANCELLED'}
-        user_errors = _errors() + ((module.ExportError,) if module else ())
-        cannot_write = (OSError,) + ((module.ExporterFailed,) if module else ())
-        try:
-            with transaction():
-                export_to_file(hair, path, self.format, self.world_space, module)
-        except user_errors as e:
-            self.report({'ERROR'}, str(e))
-            return {'CANCELLED'}
-        except cannot_write as e:
-            self.report({'ERROR'}, f"Cannot write {path}: {e}")
-            return {'CANCELLED'}
-        except Exception as e:
-            report_internal_error(self, e)
-            return {'CANCELLED'}
-        self.report({'INFO'}, f"Exported {path}")
+        path = with_extension(self.filepath, BY_NAME[self.format])
+        self.export_path = path  # named when it cannot be written
+        written, warning = export_to_file(hair, path, self.format, self.world_space, self.scale)
+        if warning:
+            self.report({'WARNING'}, warning)
+        self.report({'INFO'}, f"Exported {', '.join(written)}")
         return {'FINISHED'}
 
 
 def menu_export(self, context):
-    for fmt, label, _desc in EXPORT_FORMATS:
-        op = self.layout.operator(HAIR_OT_export.bl_idname, text=f"Key-Strand Hair: {label}")
-        op.format = fmt
+    """File > Export: one entry per format of the registry."""
+    for fmt in FORMATS:
+        op = self.layout.operator(HAIR_OT_export.bl_idname, text=f"Key-Strand Hair: {fmt.label}")
+        op.format = fmt.name
 
 
 CLASSES = (HAIR_OT_add_key_strand, HAIR_OT_generate, HAIR_OT_render_preview, HAIR_OT_load_preset,

@@ -12,7 +12,8 @@ class RenderStats:
     grid_build ("gpu" or "numpy"), grid_dims, grid_refs, cylinders_per_full_cell,
     full_cell_fraction, or the BVH's accel_s (build or refit), bvh_refit, bvh_entries (nodes
     and leaves), bvh_pieces; accel ("grid" or "bvh") and accel_bytes (the structure's
-    buffers; for the grid its lists and cell table). Of the last render: render_s, layers_max (layers the shader was
+    buffers; for the grid its lists and cell table). Of the last set_meshes: num_triangles,
+    mesh_s. Of the last render: render_s, layers_max (layers the shader was
     compiled for), screen_box and traversed_pixels (the projected bounds that were traced),
     and with RenderSettings(count=True) the counters shadow_rays, layers_traced,
     cells_visited, cylinder_tests (summed over samples). gl_backend: the shared context's
@@ -27,6 +28,8 @@ class RenderStats:
     grid_s: float = 0.0
     render_s: float = 0.0
     num_cylinders: Optional[int] = None
+    num_triangles: int = 0
+    mesh_s: float = 0.0
     grid_build: Optional[str] = None
     grid_dims: Optional[tuple] = None
     grid_refs: Optional[int] = None

@@ -89,8 +89,9 @@ float hits_horizon() {
     return cut;
 }
 
-// Offers the pieces of leaf `code` to the hit list (a hit counts in the piece that holds it).
-void offer_leaf(int code, vec3 o, vec3 d, float widen_per_t, float widen_const) {
+// Offers the pieces of leaf `code` hit at 0 < t < tmax to the hit list (a hit counts in the
+// piece that holds it).
+void offer_leaf(int code, vec3 o, vec3 d, float tmax, float widen_per_t, float widen_const) {
     int count = code & ((1 << LEAF_BITS) - 1), first = code >> LEAF_BITS;
 #if COUNT
     counter.w += float(count);
@@ -101,20 +102,20 @@ void offer_leaf(int code, vec3 o, vec3 d, float widen_per_t, float widen_const) 
         vec4 A4 = cyl(id, CYL_TOP), B4 = cyl(id, CYL_TIP);
         int surf; float asc, alpha;
         float t = hit_cylinder_ab(id, A4, B4, o, d, widen_per_t, widen_const, surf, asc, alpha);
-        bool ok = t > 0.0 && piece_holds(piece.y, o, d, t, A4, B4);
+        bool ok = t > 0.0 && t < tmax && piece_holds(piece.y, o, d, t, A4, B4);
         hits_offer(ok ? t : BIG, ok ? id : NO_ID, surf, alpha * asc);
     }
 }
 
 // The walk in tree order, boxes that start beyond `cut` (or the list's horizon) skipped.
-void nearest_in_order(vec3 o, vec3 d, float widen_per_t, float widen_const, float cut) {
+void nearest_in_order(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_const, float cut) {
     vec3 inv = safe_inverse(d);
     int i = 0;
     for (int it = 0; it < bvh_entries; ++it) {
         int code = next_leaf(i, o, inv, cut);
         if (code < 0) break;
         ++i;     // a leaf's subtree is itself
-        offer_leaf(code, o, d, widen_per_t, widen_const);
+        offer_leaf(code, o, d, tmax, widen_per_t, widen_const);
         cut = min(cut, hits_horizon());
     }
 }
@@ -126,9 +127,9 @@ void nearest_in_order(vec3 o, vec3 d, float widen_per_t, float widen_const, floa
 // deepest slot is lost: the walk in tree order then runs again from a cleared list with
 // boxes past the horizon found so far skipped (no nearer hit can lie beyond it), so the
 // list ends as if nothing had been lost.
-void accel_nearest(vec3 o, vec3 d, float widen_per_t, float widen_const) {
+void accel_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_const) {
     vec3 inv = safe_inverse(d), oi = o * inv;
-    float cut = BIG;
+    float cut = tmax;
     int st_i[BVH_SHORT_STACK]; int st_c[BVH_SHORT_STACK]; float st_t[BVH_SHORT_STACK];
     for (int j = 0; j < BVH_SHORT_STACK; ++j) { st_i[j] = 0; st_c[j] = BVH_NODE; st_t[j] = BIG; }
     int depth = 0;
@@ -147,8 +148,8 @@ void accel_nearest(vec3 o, vec3 d, float widen_per_t, float widen_const) {
             if (cur < 0) break;
         }
         if (code != BVH_NODE) {
-            offer_leaf(code, o, d, widen_per_t, widen_const);
-            cut = hits_horizon();
+            offer_leaf(code, o, d, tmax, widen_per_t, widen_const);
+            cut = min(tmax, hits_horizon());
             cur = -1;
             continue;
         }
@@ -177,7 +178,7 @@ void accel_nearest(vec3 o, vec3 d, float widen_per_t, float widen_const) {
     }
     if (lost) {
         hits_clear();
-        nearest_in_order(o, d, widen_per_t, widen_const, cut);
+        nearest_in_order(o, d, tmax, widen_per_t, widen_const, cut);
     }
 }
 
