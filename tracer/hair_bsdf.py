@@ -216,6 +216,11 @@ def tilted_angles(sin_i, cos_i, alpha):
             (sin_i * c4 - cos_i * s4, np.abs(cos_i * c4 + sin_i * s4)))
 
 
+def safe_asin(x):
+    """asin of x clamped to [-1, 1] (the shader computes it through atan, see there)."""
+    return np.arcsin(np.clip(x, -1.0, 1.0))
+
+
 def _dot(a, b):
     return np.einsum("ij,ij->i", a, b)
 
@@ -260,11 +265,11 @@ def hair_bsdf(wi, wo, tangent, h, sigma_a, lobes):
     cos_t = np.sqrt(np.maximum(1.0 - sin_t * sin_t, 0.0))
     sin_gamma_o = h
     cos_gamma_o = np.sqrt(np.maximum(1.0 - h * h, 0.0))
-    gamma_o = np.arcsin(np.clip(h, -1.0, 1.0))
+    gamma_o = safe_asin(h)
     # Snell's law in the normal plane with the modified index sqrt(eta^2 - sin^2)/cos.
     sin_gamma_t = sin_gamma_o * cos_o / np.sqrt(eta * eta - sin_o * sin_o)
     cos_gamma_t = np.sqrt(np.maximum(1.0 - sin_gamma_t * sin_gamma_t, 0.0))
-    gamma_t = np.arcsin(np.clip(sin_gamma_t, -1.0, 1.0))
+    gamma_t = safe_asin(sin_gamma_t)
     T = np.exp(-sigma_a * (2.0 * cos_gamma_t / cos_t)[:, None])
     A = ap(fresnel_dielectric(cos_o * cos_gamma_o, eta), T)
 

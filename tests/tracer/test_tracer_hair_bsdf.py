@@ -171,3 +171,107 @@ def test_log_i0_joins_the_series():
     # The series is I0 where it converges; the asymptotic form is close past the switch.
     np.testing.assert_allclose(hb.i0(np.array([0.5, 3.0, 6.0])), np.i0([0.5, 3.0, 6.0]), rtol=1e-5)
     np.testing.assert_allclose(hb.log_i0(np.array([20.0, 100.0])), np.log(np.i0([20.0, 100.0])), rtol=1e-3)
+
+
+# --- the GLSL against the reference -------------------------------------------------------
+
+_VERTEX = """#version 330 core
+in vec2 in_pos;
+void main() { gl_Position = vec4(in_pos, 0.0, 1.0); }
+"""
+
+
+def run_probe(probe, inputs, outputs):
+    """Run `probe` (GLSL defining `vec4 probe(vec4 row[ROW])`... see below) once per row of
+    `inputs` (n, k, 4) in a fragment shader after shading_chiang.glsl: fragment (0, i) reads
+    its k input texels with fetch(j) and writes `outputs` vec4s; returns (n, outputs, 4).
+    A fragment shader, as the tracer runs the model (transform feedback is not on every
+    driver)."""
+    import moderngl
+    from tracer.renderer import load_shader, shared_context
+    ctx = shared_context()
+    n, k, _ = inputs.shape
+    outs = "".join(f"layout(location = {j}) out vec4 out{j};\n" for j in range(outputs))
+    head = ("#version 330 core\n" + load_shader("shading_chiang.glsl")
+            + "uniform sampler2D tex_in;\n" + outs
+            + "vec4 fetch(int j) { return texelFetch(tex_in, ivec2(j, int(gl_FragCoord.y)), 0); }\n")
+    prog = ctx.program(vertex_shader=_VERTEX, fragment_shader=head + probe)
+    tex = ctx.texture((k, n), 4, np.ascontiguousarray(inputs, "f4").tobytes(), dtype="f4")
+    tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    targets = [ctx.texture((1, n), 4, dtype="f4") for _ in range(outputs)]
+    fbo = ctx.framebuffer(color_attachments=targets)
+    quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], "f4").tobytes())
+    vao = ctx.vertex_array(prog, [(quad, "2f", "in_pos")])
+    fbo.use()
+    tex.use(0)
+    prog["tex_in"].value = 0
+    vao.render(moderngl.TRIANGLE_STRIP)
+    result = np.stack([np.frombuffer(t.read(), "f4").reshape(n, 4) for t in targets], axis=1)
+    for obj in (vao, quad, fbo, *targets, tex, prog):
+        obj.release()
+    return result.astype(np.float64)
+
+
+def rows(*columns):
+    """(n, k, 4) texels from columns of widths that sum to 4 per texel."""
+    flat = np.concatenate([np.asarray(c, np.float64).reshape(len(c), -1) for c in columns], axis=1)
+    pad = (-flat.shape[1]) % 4
+    flat = np.concatenate([flat, np.zeros((len(flat), pad))], axis=1)
+    return flat.reshape(len(flat), -1, 4)
+
+
+_BSDF_PROBE = """
+void main() {
+    vec4 a = fetch(0), b = fetch(1), c = fetch(2), d = fetch(3), e = fetch(4);
+    // wi = a.xyz, wo = (a.w, b.xy), tangent = (b.zw, c.x), h = c.y, sigma = (c.zw, d.x),
+    // lobes = (d.yzw, e.xy)
+    FibreLobes lobes = FibreLobes(d.y, d.z, d.w, e.x, e.y);
+    out0 = vec4(hair_bsdf(a.xyz, vec3(a.w, b.xy), vec3(b.zw, c.x), c.y, vec3(c.zw, d.x), lobes), 1.0);
+}
+"""
+
+
+def test_glsl_matches_the_float64_reference():
+    """2000 random (wi, wo, tangent, h, absorption, lobes): float32 GLSL within 1e-3 relative
+    of the float64 reference, plus 1e-4 of the largest value for the lobes' tails."""
+    rng = np.random.default_rng(2024)
+    n = 2000
+    wi, wo = unit(rng.normal(size=(n, 3))), unit(rng.normal(size=(n, 3)))
+    tangent = unit(rng.normal(size=(n, 3)))
+    h = rng.uniform(-0.99, 0.99, size=n)
+    sigma = np.where(rng.uniform(size=(n, 1)) < 0.5,
+                     hb.sigma_a_from_melanin(rng.uniform(0, 0.95, n), rng.uniform(0, 1, n)),
+                     hb.sigma_a_from_color(rng.uniform(0.02, 1.0, (n, 3)), 0.3))
+    params = [hb.fibre_lobes(r, rr, c, ior, off) for r, rr, c, ior, off in zip(
+        rng.uniform(0.08, 1.0, n), rng.uniform(0.08, 1.0, n), rng.uniform(0, 0.8, n),
+        rng.uniform(1.3, 1.8, n), np.radians(rng.uniform(-6, 6, n)))]
+    lobes_rows = np.array([[p.v, p.v_r, p.s, p.alpha, p.eta] for p in params])
+    want = np.concatenate([hb.hair_bsdf(wi[i:i + 1], wo[i:i + 1], tangent[i:i + 1], h[i:i + 1], sigma[i:i + 1], p)
+                           for i, p in enumerate(params)])
+    got = run_probe(_BSDF_PROBE, rows(wi, wo, tangent, h, sigma, lobes_rows), 1)[:, 0, :3]
+    assert np.all(np.isfinite(got))
+    assert want.max() > 1.0 and (want > 1e-3).mean() > 0.5     # the set holds peaks and tails
+    np.testing.assert_allclose(got, want, rtol=1e-3, atol=1e-4 * want.max())
+
+
+_HELPER_PROBE = """
+void main() {
+    vec4 a = fetch(0), b = fetch(1), c = fetch(2);
+    // p = a.xyz, tangent = (a.w, b.xy), wo = (b.zw, c.x), colour = c.yzw
+    vec3 col = c.yzw;
+    out0 = vec4(fibre_offset(a.xyz, vec3(0.0), vec3(a.w, b.xy), vec3(b.zw, c.x), 0.5),
+                sigma_a_from_melanin(col.x, col.y));
+    out1 = vec4(sigma_a_from_color(col, 0.3), 0.0);
+}
+"""
+
+
+def test_glsl_offset_and_absorption_helpers_match():
+    rng = np.random.default_rng(8)
+    n = 500
+    p, t, wo = rng.normal(size=(n, 3)) * 0.3, unit(rng.normal(size=(n, 3))), unit(rng.normal(size=(n, 3)))
+    col = rng.uniform(0.01, 0.95, size=(n, 3))
+    got = run_probe(_HELPER_PROBE, rows(p, t, wo, col), 2)
+    np.testing.assert_allclose(got[:, 0, 0], hb.fibre_offset(p, np.zeros((n, 3)), t, wo, 0.5), atol=2e-5)
+    np.testing.assert_allclose(got[:, 0, 1:4], hb.sigma_a_from_melanin(col[:, 0], col[:, 1]), rtol=1e-5)
+    np.testing.assert_allclose(got[:, 1, :3], hb.sigma_a_from_color(col, 0.3), rtol=1e-4, atol=1e-7)

@@ -123,6 +123,13 @@ void tilted_angles(float sin_i, float cos_i, float alpha, out vec2 r, out vec2 t
     trt = vec2(sin_i * c4 - cos_i * s4, abs(cos_i * c4 + sin_i * s4));
 }
 
+// asin through atan: Mesa's asin is off by up to 4e-4 rad, which moves a narrow azimuthal
+// lobe (s = 0.02) by 8 % of its height; atan is good to 3e-6.
+float safe_asin(float x) {
+    x = clamp(x, -1.0, 1.0);
+    return atan(x, sqrt(max(1.0 - x * x, 0.0)));
+}
+
 void fibre_frame(vec3 tangent, vec3 wo, out vec3 X, out vec3 Y, out vec3 Z) {
     X = normalize(tangent);
     Y = normalize(cross(X, wo));
@@ -149,10 +156,10 @@ vec3 hair_bsdf(vec3 wi, vec3 wo, vec3 tangent, float h, vec3 sigma_a, FibreLobes
     float cos_t = sqrt(max(1.0 - sin_t * sin_t, 0.0));
     float sin_gamma_o = h;
     float cos_gamma_o = sqrt(max(1.0 - h * h, 0.0));
-    float gamma_o = asin(clamp(h, -1.0, 1.0));
+    float gamma_o = safe_asin(h);
     float sin_gamma_t = sin_gamma_o * cos_o / sqrt(eta * eta - sin_o * sin_o);
     float cos_gamma_t = sqrt(max(1.0 - sin_gamma_t * sin_gamma_t, 0.0));
-    float gamma_t = asin(clamp(sin_gamma_t, -1.0, 1.0));
+    float gamma_t = safe_asin(sin_gamma_t);
     vec3 T = exp(-sigma_a * (2.0 * cos_gamma_t / cos_t));
     vec3 a0, a1, a2, a3;
     ap(fresnel_dielectric(cos_o * cos_gamma_o, eta), T, a0, a1, a2, a3);
