@@ -85,7 +85,7 @@ def _material(hair):
 
 
 def render_cycles(strands, camera_matrix, size, sun_direction, sun_strength, hair, samples,
-                  lens=50.0, sensor_width=36.0, threads=None):
+                  lens=50.0, sensor_width=36.0, threads=None, seed=1):
     """(H, W, 3) float64 linear RGB, row 0 = top, and the render's wall time in seconds."""
     bpy = _bpy()
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -142,7 +142,7 @@ def render_cycles(strands, camera_matrix, size, sun_direction, sun_strength, hai
     sc.cycles.blur_glossy = 0.0
     sc.cycles.pixel_filter_type = 'BOX'
     sc.cycles.filter_width = 1.0
-    sc.cycles.seed = 1
+    sc.cycles.seed = int(seed)
     sc.cycles_curves.shape = 'THICK'
     sc.view_settings.view_transform = 'Standard'
     sc.view_settings.look = 'None'
