@@ -11,6 +11,8 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorPro
                        IntProperty, PointerProperty)
 from bpy.types import PropertyGroup
 
+from tracer.shading import DEFAULT_SHADING, enum_items as shading_enum_items
+
 from . import head
 from .scene_data import SceneError
 
@@ -237,9 +239,7 @@ class HairSettings(PropertyGroup):
     preview_layers: IntProperty(name="Layers", default=4, min=1, soft_max=16,
                                 description="How many see-through hair layers are blended per pixel")
     preview_shading: EnumProperty(
-        name="Shading", default='kajiya-kay',
-        items=(('kajiya-kay', "Kajiya-Kay", "The classic hair shading, with a highlight along the strand"),
-               ('phong', "Phong", "Plastic-like shading, as in the thesis")),
+        name="Shading", default=DEFAULT_SHADING, items=shading_enum_items(),    # tracer's registry
         description="How the hair reacts to light")
     preview_min_pixel_width: BoolProperty(
         name="Min Pixel Width", default=False,

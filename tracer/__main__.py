@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """python -m tracer render INPUT --out IMAGE.png [--size 512x512] [--spp N]
-[--shadows|--no-shadows] [--layers K] [--shading phong|kajiya-kay]
+[--shadows|--no-shadows] [--layers K] [--shading MODEL]
 [--camera auto|x,y,z:tx,ty,tz:fov]
 
 Bad input exits 2 with one line naming it and writes nothing. What can be known before the
@@ -105,7 +105,7 @@ def render_png(renderer, camera, settings, out, tile_pixels=TILE_PIXELS, tile_si
             band = np.empty((h, W, 4), np.uint8)
             for x0, w in row:
                 img = renderer.render(tile_camera(camera, x0, y0, w, h), settings)
-                spent[0] += renderer.stats["render_s"]
+                spent[0] += renderer.stats.render_s
                 for r in range(0, h, CONVERT_ROWS):    # float64 temporaries of a few rows at a time
                     band[r:r + CONVERT_ROWS, x0:x0 + w] = to_srgb8(img[r:r + CONVERT_ROWS])
             yield band
@@ -116,6 +116,7 @@ def render_png(renderer, camera, settings, out, tile_pixels=TILE_PIXELS, tile_si
 
 def build_parser():
     from .settings import MAX_SPP
+    from .shading import DEFAULT_SHADING, SHADING_MODELS
     parser = argparse.ArgumentParser(prog="python -m tracer", description="Render strands with the GPU ray tracer.")
     sub = parser.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a strand file to a PNG")
@@ -133,8 +134,9 @@ def build_parser():
     r.add_argument("--no-shadows", dest="shadows", action="store_false", help="no shadow rays: faster, flatter")
     r.add_argument("--layers", type=int, default=4,
                    help="semi-transparent hits composited front to back per ray, 1..64 (default %(default)s)")
-    r.add_argument("--shading", choices=("phong", "kajiya-kay"), default="kajiya-kay",
-                   help="shading model (default %(default)s)")
+    r.add_argument("--shading", choices=[m.name for m in SHADING_MODELS], default=DEFAULT_SHADING,
+                   help="shading model: " + "; ".join(f"{m.name}: {m.description}" for m in SHADING_MODELS)
+                        + " (default %(default)s)")
     r.add_argument("--camera", default="auto",
                    help="auto (frame the strands' bounds from the front) or EYE:TARGET:FOV as "
                         "x,y,z:tx,ty,tz:degrees, e.g. 0,-3,1:0,0,1:40 (default %(default)s)")
@@ -162,7 +164,7 @@ def main(argv=None):
         except InputError as e:     # strands the tracer cannot resolve: name the file they came from
             raise InputError(f"{args.input}: {e}") from None
         camera = parse_camera(args.camera, strands, size)
-        st = dict(renderer.stats)
+        st = renderer.stats.as_dict()
         try:
             render_s = render_png(renderer, camera, settings, args.out)
         except OSError as e:     # the disk filled up, or the place changed, while rendering

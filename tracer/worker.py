@@ -8,6 +8,7 @@ Blender down and Blender's own GL context is never touched.
 stats, quit. Only the parent that spawned the worker writes to its stdin; pickle is used
 because both ends are this package.
 """
+import dataclasses
 import importlib.util
 import os
 import pickle
@@ -104,7 +105,7 @@ def serve(inp, out):
             elif command == "render":
                 value = renderer.render(*args)
             elif command == "stats":
-                value = dict(renderer.stats)
+                value = dataclasses.replace(renderer.stats)     # a copy: tracer.stats.RenderStats
             else:
                 raise ValueError(f"unknown command {command!r}")
             write_message(out, ("ok", value))

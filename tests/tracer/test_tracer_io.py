@@ -16,7 +16,7 @@ from hairio import InputError, Strands
 from tracer import Camera, RenderSettings
 from tracer.__main__ import main
 from tracer.png import encode_png, linear_to_srgb, to_srgb8, write_png
-from tracer.renderer import context_backend
+from tracer.gl_state import context_backend
 from tracer.worker import WorkerClient, WorkerError
 
 from tracer_scenes import curls
@@ -106,9 +106,9 @@ def test_worker_renders_keeps_the_scene_and_restarts_after_a_crash():
         client.set_strands(s)
         first = client.render(cam, RenderSettings())
         assert first.shape == (24, 24, 4) and first[..., 3].max() > 0
-        sent = client.stats["bytes_uploaded"]
+        sent = client.stats.bytes_uploaded
         client.render(cam.moved(position=(0.3, -2.5, 0.6)), RenderSettings())
-        assert client.stats["bytes_uploaded"] == sent          # the scene stayed uploaded
+        assert client.stats.bytes_uploaded == sent          # the scene stayed uploaded
         with pytest.raises(InputError):
             client.render(cam, RenderSettings(spp=2))           # bad input comes back as InputError
         os.kill(client.pid, signal.SIGKILL)
@@ -131,7 +131,7 @@ def test_worker_imports_moderngl_from_where_this_process_does(tmp_path):
         client.set_strands(s)
         img = client.render(Camera.look_at((0, -2.5, 0.5), (0, 0, 0.5), size=(16, 16)), RenderSettings())
         assert img[..., 3].max() > 0
-        assert client.stats["gl_backend"] == context_backend()      # the backend asked for here
+        assert client.stats.gl_backend == context_backend()      # the backend asked for here
 
 
 def test_worker_is_given_the_backend_asked_for_here_even_with_its_own_environment(monkeypatch):
