@@ -182,17 +182,19 @@ void main() { gl_Position = vec4(in_pos, 0.0, 1.0); }
 
 
 def run_probe(probe, inputs, outputs):
-    """Run `probe` (GLSL defining `vec4 probe(vec4 row[ROW])`... see below) once per row of
-    `inputs` (n, k, 4) in a fragment shader after shading_chiang.glsl: fragment (0, i) reads
-    its k input texels with fetch(j) and writes `outputs` vec4s; returns (n, outputs, 4).
+    """Run `probe` (a GLSL main) once per row of `inputs` (n, k, 4) in a fragment shader
+    after shading_chiang.glsl: fragment (0, i) reads its k input texels with fetch(j) and
+    writes `outputs` vec4s out0, out1, ...; returns (n, outputs, 4).
     A fragment shader, as the tracer runs the model (transform feedback is not on every
     driver)."""
     import moderngl
-    from tracer.renderer import load_shader, shared_context
+    from tracer.gl_state import shared_context
+    from tracer.shader_source import shader_source
     ctx = shared_context()
     n, k, _ = inputs.shape
     outs = "".join(f"layout(location = {j}) out vec4 out{j};\n" for j in range(outputs))
-    head = ("#version 330 core\n" + load_shader("shading_chiang.glsl")
+    # trace_scene.glsl first: it defines the Surface of the file's shade_light.
+    head = (shader_source(330, ["trace_scene.glsl", "shading_chiang.glsl"], {"COUNT": 0})
             + "uniform sampler2D tex_in;\n" + outs
             + "vec4 fetch(int j) { return texelFetch(tex_in, ivec2(j, int(gl_FragCoord.y)), 0); }\n")
     prog = ctx.program(vertex_shader=_VERTEX, fragment_shader=head + probe)

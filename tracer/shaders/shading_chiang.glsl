@@ -3,8 +3,8 @@
 // Principled Hair BSDF ("Chiang") evaluates it for direct light. tracer/hair_bsdf.py is the
 // float64 reference of this file, function for function (its docstring gives the frame, the
 // symbols and where Cycles and pbrt-v4 differ); keep the two in step.
-// Needs nothing from the other shader files; usable in any stage (the tests run it in a
-// vertex shader with transform feedback).
+// A shading model of tracer/shading (float64 mirror of shade_light: tracer/shading/chiang.py);
+// everything above shade_light needs nothing from the other shader files.
 
 const float CHIANG_PI = 3.14159265358979;
 const float LOG_MP_BELOW = 0.1;
@@ -175,4 +175,20 @@ vec3 hair_bsdf(vec3 wi, vec3 wo, vec3 tangent, float h, vec3 sigma_a, FibreLobes
     f += a2 * (mp(trt.x, trt.y, sin_o, cos_o, 4.0 * lobes.v) * np_lobe(phi, 2.0, lobes.s, gamma_o, gamma_t));
     f += a3 * (mp(sin_i, cos_i, sin_o, cos_o, 4.0 * lobes.v) / (2.0 * CHIANG_PI));
     return f;
+}
+
+// The registry's interface (tracer/shading/chiang.py says what the strand colour means).
+uniform vec4 hair_lobes;              // v, v_r, s, alpha of FibreLobes
+uniform float hair_eta;
+uniform vec3 hair_base_sigma;         // the melanin's absorption; 0 when the colour is the hair's
+uniform float hair_radial_roughness;  // for the colour's absorption
+
+vec3 shade_light(Surface s, vec3 L) {
+    vec3 wo = -s.V;
+    vec3 X, Y, Z;
+    fibre_frame(s.T, wo, X, Y, Z);
+    float h = clamp(-dot(s.N, Y), -1.0, 1.0);
+    vec3 sigma_a = hair_base_sigma + sigma_a_from_color(s.color, hair_radial_roughness);
+    FibreLobes lobes = FibreLobes(hair_lobes.x, hair_lobes.y, hair_lobes.z, hair_lobes.w, hair_eta);
+    return hair_bsdf(L, wo, s.T, h, sigma_a, lobes);
 }
