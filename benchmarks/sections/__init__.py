@@ -17,6 +17,7 @@ SECTIONS = [
     ("gpu", "GPU"),
     ("integration", "Extension and export figures (issues 4 and 5)"),
     ("versions", "Blender versions: Generate and Render Preview in each Blender of the matrix"),
+    ("hair_shading", "Hair shading: the preview's fibre model against Cycles' Principled Hair (Chiang)"),
 ]
 
 

@@ -5,8 +5,9 @@ The same strands, camera and sun go to Cycles (Principled Hair BSDF, Chiang mode
 CPU; set-up in benchmarks/blender_hair_shading.py: direct light only, a delta sun, box pixel
 filter, linear EXR) and to the preview (shading "chiang", hard shadows, ambient 0, the same
 sun as a directional light of the same irradiance, stratified samples). Both use the node's
-sliders as given in each row; the strand colour is the Tint (melanin rows) or the colour
-itself (Direct Coloring rows), as in tracer/shading/chiang.py.
+sliders as given in each row; the strand colour is the Tint (melanin rows: white strands)
+or the colour itself (Direct Coloring rows: a random colour per strand), as in
+tracer/shading/chiang.py.
 
 The strands are straight (two points each) and run out of the frame, so both renderers see
 the same round tubes, with no curve interpolation (Cycles' Catmull-Rom against the preview's
@@ -50,8 +51,9 @@ CASES = (
 )
 
 
-def fibre_strands():
-    """18 straight strands in two staggered rows, random tilts, random colours."""
+def fibre_strands(white=False):
+    """18 straight strands in two staggered rows, random tilts, random colours (white: for
+    the melanin rows, where the colour is a Tint and white leaves the melanin alone)."""
     from hairio import Strands
     rng = np.random.default_rng(4)
     points, colors = [], []
@@ -64,8 +66,9 @@ def fibre_strands():
             points += [c - 0.5 * d, c + 0.5 * d]
             colors.append(rng.uniform(0.05, 0.9, 3))
     points = np.array(points)
+    color = np.ones((len(points), 3)) if white else np.repeat(np.array(colors), 2, axis=0)
     return Strands.from_arrays(points, np.full(len(points) // 2, 2), radius=np.full(len(points), RADIUS),
-                               color=np.repeat(np.array(colors), 2, axis=0))
+                               color=color)
 
 
 def preview_settings(tracer, spp, light, hair):
@@ -99,20 +102,20 @@ def run(sec, cfg):
     from benchmarks.scenes import LENS_MM, SENSOR_MM
 
     quick = cfg.mode == "quick"
-    size = (160, 120) if quick else (320, 240)
-    cycles_spp = 256 if quick else 1024
-    spp = 256 if quick else 1024          # the preview's, a square
+    size = (160, 120) if quick else (240, 180)
+    cycles_spp = 128 if quick else 512
+    spp = 64 if quick else 256            # the preview's, a square
     sec.text(__doc__.split("\n", 2)[2].strip())
     sec.settings(image=f"{size[0]}x{size[1]}", cycles_samples=cycles_spp, preview_spp=spp,
                  sun_strength=SUN_STRENGTH, strands=18, radius=RADIUS)
-    strands = fibre_strands()
     matrix = look_at_matrix(LOOK_FROM, LOOK_AT)
     cam = tracer.Camera.from_blender(matrix, size, type="PERSP", lens=LENS_MM, sensor_width=SENSOR_MM,
                                      sensor_fit="AUTO")
     renderer = tracer.Renderer()
-    renderer.set_strands(strands)
     rows, pictures, maes = [], [], []
     for i, (label, light, hair) in enumerate(CASES):
+        strands = fibre_strands(white=hair["parametrization"] == "melanin")
+        renderer.set_strands(strands)
         if left(sec) < 20:
             sec.not_measured(label, "the section's time ran out")
             continue
