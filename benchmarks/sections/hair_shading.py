@@ -144,6 +144,29 @@ def run(sec, cfg):
         sec.data["mae"] = [float(m) for m in maes]
     if pictures:
         _side_by_side(sec, pictures)
+    if left(sec) > 30:
+        _cost(sec, cfg, tracer)
+
+
+def _cost(sec, cfg, tracer):
+    """What the model costs in the default preview: the same groom and camera with each
+    shading model of the registry, all else at the defaults (1 spp, hard shadows, 4 layers)."""
+    from benchmarks.harness import measure
+    from benchmarks.scenes import groom_scene, settings, tracer_camera, view_matrix
+    count, side = (3000, 256) if cfg.mode == "quick" else (10000, 512)
+    strands = groom_scene("wavy", count)[3].strands
+    cam = tracer_camera(view_matrix(*strands.bounds(), (side, side)), (side, side))
+    renderer = tracer.Renderer()
+    renderer.set_strands(strands)
+    rows, base = [], None
+    for model in tracer.shading.SHADING_MODELS:
+        timing, _ = measure(lambda: renderer.render(cam, settings(shading=model.name)), runs=cfg.runs,
+                            budget=left(sec))
+        base = base or timing.median
+        rows.append([model.label + (" (default)" if model.name == tracer.shading.DEFAULT_SHADING else ""),
+                     fmt_time(timing.median), f"{timing.median / base:.2f}×"])
+    sec.table(["shading", f"render, {side}² wavy {count // 1000}k strands, defaults", "against the first"], rows,
+              caption="The model's cost in the default preview (median of the runs, after a warm-up):")
 
 
 def _side_by_side(sec, pictures):
