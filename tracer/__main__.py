@@ -114,8 +114,17 @@ def render_png(renderer, camera, settings, out, tile_pixels=TILE_PIXELS, tile_si
     return spent[0]
 
 
+HAIR_SLIDERS = (("--melanin", "hair_melanin", "melanin 0..1"),
+                ("--melanin-redness", "hair_melanin_redness", "pheomelanin share of the melanin, 0..1"),
+                ("--roughness", "hair_roughness", "longitudinal roughness 0..1"),
+                ("--radial-roughness", "hair_radial_roughness", "azimuthal roughness 0..1"),
+                ("--coat", "hair_coat", "lowers the surface reflection's roughness, 0..1"),
+                ("--ior", "hair_ior", "index of refraction 1..3"),
+                ("--cuticle-tilt", "hair_cuticle_tilt", "cuticle tilt in degrees, -90..90"))
+
+
 def build_parser():
-    from .settings import MAX_SPP
+    from .settings import HAIR_COLORS, MAX_SPP, RenderSettings
     from .shading import DEFAULT_SHADING, SHADING_MODELS
     parser = argparse.ArgumentParser(prog="python -m tracer", description="Render strands with the GPU ray tracer.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -137,6 +146,14 @@ def build_parser():
     r.add_argument("--shading", choices=[m.name for m in SHADING_MODELS], default=DEFAULT_SHADING,
                    help="shading model: " + "; ".join(f"{m.name}: {m.description}" for m in SHADING_MODELS)
                         + " (default %(default)s)")
+    # The "chiang" model's sliders (RenderSettings.hair_*, Cycles' Principled Hair names).
+    defaults = RenderSettings()
+    r.add_argument("--hair-color", choices=HAIR_COLORS, default=defaults.hair_color,
+                   help="what a strand's colour means to the chiang model: strand = the hair's colour (Cycles' "
+                        "Direct Coloring), melanin = a tint over --melanin (default %(default)s)")
+    for flag, field, what in HAIR_SLIDERS:
+        r.add_argument(flag, type=float, dest=field, metavar="X", default=getattr(defaults, field),
+                       help=f"chiang model: {what} (default %(default)s)")
     r.add_argument("--camera", default="auto",
                    help="auto (frame the strands' bounds from the front) or EYE:TARGET:FOV as "
                         "x,y,z:tx,ty,tz:degrees, e.g. 0,-3,1:0,0,1:40 (default %(default)s)")
@@ -152,7 +169,9 @@ def main(argv=None):
         check_destination(args.out, f"--out {args.out}")
         from .settings import RenderSettings
         settings = RenderSettings(spp=args.spp, shadows=args.shadows, layers=args.layers,
-                                  shading=args.shading, background=(0.0, 0.0, 0.0, 0.0))
+                                  shading=args.shading, background=(0.0, 0.0, 0.0, 0.0),
+                                  hair_color=args.hair_color,
+                                  **{field: getattr(args, field) for _, field, _ in HAIR_SLIDERS})
         settings.check()
         t0 = time.perf_counter()
         strands = read_any(args.input)

@@ -103,3 +103,35 @@ def test_strand_colour_shows_as_the_hair_colour():
                                                       hair_melanin_redness=0.8))
     mean = img[img[..., 3] > 0.99][:, :3].mean(axis=0)
     assert mean[0] > mean[1] > mean[2], mean          # pheomelanin: auburn
+
+
+def test_cli_takes_the_hair_sliders(tmp_path, monkeypatch):
+    """Every slider on the command line reaches the settings the image is rendered with."""
+    import tracer.__main__ as cli
+    seen = {}
+
+    def capture(renderer, camera, settings, out):
+        seen["settings"] = settings
+        return 0.0
+
+    monkeypatch.setattr(cli, "render_png", capture)
+    src = tmp_path / "in.npz"
+    curls(3, 4).save_npz(src)
+    assert cli.main(["render", str(src), "--out", str(tmp_path / "out.png"), "--hair-color", "melanin",
+                     "--melanin", "0.2", "--melanin-redness", "0.4", "--roughness", "0.45",
+                     "--radial-roughness", "0.55", "--coat", "0.1", "--ior", "1.6", "--cuticle-tilt", "-3"]) == 0
+    s = seen["settings"]
+    assert (s.shading, s.hair_color, s.hair_melanin, s.hair_melanin_redness, s.hair_roughness,
+            s.hair_radial_roughness, s.hair_coat, s.hair_ior, s.hair_cuticle_tilt) == (
+        "chiang", "melanin", 0.2, 0.4, 0.45, 0.55, 0.1, 1.6, -3.0)
+
+
+@pytest.mark.parametrize("flag, value, field", [("--melanin", "2", "hair_melanin"), ("--ior", "0.9", "hair_ior"),
+                                                 ("--cuticle-tilt", "100", "hair_cuticle_tilt")])
+def test_cli_refuses_bad_hair_sliders(tmp_path, capsys, flag, value, field):
+    from tracer.__main__ import main
+    src = tmp_path / "in.npz"
+    curls(3, 4).save_npz(src)
+    assert main(["render", str(src), "--out", str(tmp_path / "out.png"), flag, value]) == 2
+    assert field in capsys.readouterr().err
+    assert not (tmp_path / "out.png").exists()
