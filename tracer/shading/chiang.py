@@ -19,7 +19,7 @@ The light's part is radiance = irradiance * sum_p Mp Ap Np (the cosine is in the
 in Cycles' evaluation); `diffuse`, `specular` and `shininess` play no part. h, where the ray
 meets the fibre across its width, comes from the normal of the surface entered (-N.Y in
 the fibre frame, Cycles' dot(cross(Ng, X), Z)); on a cut plane (a strand end, the exposed
-crescent of a bend) the normal runs along the strand and h is taken as 0.
+crescent of a bend) the normal runs along the strand and h comes out near 0.
 """
 import numpy as np
 
