@@ -18,8 +18,8 @@ across the image) and shadow one another.
 Error: mean absolute difference per pixel and channel in linear RGB over the hair (every
 pixel the preview covers at all; edge pixels mix hair and black in both), and over the
 pixels fully covered; with the mean hair value beside it for scale, and Cycles' own noise at
-that sample count (half the difference between two Cycles renders with different seeds, a
-1/sqrt(2) scaled MAE) where measured.
+that sample count (the MAE between two Cycles renders with different seeds, divided by
+sqrt(2)) where measured.
 """
 import dataclasses
 
