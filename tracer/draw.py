@@ -9,20 +9,17 @@ import numpy as np
 from hairio import InputError
 from hairio.validate import check_memory
 
+from . import layout
 from .gl_buffers import set_samplers
 from .gpu_build import set_uniforms
+from .mesh_upload import MESH_BUFFERS
 from .shader_source import shader_source
 from .shading import shading_model
 
-# The shader squares distances in float32 (3.4e38 = (1.8e19)^2): past this a hit's
-# arithmetic overflows and the image comes out empty while the float64 reference shows
-# hair. Cameras within 1e19 of strands within MAX_POINT_COORDINATE keep every squared
-# distance finite (measured: hair at 1e18 and cameras out to 3e19 render as the reference does).
-MAX_CAMERA_COORDINATE = 1e19
 # Host memory of one render: the framebuffer (a driver like llvmpipe keeps it in host memory),
 # its read-back bytes and the flipped image, RGBA float32 each.
 RENDER_COPIES = 3
-# The trace program's buffers, on texture units 0, 1, 2.
+# The trace program's buffers, on texture units 0, 1, 2, and with meshes 3, 4, 5.
 TRACE_BUFFERS = ("tex_cyl", "tex_idx", "tex_cell")
 
 _VERTEX = """#version 330 core
@@ -33,12 +30,14 @@ void main() {   // one triangle that covers the screen; the scissor picks the pi
 """
 
 
-def trace_files(settings):
+def trace_files(settings, meshes=False):
     """The trace program's files in dependency order (tracer/shaders/trace_scene.glsl lists
     them): the scene, the shape, the accelerator interface and the grid that implements it,
-    the shading model of `settings`, the tracer's main."""
-    return ["trace_scene.glsl", "shapes_cylinder.glsl", "accel.glsl", "accel_grid.glsl",
-            shading_model(settings.shading).glsl, "trace_main.glsl"]
+    with `meshes` the triangles and their grid, the shading model of `settings`, the
+    tracer's main."""
+    mesh_files = ["shapes_triangle.glsl", "accel_mesh_grid.glsl"] if meshes else []
+    return (["trace_scene.glsl", "shapes_cylinder.glsl", "accel.glsl", "accel_grid.glsl"] + mesh_files
+            + [shading_model(settings.shading).glsl, "trace_main.glsl"])
 
 
 class Drawer:
@@ -49,10 +48,10 @@ class Drawer:
         self._programs = {}
         self._fbos = {}
 
-    def program(self, settings, camera, layers):
+    def program(self, settings, camera, layers, meshes=False):
         key = (layers, settings.shadows and (1 if settings.shadow_mode == "hard" else 2),
                settings.shading, len(settings.lights), settings.spp_n, settings.min_pixel_width,
-               camera.type, settings.count)
+               camera.type, settings.count, bool(meshes), layout.glsl_header())
         prog = self._programs.get(key)
         if prog is None:
             defines = {
@@ -63,10 +62,11 @@ class Drawer:
                 "MIN_PX": int(settings.min_pixel_width),
                 "ORTHO": int(camera.type == "ORTHO"),
                 "COUNT": int(settings.count),
+                "MESHES": int(bool(meshes)),
             }
             program = self.ctx.program(vertex_shader=_VERTEX,
-                                       fragment_shader=shader_source(330, trace_files(settings), defines))
-            set_samplers(program, **{name: unit for unit, name in enumerate(TRACE_BUFFERS)})
+                                       fragment_shader=shader_source(330, trace_files(settings, meshes), defines))
+            set_samplers(program, **{name: unit for unit, name in enumerate(TRACE_BUFFERS + MESH_BUFFERS)})
             prog = (program, self.ctx.vertex_array(program, []))
             self._programs[key] = prog
         return prog
@@ -98,9 +98,9 @@ class Drawer:
         out that squared distances overflow, an image wider than the driver draws, or one
         whose copies need more memory than there is."""
         far = float(np.abs(camera.position).max())
-        if not far <= MAX_CAMERA_COORDINATE:
+        if not far <= layout.MAX_CAMERA_COORDINATE:
             raise InputError(f"camera: position {far:.3g} from the origin; the GPU tracer squares distances in "
-                             f"float32, so it takes cameras within ±{MAX_CAMERA_COORDINATE:.0e}: move it closer "
+                             f"float32, so it takes cameras within ±{layout.MAX_CAMERA_COORDINATE:.0e}: move it closer "
                              "or scale the scene down")
         w, h = camera.size
         side = min(int(self.ctx.info["GL_MAX_TEXTURE_SIZE"]), *(int(d) for d in self.ctx.info["GL_MAX_VIEWPORT_DIMS"]))
@@ -110,9 +110,10 @@ class Drawer:
         check_memory(f"camera size {w}x{h}", (RENDER_COPIES + settings.count) * w * h * 16,
                      "render a smaller image, or in tiles (python -m tracer render writes any size band by band)")
 
-    def draw(self, buffers, grid, camera, settings, layers, box):
+    def draw(self, buffers, grid, camera, settings, layers, box, mesh_grid=None, mesh_offset=0.0):
         """The image (H, W, 4) float32, row 0 = top, and the summed work counters (4,):
-        pixels in `box` (x0, y0, x1, y1; None: none) traced, the rest background."""
+        pixels in `box` (x0, y0, x1, y1; None: none) traced, the rest background. With
+        `mesh_grid` the meshes uploaded with it are traced too."""
         import moderngl
         w, h = camera.size
         fbo = self.framebuffer(w, h, settings.count)
@@ -121,9 +122,14 @@ class Drawer:
         fbo.clear(*settings.premultiplied_background())
         counts = np.zeros(4)
         if box is not None:
-            prog, vao = self.program(settings, camera, layers)
-            buffers.bind(TRACE_BUFFERS)
+            meshes = mesh_grid is not None
+            prog, vao = self.program(settings, camera, layers, meshes)
+            buffers.bind(TRACE_BUFFERS + (MESH_BUFFERS if meshes else ()))
             _set_uniforms(prog, grid, camera, settings)
+            if meshes:
+                set_uniforms(prog, mesh_lo=tuple(float(x) for x in mesh_grid.lo),
+                             mesh_cell_size=tuple(float(x) for x in mesh_grid.cell_size),
+                             mesh_dims=tuple(int(x) for x in mesh_grid.dims), mesh_offset=float(mesh_offset))
             self.ctx.blend_func = moderngl.ONE, moderngl.ONE
             self.ctx.blend_equation = moderngl.FUNC_ADD
             x0, y0, x1, y1 = box
@@ -151,10 +157,9 @@ class Drawer:
         return np.frombuffer(raw, np.float32).reshape(h, w, 4)[::-1].copy(), counts
 
 
-def screen_bounds(grid, camera):
-    """Pixel rectangle (x0, y0, x1, y1), y from the top, that the grid box can cover;
+def screen_bounds(lo, hi, camera):
+    """Pixel rectangle (x0, y0, x1, y1), y from the top, that the box lo..hi can cover;
     None when nothing can be seen."""
-    lo, hi = grid.lo, grid.hi
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     w, h = camera.size
     x, y, depth = camera.project(corners)
@@ -178,7 +183,8 @@ def _set_uniforms(prog, g, camera, settings):
                  cam_pos=tuple(float(x) for x in camera.position),
                  cam_rot=tuple(float(x) for x in camera.rotation.T.ravel()),
                  pixel_size=float(camera.pixel_size),
-                 shift_px=tuple(float(x) for x in camera.shift_px),
+                 centre_px=tuple(float(x) for x in camera.centre_px),
+                 pixel_origin=tuple(int(x) for x in camera.pixel_origin),
                  image_size=(float(camera.size[0]), float(camera.size[1])))
     packed = [light.packed() for light in settings.lights]
     if "light_vec" in prog:

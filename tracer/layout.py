@@ -10,6 +10,15 @@ the compute build, the trace shader and the references all follow.
 """
 import numpy as np
 
+# --- Coordinates the GPU can square ---------------------------------------------------------
+# The shaders square distances in float32 (3.4e38 = (1.8e19)^2): past these a hit's
+# arithmetic overflows and the image comes out empty while the float64 reference shows hair
+# (a strand 1e20 from the origin did). Points (strands, meshes) within 1e18 seen from a
+# camera within 1e19 keep every squared distance finite (measured: hair at 1e18 and cameras
+# out to 3e19 render as the reference does).
+MAX_POINT_COORDINATE = 1e18
+MAX_CAMERA_COORDINATE = 1e19
+
 # --- Cylinder rules (SPEC §6; tracer/cylinders.py says why) ---------------------------------
 # Past this angle between two axes the shared plane would cut an unbounded piece: both
 # cylinders end on a cap square to their own axis instead.
@@ -24,6 +33,18 @@ CAP_PLANE2 = 2
 #   flags   COL: rgb colour
 CYL_TEXELS = ("TOP", "TIP", "N2", "COL")
 TEXELS_PER_CYL = len(CYL_TEXELS)
+
+# --- Triangle buffer (meshes): per triangle, TEXELS_PER_TRI consecutive RGBA32F texels ------
+#   V0: xyz corner 0, w red   V1: xyz corner 1, w green   V2: xyz corner 2, w blue
+TRI_TEXELS = ("V0", "V1", "V2")
+TEXELS_PER_TRI = len(TRI_TEXELS)
+# A ray meets a triangle where its barycentric coordinates are each >= -TRI_EDGE_EPS and sum
+# to <= 1 + TRI_EDGE_EPS: a sliver of overlap, so float32 rounding on a shared edge cannot
+# open a crack between two triangles (both sides test the same rule).
+TRI_EDGE_EPS = 1e-6
+# Shadow rays leave a mesh this many times its box's diagonal off the surface (and ignore
+# the triangle they leave), so a surface does not shadow itself through rounding.
+MESH_SHADOW_OFFSET = 1e-5
 
 # --- Grid -------------------------------------------------------------------------------------
 MAX_DIM = 1024          # cells per axis; 3D textures of GL 3.3 guarantee 256, every driver we target >= 2048
@@ -59,6 +80,8 @@ def glsl_header():
         "CAP_PLANE1": CAP_PLANE1, "CAP_PLANE2": CAP_PLANE2,
         "TEXELS_PER_CYL": TEXELS_PER_CYL,
         **{f"CYL_{name}": slot for slot, name in enumerate(CYL_TEXELS)},
+        "TEXELS_PER_TRI": TEXELS_PER_TRI, **{f"TRI_{name}": slot for slot, name in enumerate(TRI_TEXELS)},
+        "TRI_EDGE_EPS": float(TRI_EDGE_EPS),
         "MAX_DIM": MAX_DIM, "MAX_CELLS": MAX_CELLS, "BLOCK": BLOCK, "IDX_SLACK": IDX_SLACK,
         "EMPTY_BLOCK": EMPTY_BLOCK,
         "GROUP": GROUP, "MAX_VISITS": MAX_VISITS, "MAX_REPEATS": MAX_REPEATS,
@@ -85,6 +108,15 @@ def cylinder_texels(c, a=0, b=None):
     out[:, tip, :3], out[:, tip, 3] = c.tip[a:b], c.alpha[a:b]
     out[:, n2, :3], out[:, n2, 3] = c.n2[a:b], c.flags[a:b]
     out[:, col, :3] = c.color[a:b]
+    return out.reshape(-1, 4)
+
+
+def triangle_texels(corners, color):
+    """Triangles as RGBA float32 texels, TEXELS_PER_TRI per triangle in the TRI_TEXELS order:
+    `corners` (F, 3, 3) their corners, `color` (F, 3) their base colours."""
+    out = np.zeros((len(corners), TEXELS_PER_TRI, 4), np.float32)
+    out[:, :, :3] = corners
+    out[:, :, 3] = color
     return out.reshape(-1, 4)
 
 

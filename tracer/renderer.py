@@ -4,7 +4,8 @@ scene data in buffer textures (tracer/scene_buffers.py), one fragment shader tha
 every pixel (tracer/draw.py).
 
 `Renderer` only says what happens in which order; each job has its module: the two upload
-paths (tracer/strand_upload.py), the grid (tracer/scene_grid.py), drawing (tracer/draw.py).
+paths (tracer/strand_upload.py), the grid (tracer/scene_grid.py), meshes (tracer/meshes.py,
+tracer/mesh_upload.py), drawing (tracer/draw.py).
 Only `set_strands`/`update_strands` upload; a render with a new camera, light or setting
 sends uniforms and nothing else (`stats.bytes_uploaded` proves it).
 """
@@ -14,21 +15,19 @@ import numpy as np
 
 from hairio import InputError, Strands
 
+from . import layout
 from .cylinders import plan_cylinders
 from .draw import Drawer, screen_bounds
 from .gl_state import context_backend, shared_context
 from .gpu_build import compute_available
+from .meshes import mesh_set
+from .mesh_upload import upload_meshes
 from .scene_buffers import SceneBuffers
 from .scene_grid import build_scene_grid, grid_indices
 from .settings import GRID_WIDEN_CAP, RenderSettings
 from .stats import RenderStats
 from .strand_upload import GpuUpload, NumpyUpload, Scene, select_strands
 
-# The shader squares distances in float32 (3.4e38 = (1.8e19)^2): past these a hit's
-# arithmetic overflows and the image comes out empty while the float64 reference shows
-# hair (a strand 1e20 from the origin did). Points within 1e18 seen from a camera within
-# MAX_CAMERA_COORDINATE keep every squared distance finite.
-MAX_POINT_COORDINATE = 1e18
 BUILDS = ("auto", "gpu", "numpy")
 
 
@@ -53,6 +52,8 @@ class Renderer:
         self.buffers = SceneBuffers(self.ctx, max_buffer_texels or self.ctx.info["GL_MAX_TEXTURE_BUFFER_SIZE"],
                                     self.stats)
         self.scene = Scene()
+        self.meshes = None          # tracer.meshes.MeshSet, or None
+        self.mesh_grid = None
         self._upload = GpuUpload(self.buffers) if self.build == "gpu" else NumpyUpload(self.buffers)
         self._drawer = Drawer(self.ctx)
 
@@ -107,6 +108,23 @@ class Renderer:
             self.scene.forget()
             raise
 
+    def set_meshes(self, meshes):
+        """Opaque triangle meshes beside the strands: a list of (vertices (V,3), triangles
+        (F,3) int, rgb), each optionally followed by a name for messages; [] or None for
+        none. Checked where they enter (tracer/meshes.py: InputError naming the mesh for
+        NaN, indices outside its vertices, no faces, ...), then uploaded as float32 with a
+        grid of their own; they stay until the next set_meshes, whatever the strands do.
+        They hide hair from the camera and the lights, take the hair's shadows and cast
+        their own, and are shaded diffusely with their colour."""
+        t0 = time.perf_counter()
+        checked = mesh_set(meshes)      # nothing changes when this refuses them
+        self.meshes = self.mesh_grid = None
+        if checked is not None:
+            self.mesh_grid = upload_meshes(self.buffers, checked)
+            self.meshes = checked
+        self.stats.num_triangles = 0 if checked is None else len(checked)
+        self.stats.mesh_s = time.perf_counter() - t0
+
     def update_strands(self, strand_ids, strands):
         """`strands` is the whole new set; only strands `strand_ids` changed. When their point
         counts are unchanged, only their data is re-uploaded (their cylinders with the numpy
@@ -158,11 +176,13 @@ class Renderer:
         return settings.layers
 
     def screen_bounds(self, camera):
-        """Pixel rectangle (x0, y0, x1, y1), y from the top, that the grid box can cover;
-        None when nothing can be seen."""
-        if not self.scene.num_cylinders:
+        """Pixel rectangle (x0, y0, x1, y1), y from the top, that the strands' grid box and
+        the meshes' box can cover; None when nothing can be seen."""
+        boxes = [(g.lo, g.hi) for g, there in ((self.scene.grid, self.scene.num_cylinders),
+                                              (self.mesh_grid, self.meshes is not None)) if there]
+        if not boxes:
             return None
-        return screen_bounds(self.scene.grid, camera)
+        return screen_bounds(np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0), camera)
 
     def render(self, camera, settings=None):
         """(H, W, 4) float32 linear RGBA, premultiplied, row 0 = top of the image."""
@@ -178,7 +198,8 @@ class Renderer:
             self.stats.grid_rebuilds += 1
         box = self.screen_bounds(camera)
         layers = self.effective_layers(settings)
-        img, counts = self._drawer.draw(self.buffers, self.scene.grid, camera, settings, layers, box)
+        img, counts = self._drawer.draw(self.buffers, self.scene.grid, camera, settings, layers, box, self.mesh_grid,
+                                        0.0 if self.meshes is None else self.meshes.shadow_offset())
         st = self.stats
         st.render_s = time.perf_counter() - t0
         st.renders += 1
@@ -192,11 +213,11 @@ class Renderer:
 
 def check_gpu_range(strands):
     """InputError when strands lie farther from the origin than the GPU's float32 arithmetic
-    can square (MAX_POINT_COORDINATE), naming how far they reach."""
+    can square (layout.MAX_POINT_COORDINATE), naming how far they reach."""
     if not strands.num_points:
         return
     far = float(np.abs(strands.points).max()) + float(strands.radius.max())
-    if not far <= MAX_POINT_COORDINATE:
+    if not far <= layout.MAX_POINT_COORDINATE:
         raise InputError(f"points: coordinates reach {far:.3g}; the GPU tracer squares distances in float32, so "
-                         f"it takes strands within ±{MAX_POINT_COORDINATE:.0e} of the origin: scale them down "
+                         f"it takes strands within ±{layout.MAX_POINT_COORDINATE:.0e} of the origin: scale them down "
                          "(and the camera with them) or recentre them")

@@ -10,7 +10,7 @@ class RenderStats:
     either: only set_strands/update_strands upload), renders, grid_rebuilds. Of the last
     set_strands/update_strands: cylinders_s, upload_s, grid_s, num_cylinders and the grid's
     grid_build ("gpu" or "numpy"), grid_dims, grid_refs, cylinders_per_full_cell,
-    full_cell_fraction. Of the last render: render_s, layers_max (layers the shader was
+    full_cell_fraction. Of the last set_meshes: num_triangles, mesh_s. Of the last render: render_s, layers_max (layers the shader was
     compiled for), screen_box and traversed_pixels (the projected bounds that were traced),
     and with RenderSettings(count=True) the counters shadow_rays, layers_traced,
     cells_visited, cylinder_tests (summed over samples). gl_backend: the shared context's
@@ -25,6 +25,8 @@ class RenderStats:
     grid_s: float = 0.0
     render_s: float = 0.0
     num_cylinders: Optional[int] = None
+    num_triangles: int = 0
+    mesh_s: float = 0.0
     grid_build: Optional[str] = None
     grid_dims: Optional[tuple] = None
     grid_refs: Optional[int] = None

@@ -19,7 +19,7 @@ from tracer.png import encode_png, linear_to_srgb, to_srgb8, write_png
 from tracer.gl_state import context_backend
 from tracer.worker import WorkerClient, WorkerError
 
-from tracer_scenes import curls
+from tracer_scenes import curls, uv_sphere
 
 
 def _decode_png(data):
@@ -174,3 +174,25 @@ def test_every_render_option_has_help():
     sub = next(a for a in build_parser()._actions if a.dest == "command").choices["render"]
     missing = [a.dest for a in sub._actions if a.dest != "help" and not (a.help or "").strip()]
     assert missing == []
+
+
+def test_worker_draws_meshes_and_keeps_them_across_a_restart():
+    from tracer import Renderer
+    s = curls(6, 6)
+    meshes = [(*uv_sphere((0, -0.4, 0.5), 0.15), (0.1, 0.5, 0.9))]
+    cam = Camera.look_at((0, -2.5, 0.5), (0, 0, 0.5), size=(24, 24))
+    local = Renderer(build="numpy")
+    local.set_strands(s)
+    local.set_meshes(meshes)
+    want = local.render(cam, RenderSettings())
+    with WorkerClient(python=sys.executable, extra_sys_path=(_root(),), timeout=60) as client:
+        client.set_strands(s)
+        with pytest.raises(InputError, match="mesh 0: no faces"):
+            client.set_meshes([(np.eye(3), np.zeros((0, 3), int), (1, 1, 1))])     # refused before it travels
+        client.set_meshes(meshes)
+        np.testing.assert_allclose(client.render(cam, RenderSettings()), want, atol=1e-6)
+        os.kill(client.pid, signal.SIGKILL)
+        time.sleep(0.2)
+        with pytest.raises(WorkerError):
+            client.render(cam, RenderSettings())
+        np.testing.assert_allclose(client.render(cam, RenderSettings()), want, atol=1e-6)   # meshes re-sent

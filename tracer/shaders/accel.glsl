@@ -3,8 +3,9 @@
 // accelerator (accel_grid.glsl; a BVH would be another file) implements two functions and
 // uses the hit list below:
 //
-//   void accel_nearest(vec3 o, vec3 d, float widen_per_t, float widen_const)
-//       Offers every cylinder the ray o + t·d (unit d) enters at t > 0 to the hit list with
+//   void accel_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_const)
+//       Offers every cylinder the ray o + t·d (unit d) enters at 0 < t < tmax (tmax: where
+//       an opaque mesh hides what lies behind, else BIG) to the hit list with
 //       hits_offer(t, id, surf, alpha · ascale), each entry once (hit_cylinder_ab of
 //       shapes_cylinder.glsl gives t, surf, ascale and alpha; widen_* are its minimum
 //       pixel width arguments). Offers may come in any order: the list keeps the LAYERS
@@ -24,8 +25,8 @@
 
 // The nearest LAYERS hits of the ray being traced, sorted by (distance, id); empty slots
 // are (BIG, NO_ID). Globals, read and written with constant indices only: llvmpipe then
-// keeps them in registers, where an insertion at a computed index was a per-lane scatter
-// through memory on every test (10 % of the 4-layer scene's time).
+// keeps them in registers, where an insertion at a computed index is a per-lane scatter
+// through memory on every test (docs/DECISIONS.md, "The hit list is indexed by constants").
 float ht[LAYERS]; float ha[LAYERS]; int hid[LAYERS]; int hs[LAYERS];
 
 void hits_clear() {

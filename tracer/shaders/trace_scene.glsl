@@ -7,6 +7,7 @@
 //   shapes_cylinder.glsl  ray vs one cut cylinder, its normal
 //   accel.glsl            the accelerator interface and the hit list it fills
 //   accel_grid.glsl       the uniform grid, implementing that interface
+//   shapes_triangle.glsl, accel_mesh_grid.glsl   opaque meshes and their own grid (MESHES 1)
 //   shading_<model>.glsl  shade_light of the chosen model (tracer/shading: the registry)
 //   trace_main.glsl       camera rays, layers, shadows, samples: main
 // Compile-time switches (tracer/draw.py):
@@ -18,6 +19,7 @@
 //   MIN_PX        1: widen radii to half a pixel (alpha scaled by r / r')
 //   ORTHO         1: orthographic camera
 //   COUNT         1: write per-pixel work counters to a second target
+//   MESHES        1: opaque triangle meshes beside the strands
 
 // Per cylinder, TEXELS_PER_CYL consecutive texels (one 64-byte cache line on a CPU driver),
 // CYL_TOP: xyz top, w radius; CYL_TIP: xyz tip, w alpha; CYL_N2: xyz unit normal of plane
