@@ -12,7 +12,6 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorPro
 from bpy.types import PropertyGroup
 
 from hairio import InputError
-from tracer.shading import DEFAULT_SHADING, enum_items as shading_enum_items
 
 from . import generator_cache, head
 from .transaction import forget_background
