@@ -135,3 +135,28 @@ def test_cli_refuses_bad_hair_sliders(tmp_path, capsys, flag, value, field):
     assert main(["render", str(src), "--out", str(tmp_path / "out.png"), flag, value]) == 2
     assert field in capsys.readouterr().err
     assert not (tmp_path / "out.png").exists()
+
+
+def test_chiang_hair_beside_a_mesh_matches_the_reference(renderer):
+    """A roof (out of view) shadows the left half of the tuft from a sun behind the camera:
+    shadowed hair gets the ambient term only, lit hair the fibre model on top, on the GPU as
+    in the float64 reference."""
+    from tracer_scenes import plane
+    from test_tracer_meshes import _matches_reference
+    tuft = curls(16, 8, radius=0.015)
+    # The sun shines along (0, 0.8, -0.6): from a hair point the way to it climbs 0.6 for every
+    # 0.8 toward -y, so at z = 1.3 a roof over y in [-1.9, -0.3], x < -0.1 covers the left half.
+    roof = plane(1.3, 0.8, centre=(-0.9, -1.1))
+    cam = Camera.look_at((0, -2.6, 0.5), (0, 0, 0.5), size=(64, 48), fov_deg=40)
+    settings = RenderSettings(shadows=True, lights=(Light("directional", (0.0, 0.8, -0.6), (1, 1, 1), 3.0),))
+    try:
+        img, _ = _matches_reference(renderer, tuft, [(*roof, (0.6, 0.6, 0.6))], cam, settings)
+    finally:
+        renderer.set_meshes(None)
+    ambient = 0.7 * settings.ambient                 # curls' red channel times the ambient term
+    hair = img[..., 3] > 0.99
+    left, right = hair & (np.arange(64) < 28)[None], hair & (np.arange(64) > 36)[None]
+    assert left.sum() > 30 and right.sum() > 30
+    shadowed = np.isclose(img[..., 0], ambient, atol=2e-3)
+    assert (shadowed & left).sum() > 0.8 * left.sum()
+    assert (shadowed & right).sum() < 0.4 * right.sum()    # some in the shadow of strands in front
