@@ -118,7 +118,7 @@ def run(sec, cfg):
     cam = tracer.Camera.from_blender(matrix, size, type="PERSP", lens=LENS_MM, sensor_width=SENSOR_MM,
                                      sensor_fit="AUTO")
     renderer = tracer.Renderer()
-    rows, pictures, maes = [], [], []
+    rows, pictures, maes, breakdown = [], [], [], None
     for i, (label, light, hair) in enumerate(CASES):
         strands = fibre_strands(white=hair["parametrization"] == "melanin")
         renderer.set_strands(strands)
@@ -136,6 +136,8 @@ def run(sec, cfg):
         if i == 3:          # the brightest case: Cycles' own noise there
             cyc2, _ = render_cycles(strands, matrix, size, light, SUN_STRENGTH, hair, cycles_spp, seed=2)
             noise = fmt_num(np.abs(cyc2 - cyc)[ours[..., 3] > 0].mean() / np.sqrt(2))
+        if i == 3:
+            breakdown = _by_brightness(ours, cyc)
         maes.append(mae)
         rows.append([label, fmt_num(mae), _num(mae_full), fmt_num(mean), noise, str(n),
                      fmt_time(t_ours), fmt_time(t_cycles)])
@@ -143,6 +145,10 @@ def run(sec, cfg):
     sec.table(["case", "MAE over the hair", "MAE, covered pixels", "mean hair value (Cycles)",
                "Cycles' own noise", "hair pixels", f"preview ({spp} spp)",
                f"Cycles ({cycles_spp} samples, sync + render)"], rows)
+    if breakdown:
+        sec.table(["Cycles' pixel value", "pixels", "MAE", "mean signed difference (preview − Cycles)"], breakdown,
+                  caption=f"Where the error is, on the brightest case ({CASES[3][0]}), covered pixels by "
+                          "their value in Cycles (mean of RGB):")
     if maes:
         sec.summary.append(f"preview vs Cycles' Principled Hair (Chiang), direct light: MAE over the hair "
                            f"{fmt_num(min(maes))}–{fmt_num(max(maes))} in linear RGB over {len(maes)} cases "
@@ -154,6 +160,21 @@ def run(sec, cfg):
         _side_by_side(sec, pictures)
     if left(sec) > 30:
         _cost(sec, cfg, tracer)
+
+
+def _by_brightness(ours, cycles):
+    """Rows (value range, pixels, MAE, signed mean) of the fully covered pixels binned by
+    their value in Cycles: does the error follow the brightness (a scale) or not."""
+    full = ours[..., 3] >= 0.999
+    value = cycles[full].mean(axis=-1)
+    diff = ours[..., :3][full] - cycles[full]
+    rows = []
+    for lo, hi in ((0.0, 0.05), (0.05, 0.2), (0.2, 0.5), (0.5, 1.0), (1.0, 3.0), (3.0, np.inf)):
+        m = (value >= lo) & (value < hi)
+        if m.any():
+            rows.append([f"{lo:g} – {hi:g}", str(int(m.sum())), fmt_num(np.abs(diff[m]).mean()),
+                         f"{fmt_num(diff[m].mean())} ({diff[m].mean() / max(value[m].mean(), 1e-12):+.1%})"])
+    return rows
 
 
 def _groom(sec, cfg, tracer, render_cycles, pictures):
