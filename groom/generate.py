@@ -317,11 +317,11 @@ class Generator:
             asked = p.tolerance * (base_radius if p.tolerance_units == "radius" else np.ones(len(frac)))
             tol = np.maximum(asked, 1e-300)
             bins = shaping_bound(np.stack([d["bound"] for d in kd]), rows, p)
-            res = adaptive_sigma(frac, g.T, w.T, bins, tol, max_cyl, table_step=1.0 / (self._samples - 1))
+            res = adaptive_sigma(frac, g.T, w.T, bins, tol, max_cyl, table_step=1.0 / (self._samples - 1), clump=clump)
             sigma, counts = res.sigma, res.counts
             self._note_resolution(sel, res.met, tol, res.needed)
             pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma, threads=_threads_for(len(frac)), clump=clump)
-            attrs = self._attributes(ids, counts, sigma / np.repeat(frac, counts), g, w, base_radius)
+            attrs = self._attributes(ids, counts, (sigma, frac), g, w, base_radius)
         threads = _threads_for(len(frac))
         self._report(0.6, "frizz and curl")
         shape_strands(pts, counts, sigma, frac, args[1], g[0], ids, rows, p, threads)

@@ -19,6 +19,8 @@ import numpy as np
 
 from hairio import InputError
 
+from .settings import ACCELS, DEFAULT_ACCEL
+
 # Samples are placed in float32 pixel coordinates of the whole image: below 16384 they
 # round to within 1/2048 of a pixel (a 32nd of the finest stratum, 64 per side at MAX_SPP);
 # each doubling of the size doubles that error.
@@ -216,6 +218,9 @@ def build_parser():
     for flag, field, what in HAIR_SLIDERS:
         r.add_argument(flag, type=float, dest=field, metavar="X", default=getattr(defaults, field),
                        help=f"chiang model: {what} (default %(default)s)")
+    r.add_argument("--accel", choices=ACCELS, default=DEFAULT_ACCEL,
+                   help="what rays walk: the uniform grid or the BVH over cylinders; same image "
+                        "(default %(default)s)")
     r.add_argument("--camera", default="auto",
                    help="auto (frame the strands' and meshes' bounds from the front) or EYE:TARGET:FOV as "
                         "x,y,z:tx,ty,tz:degrees, e.g. 0,-3,1:0,0,1:40 (default %(default)s)")
@@ -262,7 +267,7 @@ def main(argv=None):
         meshes = read_meshes(args.mesh, args.mesh_color, to_our_frame)
         t1 = time.perf_counter()
         from .renderer import Renderer
-        renderer = Renderer()
+        renderer = Renderer(accel=args.accel)
         try:
             renderer.set_strands(strands)
         except InputError as e:     # strands the tracer cannot resolve: name the file they came from
@@ -282,7 +287,10 @@ def main(argv=None):
     print(f"read {t1 - t0:.3f} s: {strands.num_strands} strands, {st['num_cylinders']} cylinders"
           + (f", {st['num_triangles']} mesh triangles" if st["num_triangles"] else ""))
     print(f"upload {st['upload_s']:.3f} s (cylinders {st['cylinders_s']:.3f} s)")
-    print(f"grid build {st['grid_s']:.3f} s: {st['grid_dims']} cells, {st['grid_refs']} references")
+    if args.accel == "grid":
+        print(f"grid build {st['grid_s']:.3f} s: {st['grid_dims']} cells, {st['grid_refs']} references")
+    else:
+        print(f"BVH build {st['accel_s']:.3f} s: {st['bvh_pieces']} pieces, {st['bvh_entries']} nodes and leaves")
     print(f"render {render_s:.3f} s at {size[0]}x{size[1]}, {args.spp} spp"
           + (", minimum pixel width" if settings.min_pixel_width else ""))
     print(f"wrote {args.out}")

@@ -123,6 +123,15 @@ class RenderSettings:
         return (r * a, g * a, b * a, a)
 
 
+# What rays walk (Renderer(accel=...)): the thesis's uniform grid (tracer/grid.py) or a BVH
+# over cylinder pieces (tracer/bvh.py). Same hits, same image (the tests render both). The
+# default is the one that measured faster on the benchmark scenes (benchmarks/sections/accel.py,
+# llvmpipe, 512², CPU time): the grid; the BVH took 1.27x its time on the real straight.hair,
+# 1.5x on 1,000 and 10,000 wavy strands and 1.17x on 100,000 (1.0-1.6x over three runs on a
+# shared machine), with 2-5x fewer cylinder tests per ray, and builds in numpy 1-3.4x slower.
+ACCELS = ("grid", "bvh")
+DEFAULT_ACCEL = "grid"
+
 # The grid lists every cylinder with its radius times this factor, so minimum pixel width can
 # widen a radius up to it without hits falling outside the cells the cylinder is listed in.
 GRID_WIDEN_CAP = 8.0
