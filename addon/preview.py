@@ -31,7 +31,7 @@ import numpy as np
 import bpy
 from hairio import InputError, Strands
 
-from . import blender_curves, scene_data
+from . import blender_curves, hair_material, scene_data
 from .transaction import transaction
 
 IMAGE_NAME = "Hair Preview"
@@ -123,8 +123,10 @@ def preview_size(scene, settings):
     return w, max(1, int(round(w * aspect)))
 
 
-def scene_lights(scene):
-    """The scene's sun and point lights as tracer.Light (at most 8), or () for none."""
+def scene_lights(scene, sun_strength=False):
+    """The scene's sun and point lights as tracer.Light (at most 8), or () for none.
+    `sun_strength`: suns at their Strength (irradiance, W/m², for the physically based
+    "chiang" shading, which then matches Cycles); else every light at intensity 1."""
     from tracer import Light
     from tracer.settings import MAX_LIGHTS
     lights = []
@@ -133,7 +135,8 @@ def scene_lights(scene):
             continue
         m = np.array(obj.matrix_world, np.float64)
         if obj.data.type == 'SUN':
-            lights.append(Light("directional", tuple(-m[:3, 2]), tuple(obj.data.color), 1.0))
+            strength = float(obj.data.energy) if sun_strength else 1.0
+            lights.append(Light("directional", tuple(-m[:3, 2]), tuple(obj.data.color), strength))
         else:
             lights.append(Light("point", tuple(m[:3, 3]), tuple(obj.data.color), 1.0))
         if len(lights) == MAX_LIGHTS:
@@ -141,13 +144,17 @@ def scene_lights(scene):
     return tuple(lights)
 
 
-def render_settings(scene, settings):
-    """tracer.RenderSettings from the scalp's preview settings."""
+def render_settings(scene, settings, hair_obj=None):
+    """tracer.RenderSettings from the scalp's preview settings (and, for the "chiang"
+    shading, the hair object's Principled Hair BSDF and the suns' strengths)."""
     from tracer import RenderSettings
     kwargs = dict(spp=int(settings.preview_samples), shadows=settings.preview_shadows,
                   shadow_mode=settings.preview_shadow_mode, layers=settings.preview_layers,
                   shading=settings.preview_shading, min_pixel_width=settings.preview_min_pixel_width)
-    lights = scene_lights(scene) if settings.preview_scene_lights else ()
+    physical = settings.preview_shading == "chiang"
+    if physical and hair_obj is not None:
+        kwargs.update(hair_material.principled_hair_settings(hair_obj))
+    lights = scene_lights(scene, sun_strength=physical) if settings.preview_scene_lights else ()
     if lights:
         kwargs["lights"] = lights
     return RenderSettings(**kwargs)
@@ -223,7 +230,7 @@ def begin_render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass
     global _uploaded, _uploaded_meshes
     t0 = time.perf_counter()
     size = preview_size(scene, settings)
-    rs = render_settings(scene, settings)
+    rs = render_settings(scene, settings, hair_obj)
     rs.check()
     camera = _shifted(camera_for(scene, camera_obj, size), sample_pass, rs.spp_n)
     mesh_list = [] if meshes is None else meshes.meshes

@@ -167,9 +167,18 @@ def render_png(renderer, camera, settings, out, tile_pixels=TILE_PIXELS, tile_si
     return spent[0]
 
 
+HAIR_SLIDERS = (("--melanin", "hair_melanin", "melanin 0..1"),
+                ("--melanin-redness", "hair_melanin_redness", "pheomelanin share of the melanin, 0..1"),
+                ("--roughness", "hair_roughness", "longitudinal roughness 0..1"),
+                ("--radial-roughness", "hair_radial_roughness", "azimuthal roughness 0..1"),
+                ("--coat", "hair_coat", "lowers the surface reflection's roughness, 0..1"),
+                ("--ior", "hair_ior", "index of refraction 1..3"),
+                ("--cuticle-tilt", "hair_cuticle_tilt", "cuticle tilt in degrees, -90..90"))
+
+
 def build_parser():
     from hairio.formats.up_axis import UP_CHOICES
-    from .settings import MAX_SPP, RenderSettings
+    from .settings import HAIR_COLORS, MAX_SPP, RenderSettings
     from .shading import DEFAULT_SHADING, SHADING_MODELS
     parser = argparse.ArgumentParser(prog="python -m tracer", description="Render strands with the GPU ray tracer.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -201,6 +210,14 @@ def build_parser():
     r.add_argument("--shading", choices=[m.name for m in SHADING_MODELS], default=DEFAULT_SHADING,
                    help="shading model: " + "; ".join(f"{m.name}: {m.description}" for m in SHADING_MODELS)
                         + " (default %(default)s)")
+    # The "chiang" model's sliders (RenderSettings.hair_*, Cycles' Principled Hair names).
+    defaults = RenderSettings()
+    r.add_argument("--hair-color", choices=HAIR_COLORS, default=defaults.hair_color,
+                   help="what a strand's colour means to the chiang model: strand = the hair's colour (Cycles' "
+                        "Direct Coloring), melanin = a tint over --melanin (default %(default)s)")
+    for flag, field, what in HAIR_SLIDERS:
+        r.add_argument(flag, type=float, dest=field, metavar="X", default=getattr(defaults, field),
+                       help=f"chiang model: {what} (default %(default)s)")
     r.add_argument("--accel", choices=ACCELS, default=DEFAULT_ACCEL,
                    help="what rays walk: the uniform grid or the BVH over cylinders; same image "
                         "(default %(default)s)")
@@ -232,7 +249,8 @@ def main(argv=None):
         from .settings import RenderSettings
         settings = RenderSettings(spp=args.spp, shadows=args.shadows, layers=args.layers,
                                   shading=args.shading, min_pixel_width=args.min_pixel_width,
-                                  background=(0.0, 0.0, 0.0, 0.0))
+                                  background=(0.0, 0.0, 0.0, 0.0), hair_color=args.hair_color,
+                                  **{field: getattr(args, field) for _, field, _ in HAIR_SLIDERS})
         settings.check()
         from hairio.formats.up_axis import file_frame
         from hairio.formats.axes import unconvert_points

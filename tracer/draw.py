@@ -201,3 +201,4 @@ def _set_uniforms(prog, camera, settings):
     set_uniforms(prog, background=settings.premultiplied_background(),
                  material=(settings.ambient, settings.diffuse, settings.specular, settings.shininess),
                  mpw_cap=float(settings.min_pixel_width_cap), t_eps=float(settings.transmittance_eps))
+    set_uniforms(prog, **shading_model(settings.shading).uniforms(settings))

@@ -6,8 +6,9 @@ same strands with the same head, camera and sun: its first image (the add-on's d
 one sample per pixel) and the image its refinement reaches (REFINED_SPP samples, stratified;
 the Blender preview refines to 64). The preview's head is what Render Preview
 shows: opaque, diffuse, the head's base colour; Cycles renders the head with a Principled
-BSDF of that colour. A reading aid, not a measure: the two hair shadings differ by design
-until the preview has the physically based fibre model.
+BSDF of that colour. A reading aid, not a measure: the preview's default hair shading is
+Cycles' fibre model (chiang; section hair_shading measures it against Cycles alone), but
+Cycles here also adds indirect light and the preview an ambient term.
 
 Run alone: `python -m benchmarks --only contact_sheet [--full]` (quick: a quarter of each
 preset's strands at 320²; full: the presets' own counts at 512²).
