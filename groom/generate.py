@@ -852,7 +852,7 @@ def generate_to_npz(path, scalp, keys, params=None, collider=None, progress=None
                          f"strand, or write it elsewhere")
 
     def growing(fraction, stage):
-        if progress is not None:
+        if progress is not None and stage != "done":   # done once the file is
             progress(0.9 * fraction, stage)
     gen = BlockGenerator(scalp, keys, params, collider=collider, progress=growing, block_strands=block_strands)
     key_strands = _key_strands(gen.keys, params, points_per_key)
@@ -869,4 +869,6 @@ def generate_to_npz(path, scalp, keys, params=None, collider=None, progress=None
             del block, array
         label = f"writing {os.path.basename(os.fspath(path))}"
         writer.commit(None if progress is None else lambda f: progress(0.9 + 0.1 * f, label))
+    if progress is not None:
+        progress(1.0, "done")
     return gen.summary
