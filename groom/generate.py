@@ -87,9 +87,9 @@ def _check_inputs(scalp, keys, params, in_memory=True):
 
 
 # Peak memory while growing, per strand and point of points_per_strand, with room for the
-# caller's copy: the result takes 32 bytes a point (SPEC §0 arrays), the growing of one block
-# a few hundred MB more (measured at 1M strands of wavy: 2.4 GB for 62 points a strand).
-_BYTES_PER_POINT = 48
+# caller's copy (measured: 39 bytes at 1M strands of wavy, 62 of its 96 points a strand; the
+# result itself takes 32 bytes a point, SPEC §0 arrays, and a copy of it as many again).
+_BYTES_PER_POINT = 64
 
 # Strands grown at a time. Each block's temporaries (curve parameters, per-point attributes
 # before they are joined, the collision's look-ups) take some 60 bytes a point, about 250 MB

@@ -342,3 +342,26 @@ def test_adaptive_strands_end_without_a_sliver_segment(scalp):
     inside[np.cumsum(s.counts)[:-1] - 1] = False          # steps from one strand to the next
     length = np.sqrt((seg[inside] ** 2).sum(axis=1))
     assert length.min() > 1e-6
+
+
+@pytest.mark.parametrize("resolution", ["adaptive", "fixed"])
+def test_growing_in_blocks_changes_no_number(scalp, keys_around, resolution):
+    """Blocks of 700 strands (the last one shorter) against one block: every array, the
+    resolution notes, the collision's report and an incremental update spanning blocks."""
+    from groom import default_collider
+    params = GroomParams(count=3000, seed=4, resolution_mode=resolution, points_per_strand=24, clump=0.4,
+                         color_variation_point=(0.02, 0.02, 0.02))
+    keys = keys_around(scalp, 7)
+    one = Generator(scalp, keys, params, collider=default_collider(), block_strands=10_000)
+    blocks = Generator(scalp, keys, params, collider=default_collider(), block_strands=700)
+    a, b = one.generate(), blocks.generate()
+    _same(a, b)
+    assert a.collision.strands_moved == b.collision.strands_moved > 0
+    assert a.collision.last == b.collision.last
+    if resolution == "adaptive":
+        for x, y in zip(one._resolution, blocks._resolution):
+            np.testing.assert_array_equal(x, y)
+    reshaped = KeyStrand(keys[3].points + [[0, 0, 0], [0.01, 0, 0], [0, 0.02, 0], [0.01, 0.01, 0]])
+    a, b = one.update_keys({3: reshaped}), blocks.update_keys({3: reshaped})
+    assert blocks.last_recomputed > 700
+    _same(a, b)
