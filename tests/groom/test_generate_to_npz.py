@@ -118,8 +118,8 @@ def test_a_file_the_disk_cannot_take_is_refused_before_the_work(scalp, tmp_path,
     usage = shutil.disk_usage(tmp_path)
     monkeypatch.setattr(shutil, "disk_usage", lambda p: usage._replace(free=10 << 30))
     monkeypatch.setattr(gen, "BlockGenerator", None)    # no work may start
-    with pytest.raises(InputError, match=r"count 10,000,000: .*h\.npz takes up to 39\.79 GiB of disk while it is written "
-                                         r"\(96 points a strand at most.* has 10\.00 GiB free"):
+    with pytest.raises(InputError, match=r"count 10,000,000: .*h\.npz takes up to 39\.79 GiB of disk while it is "
+                                         r"written \(96 points a strand at most.* has 10\.00 GiB free"):
         generate_to_npz(tmp_path / "h.npz", scalp, placement.keys, params)
     assert os.listdir(tmp_path) == []
 
