@@ -13,7 +13,7 @@ import bpy
 from bpy.types import Operator
 from bpy_extras.object_utils import AddObjectHelper, add_object_align_init
 
-from .transaction import report_internal_error, transaction
+from .transaction import reports_errors, transaction
 
 HEAD_NAME = "Hair Head"
 SCALP_NAME = "Hair Scalp"
@@ -48,6 +48,7 @@ class HAIR_OT_add_head(Operator, AddObjectHelper):
             return False
         return super().poll(context)
 
+    @reports_errors
     def execute(self, context):
         from groom import default_head, default_scalp
         from groom.head import CANONICAL_FRONT, CANONICAL_UP
@@ -60,30 +61,26 @@ class HAIR_OT_add_head(Operator, AddObjectHelper):
         matrix = add_object_align_init(context, self)
         head_surface, scalp_surface = default_head(), default_scalp()
         collection = context.collection or context.scene.collection
-        try:
-            # A failure part-way removes every datablock made so far (the transaction).
-            with transaction():
-                head = _add_mesh_object(HEAD_NAME, head_surface, collection)
-                scalp = _add_mesh_object(SCALP_NAME, scalp_surface, collection)
-                head.matrix_world = matrix
-                scalp.parent = head
-                scalp.matrix_parent_inverse.identity()
-                scalp.display_type = 'WIRE'
-                scalp.hide_render = True
-                settings = scalp.keystrand_hair
-                settings.role = 'SCALP'
-                # The bundled head is drawn Z up, face to -Y: its axes are known in the mesh,
-                # so they turn with it when the head is turned or tilted.
-                settings.head_axes = 'LOCAL'
-                settings.up, settings.front = CANONICAL_UP, CANONICAL_FRONT
-                # The hair stays out of the whole head, not only off the scalp cap.
-                settings.collider = head
-                # Selecting can fail (a collection outside the view layer): inside the
-                # transaction, before the other objects are deselected.
-                scalp.select_set(True)
-        except Exception as e:
-            report_internal_error(self, e)
-            return {'CANCELLED'}
+        # A failure part-way removes every datablock made so far (the transaction).
+        with transaction():
+            head = _add_mesh_object(HEAD_NAME, head_surface, collection)
+            scalp = _add_mesh_object(SCALP_NAME, scalp_surface, collection)
+            head.matrix_world = matrix
+            scalp.parent = head
+            scalp.matrix_parent_inverse.identity()
+            scalp.display_type = 'WIRE'
+            scalp.hide_render = True
+            settings = scalp.keystrand_hair
+            settings.role = 'SCALP'
+            # The bundled head is drawn Z up, face to -Y: its axes are known in the mesh,
+            # so they turn with it when the head is turned or tilted.
+            settings.head_axes = 'LOCAL'
+            settings.up, settings.front = CANONICAL_UP, CANONICAL_FRONT
+            # The hair stays out of the whole head, not only off the scalp cap.
+            settings.collider = head
+            # Selecting can fail (a collection outside the view layer): inside the
+            # transaction, before the other objects are deselected.
+            scalp.select_set(True)
         for obj in context.selected_objects:
             if obj != scalp:
                 obj.select_set(False)

@@ -13,15 +13,12 @@ import numpy as np
 import bpy
 from bpy.props import FloatProperty, StringProperty
 from bpy.types import Operator
+from bpy_extras import view3d_utils
+from hairio import InputError
 
 from . import key_points, mirror, scene_data, stroke_input
-from .scene_data import SceneError, find_scalp
-from .transaction import report_internal_error, transaction
-
-
-def _errors():
-    from hairio import InputError
-    return (SceneError, InputError)
+from .scene_data import find_scalp
+from .transaction import reports_errors, transaction
 
 
 def _key_of(context, name=""):
@@ -121,7 +118,6 @@ class HAIR_OT_comb_key(stroke_input.StrokeView, Operator):
 
     def _nearest_key(self, context, coord):
         """(key object, world point of its curve nearest the mouse) within the brush, or None."""
-        from bpy_extras import view3d_utils
         from groom.stroke import sample_cubic
         region, rv3d = self._view.region, self._view.rv3d
         best = None
@@ -129,7 +125,7 @@ class HAIR_OT_comb_key(stroke_input.StrokeView, Operator):
         for obj in scene_data.key_objects(self._scalp):  # a handful of keys
             try:
                 points, kind = scene_data.key_control_points(obj, self._scalp)
-            except SceneError:
+            except InputError:
                 continue
             samples = sample_cubic(points, 24) if kind == "cubic" else points
             world = stroke_input.to_world(self._scalp, samples)
@@ -155,7 +151,7 @@ class HAIR_OT_comb_key(stroke_input.StrokeView, Operator):
         try:
             start = stroke_input.screen_to_world(view.region, view.rv3d, [view.coord(event)], depth)[0]
             self._state = CombState(self, key, start)
-        except _errors() as e:
+        except InputError as e:
             self.report({'ERROR'}, str(e))
             context.workspace.status_text_set(None)
             return {'CANCELLED'}
@@ -173,7 +169,7 @@ class HAIR_OT_comb_key(stroke_input.StrokeView, Operator):
         try:
             if self._state.step(world):
                 self._state.write()
-        except _errors() as e:
+        except InputError as e:
             self.report({'WARNING'}, str(e))
 
     def _cancel(self, context):
@@ -184,35 +180,29 @@ class HAIR_OT_comb_key(stroke_input.StrokeView, Operator):
 
     # --- the work ------------------------------------------------------------------------
 
+    @reports_errors
     def execute(self, context):
         key = _key_of(context, self.key)
         if key is None:
             self.report({'ERROR'}, f"No key strand named {self.key!r}" if self.key else
                         "Make a key strand the active object to comb it")
             return {'CANCELLED'}
-        try:
-            path = stroke_input.stroke_points(self, context)
-            if self.stroke_space != 'WORLD':
-                raise SceneError("Comb Key Strand takes its stroke as world points (stroke_space 'WORLD')")
-            if len(path) < 2:
-                raise SceneError("The comb stroke needs at least two points: where it starts and where it goes")
-            state = CombState(self, key, path[0])
-            changed = False
-            for p in path[1:]:  # one comb step per stroke point, as the modal tool makes them
-                changed |= state.step(p)
-            if changed:
-                with transaction() as tx:
-                    for obj in (key, mirror.partner_of(key)):
-                        if obj is not None:
-                            saved = key_points.snapshot(obj)
-                            tx.undo(lambda obj=obj, saved=saved: key_points.restore(obj, saved))
-                    state.write()
-        except _errors() as e:
-            self.report({'ERROR'}, str(e))
-            return {'CANCELLED'}
-        except Exception as e:
-            report_internal_error(self, e)
-            return {'CANCELLED'}
+        path = stroke_input.stroke_points(self, context)
+        if self.stroke_space != 'WORLD':
+            raise InputError("Comb Key Strand takes its stroke as world points (stroke_space 'WORLD')")
+        if len(path) < 2:
+            raise InputError("The comb stroke needs at least two points: where it starts and where it goes")
+        state = CombState(self, key, path[0])
+        changed = False
+        for p in path[1:]:  # one comb step per stroke point, as the modal tool makes them
+            changed |= state.step(p)
+        if changed:
+            with transaction() as tx:
+                for obj in (key, mirror.partner_of(key)):
+                    if obj is not None:
+                        saved = key_points.snapshot(obj)
+                        tx.undo(lambda obj=obj, saved=saved: key_points.restore(obj, saved))
+                state.write()
         if not changed:
             self.report({'WARNING'}, f"The comb did not reach key strand {key.name!r}: "
                                      "comb closer to it or with a larger radius")

@@ -15,10 +15,11 @@ import numpy as np
 import bpy
 from bpy.props import EnumProperty, FloatProperty
 from bpy.types import Operator
+from hairio import InputError
 
 from . import head, mirror, scene_data, stroke_input
-from .scene_data import SceneError, find_scalp
-from .transaction import report_internal_error, transaction
+from .scene_data import find_scalp
+from .transaction import reports_errors, transaction
 
 SURFACES = (
     ('VIEW', "View Plane", "Draw on the plane through the root that faces you: the strand keeps the "
@@ -29,11 +30,6 @@ SURFACES = (
 
 # The preview is refitted at most this often while dragging (a fit takes a few ms to 50 ms).
 PREVIEW_INTERVAL_S = 0.03
-
-
-def _errors():
-    from hairio import InputError
-    return (SceneError, InputError)
 
 
 class StrokeFit:
@@ -163,7 +159,7 @@ class HAIR_OT_draw_key_strand(stroke_input.StrokeView, Operator):
         stroke_input.capture_view(self, view.region, view.rv3d, hit)
         try:
             self._fit = StrokeFit(self, context, self._scalp, hit)
-        except _errors() as e:
+        except InputError as e:
             self._end(context)
             self.report({'ERROR'}, str(e))
             return {'CANCELLED'}
@@ -177,7 +173,7 @@ class HAIR_OT_draw_key_strand(stroke_input.StrokeView, Operator):
         world = stroke_input.screen_to_world(self._view.region, self._view.rv3d, [coord], self._fit.root_world)
         try:
             self._fit.add(world)
-        except _errors():
+        except InputError:
             return  # a point the surface cannot take (at a perspective eye): left out
         self._world.append(world[0])
         self._mouse.append(coord)
@@ -191,7 +187,7 @@ class HAIR_OT_draw_key_strand(stroke_input.StrokeView, Operator):
         from groom.stroke import sample_cubic
         try:
             control = self._fit.fit()
-        except _errors():
+        except InputError:
             return  # too short yet
         strips = [control, self._fit.mirror_of(control)]
         self._preview.set(*[stroke_input.to_world(self._scalp, sample_cubic(c, 16)) for c in strips
@@ -200,6 +196,7 @@ class HAIR_OT_draw_key_strand(stroke_input.StrokeView, Operator):
 
     # --- the work ------------------------------------------------------------------------
 
+    @reports_errors
     def execute(self, context):
         from groom import KeyStrand
         from groom.stroke import distance_to_polyline, sample_cubic
@@ -207,29 +204,22 @@ class HAIR_OT_draw_key_strand(stroke_input.StrokeView, Operator):
         if scalp is None:
             self.report({'ERROR'}, "Select a scalp mesh first")
             return {'CANCELLED'}
-        try:
-            world = self._stroke_world(context, scalp)
-            fit = StrokeFit(self, context, scalp, world[0])
-            fit.add(world[1:])
-            control = fit.fit()
-            image = fit.mirror_of(control)
-            # For the report only: a coarser polyline than curve_deviation's (a tenth of the cost).
-            deviation = float(distance_to_polyline(np.array(fit.points), sample_cubic(control, 48)).max())
-            with transaction() as tx:
-                tx.keep_settings(scalp)
-                scalp.keystrand_hair.role = 'SCALP'
-                made = [scene_data.key_strand_to_object(scalp, KeyStrand(control, kind="cubic"),
-                                                        name=f"{scalp.name} Key")]
-                if image is not None:
-                    made.append(scene_data.key_strand_to_object(scalp, KeyStrand(image, kind="cubic"),
-                                                                name=f"{scalp.name} Key"))
-                    mirror.pair(made[0], made[1])
-        except _errors() as e:
-            self.report({'ERROR'}, str(e))
-            return {'CANCELLED'}
-        except Exception as e:
-            report_internal_error(self, e)
-            return {'CANCELLED'}
+        world = self._stroke_world(context, scalp)
+        fit = StrokeFit(self, context, scalp, world[0])
+        fit.add(world[1:])
+        control = fit.fit()
+        image = fit.mirror_of(control)
+        # For the report only: a coarser polyline than curve_deviation's (a tenth of the cost).
+        deviation = float(distance_to_polyline(np.array(fit.points), sample_cubic(control, 48)).max())
+        with transaction() as tx:
+            tx.keep_settings(scalp)
+            scalp.keystrand_hair.role = 'SCALP'
+            made = [scene_data.key_strand_to_object(scalp, KeyStrand(control, kind="cubic"),
+                                                    name=f"{scalp.name} Key")]
+            if image is not None:
+                made.append(scene_data.key_strand_to_object(scalp, KeyStrand(image, kind="cubic"),
+                                                            name=f"{scalp.name} Key"))
+                mirror.pair(made[0], made[1])
         for obj in context.selected_objects:
             obj.select_set(False)
         for obj in made:
@@ -251,7 +241,7 @@ class HAIR_OT_draw_key_strand(stroke_input.StrokeView, Operator):
         region, rv3d = stroke_input.region_view(context)
         hit = stroke_input.ray_cast_scalp(context, region, rv3d, scalp, tuple(points[0]))
         if hit is None:
-            raise SceneError("The stroke's first point is not over the scalp: start the stroke on the scalp")
+            raise InputError("The stroke's first point is not over the scalp: start the stroke on the scalp")
         stroke_input.capture_view(self, region, rv3d, hit)
         world = stroke_input.screen_to_world(region, rv3d, points, hit)
         world[0] = hit

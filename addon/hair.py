@@ -3,15 +3,15 @@
 
 All model logic is groom's; this module reads the scene (scene_data), builds a
 groom.Generator and writes its strands with blender_curves. The generators stay cached
-per scalp (live.py) so a key edit regenerates only the affected wisps.
+per scalp (generator_cache.py) so a key edit regenerates only the affected wisps.
 """
 import time
 
 import bpy
 
-from . import blender_curves, preview, scene_data
-from .transaction import transaction
+from . import blender_curves, generator_cache, preview, scene_data
 from .properties import groom_params
+from .transaction import transaction
 
 
 def hair_name(scalp):
@@ -27,7 +27,7 @@ def existing_hair(scalp):
 
 
 def read_inputs(scalp, depsgraph=None):
-    """(groom.Scalp, [KeyStrand]) of a scalp object; SceneError/InputError on bad input."""
+    """(groom.Scalp, [KeyStrand]) of a scalp object; InputError on bad input."""
     return scene_data.read_scalp(scalp, depsgraph), scene_data.read_keys(scalp)
 
 
@@ -84,11 +84,10 @@ def generate(scalp, depsgraph=None, count=None, progress=None):
     """Full generation for a scalp object, kept out of its collider. Returns (hair object,
     GroomResult, timings dict); progress: groom's progress callback or None.
 
-    Reads and computes everything before the first write, so an error (SceneError,
-    hairio.InputError) leaves the file untouched; the writes are one transaction, so an
-    unexpected error among them leaves it untouched too.
+    Reads and computes everything before the first write, so an error (hairio.InputError)
+    leaves the file untouched; the writes are one transaction, so an unexpected error among
+    them leaves it untouched too.
     """
-    from . import live
     settings = scalp.keystrand_hair
     t0 = time.perf_counter()
     scalp_data, keys = read_inputs(scalp, depsgraph)
@@ -106,6 +105,6 @@ def generate(scalp, depsgraph=None, count=None, progress=None):
             settings.role = 'SCALP'
         hair = write_hair(scalp, result.strands, result.root_uv)
     t3 = time.perf_counter()
-    live.remember(scalp, scalp_data, keys, gen, result, collider)
+    generator_cache.remember(scalp, scalp_data, keys, gen, result, collider)
     return hair, result, {"read_s": t1 - t0, "collider_s": t_collider - t1, "groom_s": t2 - t_collider,
                           "write_s": t3 - t2, "total_s": t3 - t0}

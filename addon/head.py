@@ -6,17 +6,16 @@ One source for the axes: Generate and live update (properties.groom_params) and 
 (place_preset) both read scalp_axes, so the hairs' root frames and the keys' anchors agree.
 """
 import numpy as np
-
-from .scene_data import SceneError
+from hairio import InputError
 
 
 def _linear_part(obj):
-    """The 3x3 of the object's world matrix; SceneError when it has no inverse (a flattened
+    """The 3x3 of the object's world matrix; InputError when it has no inverse (a flattened
     object: no direction in its mesh points up in the scene)."""
     m = np.array(obj.matrix_world, np.float64)[:3, :3]
     size = float(np.abs(m).max())
     if not size > 0 or abs(np.linalg.det(m)) <= 1e-12 * size ** 3:
-        raise SceneError(f"Scalp {obj.name!r} has a zero scale on some axis, so the scene's up "
+        raise InputError(f"Scalp {obj.name!r} has a zero scale on some axis, so the scene's up "
                          "and front cannot be found in its mesh: give it a non-zero scale, or "
                          "set Head Axes to Mesh and give Up and Front in the mesh's coordinates")
     return m

@@ -9,16 +9,6 @@ import bpy
 from .scene_data import _matrix
 
 
-def bezier_arrays(points):
-    """groom's piecewise cubic (3k+1, 3) -> Blender Bézier points: (co, left, right) (k+1, 3)
-    each; the free end handles point straight on, as scene_data.key_strand_to_object makes them."""
-    p = np.asarray(points, np.float64)
-    co = p[0::3]
-    right = np.vstack([p[1::3], [2 * co[-1] - p[-2]]])
-    left = np.vstack([[2 * co[0] - p[1]], p[2::3]])
-    return co, left, right
-
-
 def _to_object(obj, scalp, points):
     """Scalp-space points -> the key object's own coordinates (exact where, as Add Key Strand
     makes them, the two spaces coincide)."""
@@ -36,7 +26,8 @@ def write_key_points(obj, scalp, points, kind="cubic"):
     local = _to_object(obj, scalp, points)
     curve = obj.data
     if kind == "cubic":
-        co, left, right = bezier_arrays(local)
+        from groom.bezier import cubic_to_handles
+        co, left, right = cubic_to_handles(local)
         spline = curve.splines[0] if len(curve.splines) else None
         if spline is None or spline.type != 'BEZIER' or len(spline.bezier_points) != len(co):
             spline = _replace_first_spline(curve, 'BEZIER')

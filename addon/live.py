@@ -21,68 +21,18 @@ import time
 import bpy
 from bpy.app.handlers import persistent
 
-from . import head, scene_data
+from . import generator_cache, hair, preview, scene_data
+from .generator_cache import forget, state_of, states
 from .properties import groom_params
-from .scene_data import SceneError
+from .transaction import clear_background, forget_background, report_background
 
 SETTLE_S = 0.4
 MIN_INTERVAL_S = 0.05
+TASK = "Live update"
 
-
-class ScalpState:
-    """The cached generators of one scalp (keyed by the scalp object's session_uid)."""
-
-    def __init__(self, scalp_data, keys, full, collider, scene_sig):
-        self.scalp_data = scalp_data
-        self.collider = collider               # groom.Collider or None (Collision off)
-        self.collider_version = 0              # counts the colliders read since Generate
-        self.scene_sig = scene_sig             # scene_signature() the hair was last grown with
-        self.full = full                       # groom.Generator at the full count
-        self.full_result = None                # its last GroomResult
-        self.full_sig = scene_data.keys_signature(keys)
-        self.full_version = 0                  # collider_version `full` was built with
-        self.view = None                       # groom.Generator at the viewport count
-        self.view_sig = None
-        self.view_version = 0
-        self.dragging = False
-        self.last_edit = 0.0
-        self.catchup = None                    # (thread, result box, key signature, collider version)
-
-
-_states = {}
 _pending = set()
 _timer_on = False
 _last_cost = 0.0
-
-
-def scene_signature(scalp):
-    """The hair's inputs other than the keys that can change without a key edit: the head's
-    axes in the mesh (None when they cannot be read) and collider_signature."""
-    try:
-        axes = head.scalp_axes(scalp)
-    except SceneError:
-        axes = None
-    return axes, scene_data.collider_signature(scalp)
-
-
-def remember(scalp, scalp_data, keys, generator, result, collider=None):
-    """Called after a full Generate: cache its generator (grown with `collider`) for live
-    updates."""
-    state = ScalpState(scalp_data, keys, generator, collider, scene_signature(scalp))
-    state.full_result = result
-    _states[scalp.session_uid] = state
-
-
-def forget(scalp=None):
-    for state in (_states.values() if scalp is None else [_states.get(scalp.session_uid)]):
-        if state is not None and state.catchup is not None:
-            state.catchup[0].join()  # the thread holds the generator; let it finish first
-    if scalp is None:
-        _states.clear()
-        _pending.clear()
-    else:
-        _states.pop(scalp.session_uid, None)
-        _pending.discard(scalp.session_uid)
 
 
 def _scalp_by_uid(uid):
@@ -92,17 +42,12 @@ def _scalp_by_uid(uid):
     return None
 
 
-def _changed(sig, old):
-    if old is None or len(sig) != len(old):
-        return None
-    return [i for i, (a, b) in enumerate(zip(sig, old)) if a.shape != b.shape or not (a == b).all()]
-
-
 def _update(gen, sig, old_sig, keys, scalp_data, params, collider, stale=False):
     """(generator, GroomResult or None when nothing changed). Pure groom work: no bpy, so
     it may run on a worker thread. stale: the collider changed since `gen` was built."""
     from groom import Generator
-    changed = _changed(sig, old_sig)
+    from groom.keys import changed_keys
+    changed = changed_keys(sig, old_sig)
     if gen is not None and (stale or gen.params.to_dict() != params.to_dict()):
         gen = None  # settings, axes or collider changed since it was built: start over with them
     if changed is None or gen is None:
@@ -116,26 +61,24 @@ def _update(gen, sig, old_sig, keys, scalp_data, params, collider, stale=False):
 def process(now=None, settle=False):
     """Do the pending live updates now. settle=True also runs the full-count catch-up
     (used when edits have stopped, and by scripts that need the final hair at once).
-    Returns the number of hair objects written."""
-    from . import hair
+    Returns the number of hair objects written. What goes wrong is noted for the panel
+    (transaction.report_background) and the last good hair stays."""
+    from groom.keys import keys_signature
     now = time.monotonic() if now is None else now
     written = 0
     for uid in list(_pending):
         _pending.discard(uid)
-        state = _states.get(uid)
+        state = state_of(uid)
         scalp = _scalp_by_uid(uid)
         if state is None or scalp is None or hair.existing_hair(scalp) is None:
             continue
         settings = scalp.keystrand_hair
-        try:
-            keys = scene_data.read_keys(scalp)
-        except Exception:
-            # Mid-edit states (a key with one point, all keys deleted) are skipped silently;
-            # Generate reports them properly.
-            continue
-        sig = scene_data.keys_signature(keys)
         view_count = min(settings.viewport_count, settings.count)
         try:
+            # Mid-edit states (a key with one point, all keys deleted) are bad input: the
+            # panel says why the hair waits.
+            keys = scene_data.read_keys(scalp)
+            sig = keys_signature(keys)
             _refresh_scene(scalp, state)
             if view_count >= settings.count:
                 if state.catchup is not None:
@@ -154,14 +97,15 @@ def process(now=None, settle=False):
                 state.view_sig, state.view_version = sig, state.collider_version
                 if result is not None:
                     state.dragging = True
-        except Exception as e:  # bad parameters mid-edit: keep the last good hair
-            print(f"Key-strand hair: live update skipped ({e})")
+        except Exception as e:  # the last good hair stays
+            report_background(scalp, TASK, e)
             continue
+        clear_background(scalp, TASK)
         if result is not None:
             hair.write_hair(scalp, result.strands, result.root_uv)
             state.last_edit = now
             written += 1
-    for uid, state in list(_states.items()):
+    for uid, state in states():
         if state.catchup is not None:
             written += _finish_catch_up(uid, state, wait=settle)
         if state.dragging and state.catchup is None and (settle or now - state.last_edit >= SETTLE_S):
@@ -175,8 +119,7 @@ def _refresh_scene(scalp, state):
     """Note the scene_signature the hair is about to be grown with; the collider is read
     again when its signature changed (the generators built with the old one then start
     over: see collider_version)."""
-    from . import hair
-    axes, collider_sig = scene_signature(scalp)
+    axes, collider_sig = generator_cache.scene_signature(scalp)
     if collider_sig != state.scene_sig[1]:
         depsgraph = bpy.context.evaluated_depsgraph_get()
         state.collider = hair.read_collider(scalp, depsgraph, state.scalp_data)
@@ -188,7 +131,7 @@ def _start_catch_up(uid, state):
     """Bring the full-count hair up to date with the keys after an edit, on a worker thread
     (groom is numpy and mostly releases the GIL), so the UI keeps running meanwhile. The scene
     is read here, on the main thread; the thread touches only the generator."""
-    from . import hair
+    from groom.keys import keys_signature
     state.dragging = False
     scalp = _scalp_by_uid(uid)
     if scalp is None or hair.existing_hair(scalp) is None:
@@ -197,9 +140,9 @@ def _start_catch_up(uid, state):
         keys = scene_data.read_keys(scalp)
         params = groom_params(scalp.keystrand_hair)
     except Exception as e:
-        print(f"Key-strand hair: live update skipped ({e})")
+        report_background(scalp, TASK, e)
         return
-    sig = scene_data.keys_signature(keys)
+    sig = keys_signature(keys)
     box = {}
     collider, version = state.collider, state.collider_version
     stale = state.full_version != version
@@ -218,7 +161,6 @@ def _start_catch_up(uid, state):
 
 def _finish_catch_up(uid, state, wait=False):
     """Write the catch-up's result once its thread is done; returns 1 when hair was written."""
-    from . import hair
     thread, box, sig, version = state.catchup
     if wait:
         thread.join()
@@ -226,7 +168,9 @@ def _finish_catch_up(uid, state, wait=False):
         return 0
     state.catchup = None
     if "error" in box:
-        print(f"Key-strand hair: live update skipped ({box['error']})")
+        scalp = _scalp_by_uid(uid)
+        if scalp is not None:
+            report_background(scalp, TASK, box["error"])
         return 0
     state.full, state.full_sig, state.full_version = box["gen"], sig, version
     # None: keys are back where they were; the view generator changed the hair object,
@@ -245,7 +189,7 @@ def _tick():
     start = time.monotonic()
     process(start)
     _last_cost = time.monotonic() - start
-    if _pending or any(s.dragging or s.catchup is not None for s in _states.values()):
+    if _pending or any(s.dragging or s.catchup is not None for _uid, s in states()):
         # Leave the UI at least as much time as the update took.
         return max(MIN_INTERVAL_S, 1.5 * _last_cost)
     _timer_on = False
@@ -255,7 +199,6 @@ def _tick():
 def _key_scalps(depsgraph):
     """Scalps whose key strands or scene_signature changed; also notes edited hair for the
     preview."""
-    from . import preview
     uids = set()
     objects_changed = False
     for update in depsgraph.updates:
@@ -276,9 +219,9 @@ def _key_scalps(depsgraph):
                     uids.add(obj.keystrand_hair.scalp.session_uid)
     if objects_changed:
         # A collider moved (or a scalp's parent, turning its axes with Head Axes 'Scene').
-        for uid, state in _states.items():
+        for uid, state in states():
             scalp = _scalp_by_uid(uid)
-            if scalp is not None and scene_signature(scalp) != state.scene_sig:
+            if scalp is not None and generator_cache.scene_signature(scalp) != state.scene_sig:
                 uids.add(uid)
     return uids
 
@@ -286,7 +229,7 @@ def _key_scalps(depsgraph):
 @persistent
 def on_depsgraph_update(scene, depsgraph):
     global _timer_on
-    uids = {u for u in _key_scalps(depsgraph) if u in _states}
+    uids = {u for u in _key_scalps(depsgraph) if state_of(u) is not None}
     if not uids:
         return
     live = set()
@@ -300,9 +243,17 @@ def on_depsgraph_update(scene, depsgraph):
         bpy.app.timers.register(_tick, first_interval=MIN_INTERVAL_S)
 
 
+def forget_all():
+    """Drop every cached generator, pending update and note (a file is loaded, the
+    extension disabled)."""
+    forget()
+    _pending.clear()
+    forget_background()
+
+
 @persistent
 def on_load(*_args):
-    forget()
+    forget_all()
 
 
 HANDLERS = ((bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
@@ -323,4 +274,4 @@ def unregister_handlers():
     if bpy.app.timers.is_registered(_tick):
         bpy.app.timers.unregister(_tick)
     _timer_on = False
-    forget()
+    forget_all()

@@ -19,10 +19,12 @@ import numpy as np
 import bpy
 from bpy.app.handlers import persistent
 from bpy.props import PointerProperty
+from hairio import InputError
 
 from . import head, key_points, scene_data
-from .scene_data import SceneError
+from .transaction import clear_background, report_background
 
+TASK = "Mirror"
 _heads = {}      # scalp session_uid -> (fingerprint, groom.Scalp, groom.HeadFrame)
 _written = {}    # key session_uid -> its control points as this module last wrote them
 _busy = False
@@ -79,7 +81,7 @@ def remember_written(obj):
     s = obj.keystrand_hair
     try:
         _written[obj.session_uid] = scene_data.key_control_points(obj, s.scalp)[0]
-    except SceneError:
+    except InputError:
         _written.pop(obj.session_uid, None)
 
 
@@ -96,7 +98,7 @@ def sync(obj, depsgraph=None):
     scalp = obj.keystrand_hair.scalp
     try:
         points, kind = scene_data.key_control_points(obj, scalp)
-    except SceneError:
+    except InputError:
         return False  # mid-edit (a key with one point): nothing to mirror yet
     if _same(points, _written.get(obj.session_uid)):
         return False
@@ -104,7 +106,7 @@ def sync(obj, depsgraph=None):
     target = mirrored(points, scalp, scalp_data=scalp_data, frame=frame)
     try:
         current, current_kind = scene_data.key_control_points(other, scalp)
-    except SceneError:
+    except InputError:
         current, current_kind = None, None
     # Float32 coordinates and the root's snap make a pair mirror to within rounding, not bits.
     if current_kind == kind and _same(current, target, 1e-6 * frame.size):
@@ -143,7 +145,6 @@ def on_depsgraph_update(scene, depsgraph):
     edited = _edited_keys(depsgraph)
     if not edited:
         return
-    from hairio import InputError
     active = getattr(bpy.context, "active_object", None)
     # The key the artist holds goes first; its partner, rewritten, is then an echo.
     order = sorted(edited.values(), key=lambda o: (o != active, o.name))
@@ -153,11 +154,17 @@ def on_depsgraph_update(scene, depsgraph):
         for obj in order:
             if obj.session_uid in done:
                 continue
+            scalp = obj.keystrand_hair.scalp
             try:
                 if sync(obj, depsgraph):
                     done.add(obj.keystrand_mirror.session_uid)
-            except (SceneError, InputError) as e:  # a scalp whose head cannot be read: the pair waits
-                print(f"Key-strand hair: mirror skipped ({e})")
+            except Exception as e:  # e.g. a scalp whose head cannot be read: the pair waits
+                if scalp is None:
+                    raise
+                report_background(scalp, TASK, e)
+            else:
+                if scalp is not None:
+                    clear_background(scalp, TASK)
     finally:
         _busy = False
 

@@ -2,7 +2,7 @@
 """Operators: Add Key Strand, Generate, Render Preview, presets, export.
 
 Each one checks and computes everything it needs before its first change to the file, and
-makes its changes as one transaction (transaction.py), so a failure is a report in the UI
+its press is one transaction (transaction.reports_errors), so a failure is a report in the UI
 and leaves the scene and the files exactly as they were (and makes no undo step). A bad
 input is reported as the user's to fix; anything else is a bug, reported as an internal
 error with its traceback in the console, and undone all the same. Never a traceback in the
@@ -13,14 +13,18 @@ import os
 import pathlib
 import time
 
+import numpy as np
 import bpy
 from bpy.props import EnumProperty, FloatVectorProperty, BoolProperty, StringProperty
 from bpy.types import Operator
+from bpy_extras import view3d_utils
 from bpy_extras.io_utils import ExportHelper
 
-from . import scene_data
-from .scene_data import SceneError, find_scalp
-from .transaction import report_internal_error, transaction
+from . import blender_curves, head, preview, progress, scene_data
+from .hair import existing_hair, generate, read_collider
+from .properties import dict_to_settings, groom_params
+from .scene_data import find_scalp
+from .transaction import reports_errors, transaction
 
 EXPORT_FORMATS = (
     ('npz', "NumPy arrays (.npz)", "Strand arrays (points, counts, radius, color, alpha, wisp)"),
@@ -29,12 +33,6 @@ EXPORT_FORMATS = (
     ('abc', "Alembic (.abc)", "Alembic curves, through Blender's own exporter"),
     ('usd', "Universal Scene Description (.usd)", "USD BasisCurves, through Blender's own exporter"),
 )
-
-
-def _errors():
-    """The exception types that mean 'the user can fix this': reported, never raised."""
-    from hairio import InputError
-    return (SceneError, InputError)
 
 
 def _scalp_or_report(op, context):
@@ -55,7 +53,6 @@ def _poll_scalp(cls, context):
 def _poll_hair(cls, context):
     if not _poll_scalp(cls, context):
         return False
-    from .hair import existing_hair
     if existing_hair(find_scalp(context)) is None:
         cls.poll_message_set("Generate the hair first")
         return False
@@ -132,7 +129,6 @@ class HAIR_OT_add_key_strand(Operator):
 
     @staticmethod
     def _raycast(context, event):
-        from bpy_extras import view3d_utils
         scalp = find_scalp(context)
         region, rv3d = context.region, context.region_data
         if scalp is None or region is None or rv3d is None:
@@ -147,35 +143,28 @@ class HAIR_OT_add_key_strand(Operator):
         ok, loc, _normal, _face = evaluated.ray_cast(o_local, d_local)
         return (scalp.matrix_world @ loc) if ok else None
 
+    @reports_errors
     def execute(self, context):
-        import numpy as np
         from groom import place_key
         from groom.frames import root_frames
-        from . import head
+        from groom.keys import shape_profile
         scalp = _scalp_or_report(self, context)
         if scalp is None:
             return {'CANCELLED'}
         settings = scalp.keystrand_hair
-        try:
-            scalp_data = scene_data.read_scalp(scalp, context.evaluated_depsgraph_get())
-            world = np.append(np.asarray(self.location, np.float64), 1.0)
-            local = (np.linalg.inv(np.array(scalp.matrix_world, np.float64)) @ world)[:3]
-            tri, bary, root = scalp_data.closest_points(local[None])
-            normal = scalp_data.normals_at(tri, bary, settings.normal_mode)
-            # The head's axes in the mesh, the ones Generate grows the hair with.
-            frame = root_frames(normal, *head.scalp_axes(scalp))[0]
-            profile = scene_data.shape_profile(settings.key_shape, settings.key_length)
-            points = place_key(profile, root[0], frame)
-            with transaction() as tx:
-                tx.keep_settings(scalp)
-                settings.role = 'SCALP'
-                key = scene_data.new_key_object(scalp, points, name=f"{scalp.name} Key")
-        except _errors() as e:
-            self.report({'ERROR'}, str(e))
-            return {'CANCELLED'}
-        except Exception as e:
-            report_internal_error(self, e)
-            return {'CANCELLED'}
+        scalp_data = scene_data.read_scalp(scalp, context.evaluated_depsgraph_get())
+        world = np.append(np.asarray(self.location, np.float64), 1.0)
+        local = (np.linalg.inv(np.array(scalp.matrix_world, np.float64)) @ world)[:3]
+        tri, bary, root = scalp_data.closest_points(local[None])
+        normal = scalp_data.normals_at(tri, bary, settings.normal_mode)
+        # The head's axes in the mesh, the ones Generate grows the hair with.
+        frame = root_frames(normal, *head.scalp_axes(scalp))[0]
+        profile = shape_profile(settings.key_shape.lower(), settings.key_length)
+        points = place_key(profile, root[0], frame)
+        with transaction() as tx:
+            tx.keep_settings(scalp)
+            settings.role = 'SCALP'
+            key = scene_data.new_key_object(scalp, points, name=f"{scalp.name} Key")
         for obj in context.selected_objects:
             obj.select_set(False)
         key.select_set(True)
@@ -194,21 +183,13 @@ class HAIR_OT_generate(Operator):
     def poll(cls, context):
         return _poll_scalp(cls, context)
 
+    @reports_errors
     def execute(self, context):
-        from .hair import generate
-        from .progress import BlenderProgress
         scalp = _scalp_or_report(self, context)
         if scalp is None:
             return {'CANCELLED'}
-        try:
-            with BlenderProgress(context.window_manager, context.workspace, "Generating hair") as progress:
-                hair, result, t = generate(scalp, context.evaluated_depsgraph_get(), progress=progress)
-        except _errors() as e:
-            self.report({'ERROR'}, str(e))
-            return {'CANCELLED'}
-        except Exception as e:
-            report_internal_error(self, e)
-            return {'CANCELLED'}
+        with progress.BlenderProgress(context.window_manager, context.workspace, "Generating hair") as shown:
+            hair, result, t = generate(scalp, context.evaluated_depsgraph_get(), progress=shown)
         s = result.strands
         collision = result.collision
         moved = "" if collision is None else f", {collision.strands_moved:,} moved out of {collision.collider!r}"
@@ -232,9 +213,10 @@ class HAIR_OT_render_preview(Operator):
     def poll(cls, context):
         return _poll_scalp(cls, context)
 
+    @reports_errors(failures=((preview.RendererDied, lambda op, e: (
+        f"The preview renderer stopped ({e}). Blender is fine; press Render Preview again to start a "
+        "new renderer")),))
     def execute(self, context):
-        from . import preview
-        from .hair import existing_hair
         scalp = _scalp_or_report(self, context)
         if scalp is None:
             return {'CANCELLED'}
@@ -248,21 +230,9 @@ class HAIR_OT_render_preview(Operator):
                                    "(Ctrl+Numpad 0 on a camera)")
             return {'CANCELLED'}
         t0 = time.perf_counter()
-        try:
-            pixels, t = preview.render(context.scene, hair, camera, scalp.keystrand_hair)
-            with transaction():
-                image = preview.write_image(pixels)
-                preview.show_image(context, image)
-        except _errors() as e:
-            self.report({'ERROR'}, str(e))
-            return {'CANCELLED'}
-        except preview.RendererDied as e:
-            self.report({'ERROR'}, f"The preview renderer stopped ({e}). Blender is fine; "
-                                   "press Render Preview again to start a new renderer")
-            return {'CANCELLED'}
-        except Exception as e:
-            report_internal_error(self, e)
-            return {'CANCELLED'}
+        pixels, t = preview.render(context.scene, hair, camera, scalp.keystrand_hair)
+        image = preview.write_image(pixels)
+        preview.show_image(context, image)
         h, w = pixels.shape[:2]
         self.report({'INFO'}, f"Rendered {w}x{h} in {time.perf_counter() - t0:.2f} s")
         return {'FINISHED'}
@@ -284,11 +254,9 @@ class HAIR_OT_load_preset(Operator):
     def poll(cls, context):
         return _poll_scalp(cls, context)
 
+    @reports_errors
     def execute(self, context):
         from groom import load_preset
-        from . import head
-        from .hair import read_collider
-        from .properties import dict_to_settings
         scalp = _scalp_or_report(self, context)
         if scalp is None:
             return {'CANCELLED'}
@@ -296,34 +264,28 @@ class HAIR_OT_load_preset(Operator):
         if not source:
             self.report({'ERROR'}, f"Preset {self.preset!r} not found")
             return {'CANCELLED'}
-        try:
-            preset = load_preset(source)
-            depsgraph = context.evaluated_depsgraph_get()
-            scalp_data = scene_data.read_scalp(scalp, depsgraph)
-            # The preset's Collision is the scalp's once loaded: its keys are placed with it.
-            collider = read_collider(scalp, depsgraph, scalp_data, preset.params.collision)
-            placement = head.place_preset(preset, scalp, scalp_data, collider)
-            keys = placement.keys
-            with transaction() as tx:
-                tx.keep_settings(scalp)
-                old = scene_data.key_objects(scalp) if self.replace else []
-                settings = scalp.keystrand_hair
-                settings.role = 'SCALP'
-                dict_to_settings(settings, preset.params.to_dict())
-                names = [f"{scalp.name} Key {i:02d}" for i in range(len(keys))]
-                made = [scene_data.key_strand_to_object(scalp, key, name=name)
-                        for key, name in zip(keys, names)]
-                # Removing cannot be undone, so the old keys go last, once every new one is
-                # made; the new ones then take the names the old ones held.
-                scene_data.remove_key_objects(old)
-                for obj, name in zip(made, names):
-                    obj.name = obj.data.name = name
-        except _errors() as e:
-            self.report({'ERROR'}, str(e))
-            return {'CANCELLED'}
-        except Exception as e:
-            report_internal_error(self, e)
-            return {'CANCELLED'}
+        preset = load_preset(source)
+        depsgraph = context.evaluated_depsgraph_get()
+        scalp_data = scene_data.read_scalp(scalp, depsgraph)
+        # The preset's Collision is the scalp's once loaded: its keys are placed with it.
+        collider = read_collider(scalp, depsgraph, scalp_data, preset.params.collision)
+        placement = head.place_preset(preset, scalp, scalp_data, collider)
+        keys = placement.keys
+        with transaction() as tx:
+            tx.keep_settings(scalp)
+            old = scene_data.key_objects(scalp) if self.replace else []
+            settings = scalp.keystrand_hair
+            settings.role = 'SCALP'
+            # The placement's parameters: the preset's, its parting carried onto this head.
+            dict_to_settings(settings, placement.params.to_dict())
+            names = [f"{scalp.name} Key {i:02d}" for i in range(len(keys))]
+            made = [scene_data.key_strand_to_object(scalp, key, name=name)
+                    for key, name in zip(keys, names)]
+            # Removing cannot be undone, so the old keys go last, once every new one is
+            # made; the new ones then take the names the old ones held.
+            scene_data.remove_key_objects(old)
+            for obj, name in zip(made, names):
+                obj.name = obj.data.name = name
         lifted = f", {len(placement.lifted)} lifted out of {collider.name!r}" if placement.lifted else ""
         self.report({'INFO'}, f"Loaded preset {preset.name!r}: {len(keys)} key strands{lifted}")
         warning = placement.warning()
@@ -353,28 +315,18 @@ class HAIR_OT_save_preset(Operator, ExportHelper):
             self.filepath = os.path.join(folder, "my_hairstyle.json")
         return ExportHelper.invoke(self, context, event)
 
+    @reports_errors(failures=((OSError, lambda op, e: f"Cannot write {op.filepath}: {e}"),))
     def execute(self, context):
         from groom import save_preset
-        from .properties import groom_params
         scalp = _scalp_or_report(self, context)
         if scalp is None:
             return {'CANCELLED'}
-        try:
-            keys = scene_data.read_keys(scalp)
-            params = groom_params(scalp.keystrand_hair)
-            # Given the scalp, the preset is stored in the bundled head's space through this
-            # head's frame, so Load Preset places it the same way here and on any other head.
-            scalp_data = scene_data.read_scalp(scalp, context.evaluated_depsgraph_get())
-            save_preset(self.filepath, keys, params, description=self.description, scalp=scalp_data)
-        except _errors() as e:
-            self.report({'ERROR'}, str(e))
-            return {'CANCELLED'}
-        except OSError as e:
-            self.report({'ERROR'}, f"Cannot write {self.filepath}: {e}")
-            return {'CANCELLED'}
-        except Exception as e:
-            report_internal_error(self, e)
-            return {'CANCELLED'}
+        keys = scene_data.read_keys(scalp)
+        params = groom_params(scalp.keystrand_hair)
+        # Given the scalp, the preset is stored in the bundled head's space through this
+        # head's frame, so Load Preset places it the same way here and on any other head.
+        scalp_data = scene_data.read_scalp(scalp, context.evaluated_depsgraph_get())
+        save_preset(self.filepath, keys, params, description=self.description, scalp=scalp_data)
         self.report({'INFO'}, f"Saved preset {self.filepath}")
         return {'FINISHED'}
 
@@ -388,7 +340,6 @@ def export_to_file(hair, path, format, world_space=True, blender_exporter=None):
     USD are always world space. Root UVs are the ones Generate stored from the scalp's UV
     map, when it has one."""
     from hairio.cli import export_strands, groom_library_available
-    from . import blender_curves, preview
     uv = blender_curves.root_uv(hair.data)
     if format in ('abc', 'usd'):
         if not groom_library_available(format):
@@ -406,6 +357,18 @@ def export_blender_module():
     except ImportError:
         return None
     return export_blender
+
+
+def _export_refused():
+    """export_blender's own bad-input error (its ExportError, a ValueError beside InputError)."""
+    module = export_blender_module()
+    return (module.ExportError,) if module else ()
+
+
+def _cannot_write():
+    """The errors that mean the file could not be written (not the user's input, not a bug)."""
+    module = export_blender_module()
+    return (OSError,) + ((module.ExporterFailed,) if module else ())
 
 
 class HAIR_OT_export(Operator, ExportHelper):
@@ -434,8 +397,9 @@ class HAIR_OT_export(Operator, ExportHelper):
         self.filename_ext = "." + self.format
         return ExportHelper.invoke(self, context, event)
 
+    @reports_errors(failures=((lambda: _export_refused(), lambda op, e: str(e)),
+                              (lambda: _cannot_write(), lambda op, e: f"Cannot write {op.export_path}: {e}")))
     def execute(self, context):
-        from .hair import existing_hair
         scalp = find_scalp(context)
         hair = existing_hair(scalp) if scalp is not None else None
         if hair is None:
@@ -452,20 +416,8 @@ class HAIR_OT_export(Operator, ExportHelper):
         if self.format in ('abc', 'usd') and module is None:
             self.report({'ERROR'}, f"Export to .{self.format} is not available in this version")
             return {'CANCELLED'}
-        user_errors = _errors() + ((module.ExportError,) if module else ())
-        cannot_write = (OSError,) + ((module.ExporterFailed,) if module else ())
-        try:
-            with transaction():
-                export_to_file(hair, path, self.format, self.world_space, module)
-        except user_errors as e:
-            self.report({'ERROR'}, str(e))
-            return {'CANCELLED'}
-        except cannot_write as e:
-            self.report({'ERROR'}, f"Cannot write {path}: {e}")
-            return {'CANCELLED'}
-        except Exception as e:
-            report_internal_error(self, e)
-            return {'CANCELLED'}
+        self.export_path = path  # named when it cannot be written
+        export_to_file(hair, path, self.format, self.world_space, module)
         self.report({'INFO'}, f"Exported {path}")
         return {'FINISHED'}
 

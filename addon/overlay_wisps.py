@@ -12,15 +12,17 @@ import numpy as np
 import bpy
 from bpy.props import BoolProperty
 
+from . import blender_curves, preview
+from .hair import existing_hair
+from .scene_data import find_scalp, key_objects
+
 # Colours are spread around the hue circle by the golden angle, so neighbouring keys (and
 # any few of them) differ clearly whatever their number.
 GOLDEN = 0.6180339887498949
 SATURATION, VALUE = 0.65, 0.95
 # With a key active, its wisp is drawn opaque and lightened toward white, the others darkened
-# toward a dim grey and see-through. Darkened, not only see-through: where hundreds of hairs
-# overlap, their alphas add up to opaque and a faded wisp drawn that way showed as bright as
-# the active one (measured on 3,000 hairs: the active wisp 1.1 times as bright as the
-# brightest faded one; darkened, 2.4 times).
+# toward a dim grey and see-through: where hundreds of hairs overlap, alpha alone adds back up
+# to opaque (docs/DECISIONS.md, "Wisp overlay").
 DIM_MIX, DIM_GREY, DIM_ALPHA = 0.7, 0.15, 0.35
 HIGHLIGHT_MIX = 0.35
 LOST = (0.5, 0.5, 0.5, 0.5)   # a hair whose key no longer exists (deleted since Generate)
@@ -85,7 +87,6 @@ _cache = {}   # "strands": (key, strands); "batch": (key, active, n_keys, batch)
 
 
 def _hair_key(hair):
-    from . import preview
     return (hair.data.session_uid, preview._revisions.get(hair.data.session_uid, 0), len(hair.data.points))
 
 
@@ -94,7 +95,6 @@ def draw_hair(hair, n_keys, active, viewport_size):
     view and projection set by the caller: the viewport's, in the draw handler)."""
     import gpu
     from gpu_extras.batch import batch_for_shader
-    from . import blender_curves
     key = _hair_key(hair)
     cached = _cache.get("strands")
     if cached is None or cached[0] != key:
@@ -123,8 +123,6 @@ def draw_hair(hair, n_keys, active, viewport_size):
 
 
 def _draw():
-    from .hair import existing_hair
-    from .scene_data import find_scalp, key_objects
     context = bpy.context
     if not getattr(context.window_manager, "keystrand_show_wisps", False):
         return  # switched off with a new file (a window-manager setting is not saved)

@@ -4,6 +4,7 @@ from bpy.types import Panel
 
 from . import draw_tools
 from .scene_data import find_scalp, key_objects
+from .transaction import background_errors
 
 
 class _HairPanel:
@@ -47,6 +48,9 @@ class VIEW3D_PT_keystrand_hair(_HairPanel, Panel):
         col.prop(s, "count")
         col.prop(s, "viewport_count")
         col.prop(s, "live_update")
+        # What live update or the mirrored keys could not do (transaction.report_background).
+        for message in background_errors(scalp):
+            layout.label(text=message, icon='ERROR')
         layout.operator("hair.generate", icon='OUTLINER_OB_CURVES')
         layout.operator("hair.export", icon='EXPORT')
 
@@ -91,6 +95,28 @@ class VIEW3D_PT_keystrand_hair_wisps(_HairPanel, Panel):
         col.use_property_split = True
         for name in ("clump", "clump_shape", "frizz", "curl", "curl_period"):
             col.prop(s, name)
+
+
+class VIEW3D_PT_keystrand_hair_parting(_HairPanel, Panel):
+    bl_space_type = 'VIEW_3D'
+    bl_label = "Parting"
+    bl_parent_id = "VIEW3D_PT_keystrand_hair"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw_header(self, context):
+        self.layout.prop(find_scalp(context).keystrand_hair, "use_parting", text="")
+
+    def draw(self, context):
+        s = find_scalp(context).keystrand_hair
+        col = self.layout.column()
+        col.use_property_split = True
+        col.active = s.use_parting
+        col.prop(s, "parting_point")
+        col.prop(s, "parting_normal")
+        col.prop(s, "parting_use_end")
+        sub = col.column()
+        sub.active = s.use_parting and s.parting_use_end
+        sub.prop(s, "parting_end")
 
 
 class VIEW3D_PT_keystrand_hair_collision(_HairPanel, Panel):
@@ -171,5 +197,5 @@ class IMAGE_PT_keystrand_hair_preview(_HairPanel, Panel):
 
 
 CLASSES = (VIEW3D_PT_keystrand_hair, VIEW3D_PT_keystrand_hair_shape, VIEW3D_PT_keystrand_hair_look,
-           VIEW3D_PT_keystrand_hair_wisps, VIEW3D_PT_keystrand_hair_collision, VIEW3D_PT_keystrand_hair_key,
+           VIEW3D_PT_keystrand_hair_wisps, VIEW3D_PT_keystrand_hair_parting, VIEW3D_PT_keystrand_hair_collision, VIEW3D_PT_keystrand_hair_key,
            VIEW3D_PT_keystrand_hair_preview, IMAGE_PT_keystrand_hair_preview)

@@ -14,6 +14,7 @@ import time
 
 import numpy as np
 import bpy
+from hairio import InputError, Strands
 
 from . import blender_curves
 from .transaction import transaction
@@ -130,7 +131,6 @@ def render_settings(scene, settings):
 
 def world_strands(hair_obj):
     """The hair object's strands in world space (points by its matrix, radii by its mean scale)."""
-    from hairio import Strands
     s = blender_curves.curves_to_strands(hair_obj)
     m = np.array(hair_obj.matrix_world, np.float64)
     if np.allclose(m, np.eye(4)):
@@ -144,7 +144,6 @@ def render(scene, hair_obj, camera_obj, settings):
     Raises hairio.InputError for bad settings and RendererDied when the renderer failed
     (it is then closed, so the next call starts a fresh one)."""
     global _uploaded
-    from hairio import InputError
     t0 = time.perf_counter()
     size = preview_size(scene, settings)
     camera = camera_for(scene, camera_obj, size)

@@ -11,8 +11,11 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorPro
                        IntProperty, PointerProperty)
 from bpy.types import PropertyGroup
 
-from . import head
-from .scene_data import SceneError
+from hairio import InputError
+from tracer.shading import DEFAULT_SHADING, enum_items as shading_enum_items
+
+from . import generator_cache, head
+from .transaction import forget_background
 
 ROLES = (
     ('NONE', "None", "Not part of a hairstyle"),
@@ -50,7 +53,7 @@ def _set_head_axes(self, value):
         try:
             self.up, self.front = (head.scene_to_mesh if to_mesh else head.mesh_to_scene)(
                 self.id_data, (tuple(self.up), tuple(self.front)))
-        except SceneError:
+        except InputError:
             pass
     self["head_axes"] = value
 
@@ -61,9 +64,9 @@ def _is_mesh(self, obj):
 
 def _live_update(self, context):
     # Switching live update off drops the cached generators, so no stale copy lingers.
-    from . import live
     if not self.live_update:
-        live.forget(self.id_data)
+        generator_cache.forget(self.id_data)
+        forget_background(self.id_data)
 
 
 class HairSettings(PropertyGroup):
@@ -192,6 +195,27 @@ class HairSettings(PropertyGroup):
     collision_margin: FloatProperty(name="Margin", default=2e-4, min=0.0, soft_max=0.005, precision=5,
                                     subtype='DISTANCE',
                                     description="The gap kept between every hair's surface and the collider")
+    # GroomParams.parting, a plane through the scalp (None when Parting is off), held as the
+    # five settings below; groom_params and dict_to_settings convert.
+    use_parting: BoolProperty(name="Parting", default=False,
+                              description="Part the hair along a plane: the roots on the side Normal points "
+                                          "to are Part Group 1, the others 0, and hairs only follow key "
+                                          "strands of their own group. A scalp mesh with a `hair_group` "
+                                          "attribute uses its groups instead")
+    parting_point: FloatVectorProperty(name="Point", size=3, default=(0.0, 0.0, 0.0), subtype='XYZ',
+                                       description="A point on the parting plane, in the scalp mesh's own "
+                                                   "coordinates")
+    parting_normal: FloatVectorProperty(name="Normal", size=3, default=(1.0, 0.0, 0.0), subtype='XYZ',
+                                        description="The direction across the parting (mesh coordinates): "
+                                                    "roots on the side it points to are Part Group 1")
+    parting_use_end: BoolProperty(name="Stop at End", default=False,
+                                  description="Part only the roots in front of End (toward the face), so a "
+                                              "side parting can stop at the crown instead of running down "
+                                              "the back")
+    parting_end: FloatVectorProperty(name="End", size=3, default=(0.0, 0.0, 0.0), subtype='XYZ',
+                                     description="Where the parting stops, in the scalp mesh's own "
+                                                 "coordinates: behind it (away from the face) the hair "
+                                                 "falls as one")
 
     # --- drawing key strands -------------------------------------------------------------
     key_shape: EnumProperty(name="Key Shape", items=KEY_SHAPES, default='STRAIGHT',
@@ -237,9 +261,7 @@ class HairSettings(PropertyGroup):
     preview_layers: IntProperty(name="Layers", default=4, min=1, soft_max=16,
                                 description="How many see-through hair layers are blended per pixel")
     preview_shading: EnumProperty(
-        name="Shading", default='kajiya-kay',
-        items=(('kajiya-kay', "Kajiya-Kay", "The classic hair shading, with a highlight along the strand"),
-               ('phong', "Phong", "Plastic-like shading, as in the thesis")),
+        name="Shading", default=DEFAULT_SHADING, items=shading_enum_items(),    # tracer's registry
         description="How the hair reacts to light")
     preview_min_pixel_width: BoolProperty(
         name="Min Pixel Width", default=False,
@@ -273,6 +295,8 @@ PARAM_FIELDS = ("count", "seed", "sampling_mode", "normal_mode", "up", "front", 
                 "tolerance_units", "radius", "radius_mode", "taper_start", "color",
                 "color_variation", "color_variation_point", "alpha_start", "alpha_tip", "clump",
                 "clump_shape", "frizz", "curl", "curl_period", "collision", "collision_margin")
+# The settings that hold GroomParams.parting.
+PARTING_FIELDS = ("use_parting", "parting_point", "parting_normal", "parting_use_end", "parting_end")
 RENDER_FIELDS = ("preview_size", "preview_samples", "preview_shadows", "preview_shadow_mode",
                  "preview_layers", "preview_shading", "preview_min_pixel_width",
                  "preview_scene_lights", "preview_in_process")
@@ -284,30 +308,45 @@ HEAD_FIELDS = ("up", "front")
 
 
 def settings_to_dict(settings):
-    """The model parameters as a plain dict (GroomParams field names, JSON-able values), as
-    the settings hold them (up and front in the space Head Axes names)."""
+    """The model parameters as a plain dict (every GroomParams field name, JSON-able values),
+    as the settings hold them (up and front in the space Head Axes names)."""
     out = {}
     for name in PARAM_FIELDS:
         value = getattr(settings, name)
         out[name] = list(value) if hasattr(value, "__len__") and not isinstance(value, str) else value
+    out["parting"] = None
+    if settings.use_parting:
+        out["parting"] = {"point": list(settings.parting_point), "normal": list(settings.parting_normal)}
+        if settings.parting_use_end:
+            out["parting"]["end"] = list(settings.parting_end)
     return out
 
 
 def dict_to_settings(settings, params):
-    """Set the settings from a GroomParams-like dict (a preset's); unknown names and the
-    head's axes are left alone."""
+    """Set the settings from a GroomParams-like dict (a preset's, its parting in the scalp's
+    space); unknown names and the head's axes are left alone, a parting of None switches
+    Parting off."""
     for name in PARAM_FIELDS:
         if name in HEAD_FIELDS:
             continue
         if name in params and params[name] is not None:
             setattr(settings, name, tuple(params[name]) if isinstance(params[name], (list, tuple))
                     else params[name])
+    if "parting" in params:
+        parting = params["parting"]
+        settings.use_parting = parting is not None
+        if parting is not None:
+            settings.parting_point = tuple(parting["point"])
+            settings.parting_normal = tuple(parting["normal"])
+            settings.parting_use_end = "end" in parting
+            if "end" in parting:
+                settings.parting_end = tuple(parting["end"])
 
 
 def groom_params(settings, count=None):
     """groom.GroomParams from a scalp's settings, with up and front in the scalp's own space
     (the space groom works in), the same axes presets are placed with (InputError on an
-    out-of-range combination, SceneError on a scalp whose axes cannot be read)."""
+    out-of-range combination or a scalp whose axes cannot be read)."""
     from groom import GroomParams
     d = settings_to_dict(settings)
     if count is not None:
@@ -315,4 +354,6 @@ def groom_params(settings, count=None):
     d["up"], d["front"] = head.scalp_axes(settings.id_data)
     for name in ("color", "color_variation", "color_variation_point"):
         d[name] = tuple(d[name])
+    if d["parting"] is not None:
+        d["parting"] = {k: tuple(v) for k, v in d["parting"].items()}
     return GroomParams(**d)

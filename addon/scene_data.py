@@ -9,10 +9,7 @@ import contextlib
 
 import numpy as np
 import bpy
-
-
-class SceneError(Exception):
-    """A problem with the scene the user can fix; the message says how."""
+from hairio import InputError
 
 
 def find_scalp(context):
@@ -59,12 +56,12 @@ def _matrix(m):
 
 
 def _to_scalp_space(obj, scalp):
-    """The 4x4 carrying `obj`'s coordinates into the scalp's; SceneError when the scalp is
+    """The 4x4 carrying `obj`'s coordinates into the scalp's; InputError when the scalp is
     flattened (its matrix has no inverse, so nothing can be placed in its space)."""
     m = _matrix(scalp.matrix_world)
     size = float(np.abs(m[:3, :3]).max())
     if not size > 0 or abs(np.linalg.det(m[:3, :3])) <= 1e-12 * size ** 3:
-        raise SceneError(f"Scalp {scalp.name!r} has a zero scale on some axis: give it a non-zero scale")
+        raise InputError(f"Scalp {scalp.name!r} has a zero scale on some axis: give it a non-zero scale")
     return np.linalg.solve(m, _matrix(obj.matrix_world))
 
 
@@ -114,14 +111,14 @@ def _mesh_geometry(mesh):
 def read_scalp(obj, depsgraph=None):
     """groom.Scalp of a mesh object, in its local space, with modifiers applied when a
     depsgraph is given. Optional point attributes: float `hair_density` (root density
-    weight) and int `hair_group` (parting groups). Raises SceneError without faces."""
+    weight) and int `hair_group` (parting groups). Raises InputError without faces."""
     from groom import Scalp
     if obj is None or obj.type != 'MESH':
-        raise SceneError("Select a scalp mesh (or one of its key strands) first")
+        raise InputError("Select a scalp mesh (or one of its key strands) first")
     with _mesh_of(obj, depsgraph) as mesh:
         vertices, triangles = _mesh_geometry(mesh)
         if len(triangles) == 0:
-            raise SceneError(f"Scalp {obj.name!r} has no faces: hair grows from faces, "
+            raise InputError(f"Scalp {obj.name!r} has no faces: hair grows from faces, "
                              "so give the mesh a surface (e.g. fill it or use a sphere)")
         uv = None
         if mesh.uv_layers.active is not None and len(mesh.loops):
@@ -153,7 +150,7 @@ def collider_signature(scalp):
     try:
         # Rounded (and -0 made 0): a head moved with its scalp keeps its place but for the last bits.
         place = (np.round(_to_scalp_space(obj, scalp), 9) + 0.0).tobytes()
-    except SceneError:
+    except InputError:
         place = None
     data = obj.data.session_uid if obj.data is not None else None
     return obj.session_uid, data, place
@@ -164,13 +161,13 @@ def read_collider(scalp, depsgraph=None, scalp_data=None, collision=None):
     space (where groom works), modifiers applied when a depsgraph is given; None when
     collision is off (collision: True or False, or None for the scalp's Collision setting).
     scalp_data: the scalp's groom.Scalp when already read (a scalp that is its own collider
-    is then not read twice). Raises SceneError for a collider that is not a mesh; groom
+    is then not read twice). Raises InputError for a collider that is not a mesh; groom
     judges its faces."""
     if not (scalp.keystrand_hair.collision if collision is None else collision):
         return None
     obj = collider_object(scalp)
     if obj.type != 'MESH':
-        raise SceneError(f"Collider {obj.name!r} of scalp {scalp.name!r} is a {obj.type.lower()}, not a "
+        raise InputError(f"Collider {obj.name!r} of scalp {scalp.name!r} is a {obj.type.lower()}, not a "
                          "mesh: choose the head mesh as Collider, or clear it to use the scalp itself")
     if obj == scalp:
         if scalp_data is None:
@@ -198,27 +195,23 @@ def key_control_points(key_obj, scalp):
     """(points (n,3) in scalp space, kind) of a key strand's first spline."""
     curve = key_obj.data
     if not curve.splines:
-        raise SceneError(f"Key strand {key_obj.name!r} has no spline; delete it or draw one")
+        raise InputError(f"Key strand {key_obj.name!r} has no spline; delete it or draw one")
     spline = curve.splines[0]
     if spline.type == 'BEZIER':
+        from groom.bezier import handles_to_cubic
         n = len(spline.bezier_points)
         if n < 2:
-            raise SceneError(f"Key strand {key_obj.name!r} needs at least 2 points")
+            raise InputError(f"Key strand {key_obj.name!r} needs at least 2 points")
         co, left, right = (np.empty(n * 3, np.float64) for _ in range(3))
         spline.bezier_points.foreach_get("co", co)
         spline.bezier_points.foreach_get("handle_left", left)
         spline.bezier_points.foreach_get("handle_right", right)
-        co, left, right = co.reshape(n, 3), left.reshape(n, 3), right.reshape(n, 3)
-        # groom's piecewise cubic layout: P0, H0out, H1in, P1, H1out, H2in, P2, ...
-        local = np.empty((3 * (n - 1) + 1, 3))
-        local[0::3] = co
-        local[1::3] = right[:-1]
-        local[2::3] = left[1:]
+        local = handles_to_cubic(co.reshape(n, 3), left.reshape(n, 3), right.reshape(n, 3))
         kind = "cubic"
     else:
         n = len(spline.points)
         if n < 2:
-            raise SceneError(f"Key strand {key_obj.name!r} needs at least 2 points")
+            raise InputError(f"Key strand {key_obj.name!r} needs at least 2 points")
         co = np.empty(n * 4, np.float64)
         spline.points.foreach_get("co", co)
         local = co.reshape(n, 4)[:, :3]
@@ -232,12 +225,12 @@ def key_control_points(key_obj, scalp):
 
 
 def read_keys(scalp):
-    """groom.KeyStrand list of the scalp's key strands (scalp space); raises SceneError
+    """groom.KeyStrand list of the scalp's key strands (scalp space); raises InputError
     when there are none."""
     from groom import KeyStrand
     objs = key_objects(scalp)
     if not objs:
-        raise SceneError(f"Scalp {scalp.name!r} has no key strands: add one with Add Key Strand "
+        raise InputError(f"Scalp {scalp.name!r} has no key strands: add one with Add Key Strand "
                          "or load a preset")
     keys = []
     for obj in objs:  # a handful of keys, not strands
@@ -256,26 +249,19 @@ def key_from_object(obj, scalp, key_class=None):
                      group=int(s.key_group))
 
 
-def cubic_handles(points):
-    """Handles of a smooth piecewise cubic through `points` (n,3) (Catmull-Rom tangents,
-    one-sided at the ends): (left (n,3), right (n,3))."""
-    p = np.asarray(points, np.float64)
-    tangent = np.empty_like(p)
-    tangent[1:-1] = (p[2:] - p[:-2]) / 2.0
-    tangent[0] = p[1] - p[0]
-    tangent[-1] = p[-1] - p[-2]
-    return p - tangent / 3.0, p + tangent / 3.0
-
-
 def new_key_object(scalp, points, name="Key Strand", collection=None, handles=None):
     """A Bézier curve object through `points` (n,3, scalp space), parented to the scalp
     (identity parent inverse: its coordinates are the scalp's) and registered as its key.
 
-    handles: (left, right) arrays, or None for smooth Catmull-Rom handles. For a groom
-    KeyStrand of kind 'cubic' pass its own handles to keep its exact shape.
+    handles: (left, right) arrays, or None for smooth Catmull-Rom handles
+    (groom.bezier.smooth_handles). For a groom KeyStrand of kind 'cubic' pass its own
+    handles to keep its exact shape.
     """
     points = np.asarray(points, np.float64)
-    left, right = cubic_handles(points) if handles is None else handles
+    if handles is None:
+        from groom.bezier import smooth_handles
+        handles = smooth_handles(points)
+    left, right = handles
     curve = bpy.data.curves.new(name, 'CURVE')
     curve.dimensions = '3D'
     spline = curve.splines.new('BEZIER')
@@ -303,10 +289,8 @@ def key_strand_to_object(scalp, key, name="Key Strand", collection=None):
     """A key curve object from a groom.KeyStrand (scalp space); 'bezier' keys of any
     degree are drawn through points sampled on the curve."""
     if key.kind == "cubic":
-        p = key.points
-        co = p[0::3]
-        right = np.vstack([p[1::3], [2 * co[-1] - p[-2]]])
-        left = np.vstack([[2 * co[0] - p[1]], p[2::3]])
+        from groom.bezier import cubic_to_handles
+        co, left, right = cubic_to_handles(key.points)
         obj = new_key_object(scalp, co, name, collection, handles=(left, right))
     else:
         samples = key.evaluate(np.linspace(0.0, 1.0, max(4, len(key.points) + 2)))
@@ -319,36 +303,3 @@ def key_strand_to_object(scalp, key, name="Key Strand", collection=None):
         s.key_radius = float(key.root_radius)
     s.key_group = int(key.group)
     return obj
-
-
-def shape_profile(shape, length):
-    """Control points (n,3) of a key shape in a root's local frame (x down the head,
-    y across it, z out of the scalp), first row the root, scaled to `length`."""
-    s = np.linspace(0.0, 1.0, 9)
-    if shape == 'STRAIGHT':
-        # Lift off the scalp, then fall down the head.
-        p = np.stack([s, np.zeros_like(s), 0.12 * np.sin(np.pi * np.minimum(s * 1.5, 1.0)) * (1 - 0.5 * s)], 1)
-        p[1] = (0.0, 0.0, 0.06)
-    elif shape == 'WAVY':
-        s = np.linspace(0.0, 1.0, 13)
-        p = np.stack([s, 0.07 * np.sin(4 * np.pi * s) * np.minimum(s * 4, 1.0),
-                      0.1 * np.sin(np.pi * np.minimum(s * 1.5, 1.0))], 1)
-    elif shape == 'CURLY':
-        s = np.linspace(0.0, 1.0, 33)
-        turn = 6 * np.pi * s
-        ramp = np.minimum(s * 5, 1.0)
-        p = np.stack([0.6 * s, 0.08 * np.sin(turn) * ramp, 0.08 * (1 - np.cos(turn)) * ramp + 0.05 * ramp], 1)
-    elif shape == 'SWEPT':
-        p = np.stack([-0.35 * s * s, np.zeros_like(s), s], 1)
-    else:
-        raise SceneError(f"Unknown key shape {shape!r}")
-    p -= p[0]
-    arc = float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
-    return p * (length / arc)
-
-
-def keys_signature(keys):
-    """A cheap fingerprint of each key (for telling which keys an edit changed)."""
-    return [np.concatenate([k.points.ravel(), np.asarray(k.color if k.color is not None else (-1, -1, -1)),
-                            [k.root_radius if k.root_radius is not None else -1.0, k.group]])
-            for k in keys]

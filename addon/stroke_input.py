@@ -14,8 +14,10 @@ import numpy as np
 import bpy
 from bpy.props import BoolProperty, CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty
 from bpy.types import PropertyGroup
+from bpy_extras import view3d_utils
+from mathutils import Vector
+from hairio import InputError
 
-from .scene_data import SceneError
 
 # Events that move the view: a stroke tool passes them on while it waits for its press.
 VIEW_NAVIGATION = frozenset({'MIDDLEMOUSE', 'WHEELUPMOUSE', 'WHEELDOWNMOUSE', 'TRACKPADPAN', 'TRACKPADZOOM'})
@@ -105,8 +107,6 @@ class ViewUnderMouse:
 def capture_view(op, region, rv3d, root_world):
     """Store the viewport's view in the operator's view properties: its direction, its eye
     (perspective), and the world size of a pixel at the depth of `root_world`."""
-    from bpy_extras import view3d_utils
-    from mathutils import Vector
     direction = rv3d.view_rotation @ Vector((0.0, 0.0, -1.0))
     op.view_direction = direction.normalized()
     op.view_perspective = bool(rv3d.is_perspective)
@@ -123,8 +123,6 @@ def capture_view(op, region, rv3d, root_world):
 def screen_to_world(region, rv3d, coords, depth_world):
     """Region pixel coordinates (n,2) -> world points (n,3) on the plane facing the view
     through `depth_world`."""
-    from bpy_extras import view3d_utils
-    from mathutils import Vector
     depth = Vector(depth_world)
     return np.array([tuple(view3d_utils.region_2d_to_location_3d(region, rv3d, Vector(c), depth)) for c in coords],
                     np.float64)
@@ -132,27 +130,27 @@ def screen_to_world(region, rv3d, coords, depth_world):
 
 def view_of(op):
     """(unit view direction (3,), eye (3,) or None) in the world, from the operator's
-    properties; SceneError for a view direction of zero."""
+    properties; InputError for a view direction of zero."""
     direction = np.array(op.view_direction, np.float64)
     length = float(np.linalg.norm(direction))
     if not (np.isfinite(direction).all() and length > 0):
-        raise SceneError(f"view_direction: expected a direction, got {tuple(op.view_direction)}")
+        raise InputError(f"view_direction: expected a direction, got {tuple(op.view_direction)}")
     eye = np.array(op.view_eye, np.float64) if op.view_perspective else None
     return direction / length, eye
 
 
 def stroke_points(op, context):
     """The operator's stroke: world points (n,3), or for a screen stroke its mouse positions
-    (n,2), which need the 3D viewport they were drawn in (SceneError without one)."""
+    (n,2), which need the 3D viewport they were drawn in (InputError without one)."""
     n = len(op.stroke)
     if n == 0:
-        raise SceneError("The stroke is empty: drag in the viewport, or give the stroke's points")
+        raise InputError("The stroke is empty: drag in the viewport, or give the stroke's points")
     if op.stroke_space == 'WORLD':
         flat = np.empty(n * 3, np.float64)
         op.stroke.foreach_get("location", flat)
         return flat.reshape(n, 3)
     if region_view(context)[0] is None:
-        raise SceneError("A screen stroke needs the 3D viewport it was drawn in; "
+        raise InputError("A screen stroke needs the 3D viewport it was drawn in; "
                          "give world locations (stroke_space 'WORLD') instead")
     flat = np.empty(n * 2, np.float64)
     op.stroke.foreach_get("mouse", flat)
@@ -182,7 +180,7 @@ def object_scale(obj):
     """The object's mean linear scale (cube root of its matrix's volume change)."""
     det = abs(float(np.linalg.det(_matrix(obj.matrix_world)[:3, :3])))
     if not det > 0:
-        raise SceneError(f"Object {obj.name!r} has a zero scale on some axis: give it a non-zero scale")
+        raise InputError(f"Object {obj.name!r} has a zero scale on some axis: give it a non-zero scale")
     return det ** (1.0 / 3.0)
 
 
@@ -206,7 +204,6 @@ def direction_to_local(obj, direction):
 def ray_cast_scalp(context, region, rv3d, scalp, coord):
     """The world point of the scalp under region pixel `coord`, or None (as Add Key Strand
     finds it: the evaluated mesh, in its own space)."""
-    from bpy_extras import view3d_utils
     if scalp is None or region is None:
         return None
     origin = view3d_utils.region_2d_to_origin_3d(region, rv3d, coord)

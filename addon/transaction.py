@@ -8,17 +8,23 @@ is removed and everything it changed is put back, so the file is exactly as it w
         tx.keep_curves(hair)        # its Curves datablock comes back, as it was
         ... write ...
 
-An exception inside the block rolls back and propagates; the caller decides how to report
-it: a bad input as the user's to fix, anything else through `report_internal_error`.
+An exception inside the block rolls back and propagates. The error policy is here too, one
+for the whole extension: a bad input (hairio.InputError) is the user's to fix and is reported
+with its message; anything else is a bug and says so (`report_internal_error`). Operators get
+both from `reports_errors`, the decorator every execute() wears; live update and the mirror
+keeping, which run in handlers with no operator to report on, use `report_background` (the
+panel shows what it noted).
 Datablocks made inside the block need no bookkeeping: every ID that was not in the file when
 the block began is removed on rollback. A `transaction()` opened inside another joins it, so
 a writer such as hair.write_hair is all or nothing alone (live update) and as a part of an
 operator's larger change alike.
 """
 import contextlib
+import functools
 import traceback
 
 import bpy
+from hairio import InputError
 
 _active = None
 
@@ -144,6 +150,83 @@ def report_internal_error(op, error):
     op.report({'ERROR'}, f"Internal error in {op.bl_label} ({type(error).__name__}: {error}); "
                          "nothing was changed. Please report this, with the traceback printed "
                          "in Blender's system console")
+
+
+def reports_errors(execute=None, *, failures=()):
+    """Decorator of an operator's execute(): the press is one transaction, and nothing is
+    raised into the UI. An InputError is reported as the user's to fix (its message names
+    the input and the fix); an exception matching `failures`, pairs (types, message(op,
+    error)) for the world outside failing rather than the user or the code (a file that
+    cannot be written, a renderer process that died), with its own message; anything else
+    as a bug, through report_internal_error. Either way the press is rolled back and returns
+    {'CANCELLED'}. `types` may be a callable returning the types (for optional modules)."""
+    def wrap(fn):
+        @functools.wraps(fn)
+        def run(op, context):
+            try:
+                with transaction():
+                    return fn(op, context)
+            except InputError as e:
+                op.report({'ERROR'}, str(e))
+            except Exception as e:
+                for types, message in failures:
+                    if not isinstance(types, (type, tuple)):
+                        types = types()
+                    if isinstance(e, types):
+                        op.report({'ERROR'}, message(op, e))
+                        break
+                else:
+                    report_internal_error(op, e)
+            return {'CANCELLED'}
+        return run
+    return wrap if execute is None else wrap(execute)
+
+
+# What went wrong in work no operator runs (live update, mirrored keys), per scalp and task,
+# until that task next succeeds: (scalp session_uid, task) -> message.
+_background = {}
+
+
+def report_background(scalp, task, error):
+    """Note an error of `task` (e.g. "Live update") on `scalp` outside any press, for the
+    panel to show: an InputError as its message (the task waits until the input is fixed;
+    the hair keeps its last good state), anything else as a bug, its traceback printed to
+    the console."""
+    if isinstance(error, InputError):
+        message = f"{task} waits: {error}"
+    else:
+        traceback.print_exception(error)
+        message = (f"Internal error in {task} ({type(error).__name__}: {error}). Please report this, "
+                   "with the traceback printed in Blender's system console")
+    if _background.get((scalp.session_uid, task)) != message:
+        _background[scalp.session_uid, task] = message
+        _redraw_hair_tab()
+
+
+def clear_background(scalp, task):
+    """`task` succeeded on `scalp`: its note goes."""
+    if _background.pop((scalp.session_uid, task), None) is not None:
+        _redraw_hair_tab()
+
+
+def _redraw_hair_tab():
+    # The notes change in handlers and timers, which redraw nothing by themselves.
+    for window in getattr(bpy.context.window_manager, "windows", ()):
+        for area in window.screen.areas:
+            if area.type == 'VIEW_3D':
+                area.tag_redraw()
+
+
+def background_errors(scalp):
+    """The notes report_background holds for `scalp`, oldest first."""
+    return [m for (uid, _task), m in _background.items() if uid == scalp.session_uid]
+
+
+def forget_background(scalp=None):
+    """Drop the notes of one scalp (of every scalp when None): a file was loaded, or live
+    update switched off."""
+    for key in [k for k in _background if scalp is None or k[0] == scalp.session_uid]:
+        del _background[key]
 
 
 @contextlib.contextmanager

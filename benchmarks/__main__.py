@@ -159,7 +159,7 @@ def main(argv=None):
     g.add_argument("--gpu-only", action="store_const", dest="mode", const="gpu",
                    help="on a GPU machine: 1920x1080 frames per second for 10k and 100k strands")
     ap.add_argument("--only", nargs="+", metavar="SECTION", help=f"run only these of {[k for k, _ in SECTIONS]}")
-    ap.add_argument("--outdir", default=HERE, help="where REPORT.md and the plots go (default: benchmarks/)")
+    ap.add_argument("--outdir", default=HERE, help="where REPORT.md goes, its plots in figures/ beside it (default: benchmarks/)")
     # internal: one section in this process
     ap.add_argument("--section", help=argparse.SUPPRESS)
     ap.add_argument("--mode", dest="section_mode", help=argparse.SUPPRESS)

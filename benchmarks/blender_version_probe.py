@@ -5,7 +5,8 @@ tracer and moderngl come from the zip's wheels, not from a checkout).
 
     PYTHON probe.py --zip dist/keystrand_hair-0.1.0.zip --count 100000 --runs 5 --out result.json
 
-Writes JSON: Blender and Python versions, the timings of the extension's bench hooks, and the
+Writes JSON: Blender and Python versions, the timings of blender_hooks.py (beside this file)
+driving the installed extension, and the
 error figures beside them: the largest difference between the Curves object Generate wrote
 and groom's own strands, and the preview image (saved as .npy beside the JSON) against the
 tracer alone on the same camera.
@@ -54,7 +55,10 @@ def _measure(args, user):
         raise RuntimeError(f"Blender's installer refused the zip: {done}")
     install_s = time.perf_counter() - t0
     package = f"bl_ext.{REPO_MODULE}.{EXT_ID}"
-    hooks = importlib.import_module(f"{package}.addon.bench_hooks")
+    # Run as a script, this folder is first on sys.path: the hooks come from here, everything
+    # they drive from the installed extension.
+    from blender_hooks import BlenderHooks
+    hooks = BlenderHooks(f"{package}.addon")
     curves_mod = importlib.import_module(f"{package}.addon.blender_curves")
     hair_mod = importlib.import_module(f"{package}.addon.hair")
     props = importlib.import_module(f"{package}.addon.properties")

@@ -222,6 +222,17 @@ class NotMeasured(Exception):
     """Raised by a section (or a part of one) whose code under test is not there yet."""
 
 
+# The report's plots and images go into this folder beside it (benchmarks/figures/ for the
+# committed report), not among the code.
+FIGURES = "figures"
+
+
+def _figure_path(outdir, name):
+    folder = os.path.join(outdir, FIGURES)
+    os.makedirs(folder, exist_ok=True)
+    return os.path.join(folder, name)
+
+
 @dataclass
 class Section:
     """What one report section collects while it runs."""
@@ -252,27 +263,30 @@ class Section:
         return time.perf_counter() - self.started
 
     def figure(self, fig, name, caption):
-        """Save a matplotlib figure beside the report (atomically) and link it."""
-        path = os.path.join(self.outdir, name)
+        """Save a matplotlib figure in the report's figures folder (atomically) and link it."""
+        path = _figure_path(self.outdir, name)
         buf = io.BytesIO()
         fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
         with atomic_write(path) as f:
             f.write(buf.getvalue())
         import matplotlib.pyplot as plt
         plt.close(fig)
-        self.figures.append(name)
-        self.parts.append(f"![{caption}]({name})\n\n*{caption}*")
+        link = f"{FIGURES}/{name}"
+        self.figures.append(link)
+        self.parts.append(f"![{caption}]({link})\n\n*{caption}*")
 
     def image(self, rgba, name):
-        """Save an (H,W,3|4) linear image as an sRGB PNG beside the report."""
+        """Save an (H,W,3|4) linear image as an sRGB PNG in the report's figures folder;
+        returns its link from the report."""
         import matplotlib.image as mpimg
-        path = os.path.join(self.outdir, name)
+        path = _figure_path(self.outdir, name)
         buf = io.BytesIO()
         mpimg.imsave(buf, to_srgb8(rgba), format="png")
         with atomic_write(path) as f:
             f.write(buf.getvalue())
-        self.figures.append(name)
-        return name
+        link = f"{FIGURES}/{name}"
+        self.figures.append(link)
+        return link
 
     def markdown(self):
         return "\n\n".join(self.parts)

@@ -175,3 +175,53 @@ def place_key(profile, root, frame, angles=(0.0, 0.0, 0.0)):
     rot = rotation_xyz(np.asarray(angles, dtype=np.float64).reshape(1, 3))[0]
     local = (prof - prof[0]) @ rot.T
     return root + local @ frame.T
+
+
+# The shapes a new key strand starts with (Add Key Strand), by name.
+KEY_SHAPES = ("straight", "wavy", "curly", "swept")
+
+
+def shape_profile(shape, length):
+    """Control points (n,3) of a key shape in a root's local frame (x down the head, y across
+    it, z out of the scalp; place_key's profile), first row the root, scaled to arc length
+    `length` along its control polygon. shape: one of KEY_SHAPES."""
+    if shape not in KEY_SHAPES:
+        raise InputError(f"key shape: expected one of {KEY_SHAPES}, got {shape!r}")
+    length = float(length)
+    if not np.isfinite(length) or length <= 0:
+        raise InputError(f"key length: expected a positive finite length, got {length}")
+    s = np.linspace(0.0, 1.0, 9)
+    if shape == "straight":
+        # Lift off the scalp, then fall down the head.
+        p = np.stack([s, np.zeros_like(s), 0.12 * np.sin(np.pi * np.minimum(s * 1.5, 1.0)) * (1 - 0.5 * s)], 1)
+        p[1] = (0.0, 0.0, 0.06)
+    elif shape == "wavy":
+        s = np.linspace(0.0, 1.0, 13)
+        p = np.stack([s, 0.07 * np.sin(4 * np.pi * s) * np.minimum(s * 4, 1.0),
+                      0.1 * np.sin(np.pi * np.minimum(s * 1.5, 1.0))], 1)
+    elif shape == "curly":
+        s = np.linspace(0.0, 1.0, 33)
+        turn = 6 * np.pi * s
+        ramp = np.minimum(s * 5, 1.0)
+        p = np.stack([0.6 * s, 0.08 * np.sin(turn) * ramp, 0.08 * (1 - np.cos(turn)) * ramp + 0.05 * ramp], 1)
+    else:  # swept
+        p = np.stack([-0.35 * s * s, np.zeros_like(s), s], 1)
+    p -= p[0]
+    arc = float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+    return p * (length / arc)
+
+
+def keys_signature(keys):
+    """A fingerprint of each key, one float64 array per key: its control points, colour,
+    root radius and group, so an edit of any of them shows. Compare two with changed_keys."""
+    return [np.concatenate([k.points.ravel(), np.asarray(k.color if k.color is not None else (-1, -1, -1)),
+                            [k.root_radius if k.root_radius is not None else -1.0, k.group]])
+            for k in keys]
+
+
+def changed_keys(signature, old):
+    """Indices of the keys whose fingerprint (keys_signature) differs from `old`'s, or None
+    when there is no old one or the number of keys changed (every key counts as new)."""
+    if old is None or len(signature) != len(old):
+        return None
+    return [i for i, (a, b) in enumerate(zip(signature, old)) if a.shape != b.shape or not (a == b).all()]

@@ -40,17 +40,25 @@ EXPORT_SCRIPT = pathlib.Path(__file__).resolve().parents[1] / "addon" / "export_
 
 def export_file(input_path, out, format=None, vertices_per_strand=32, pinned=2, pin_tip=False,
                 guides=None, root_uv=None, scale=1.0, axis=None, flip_v=True, pad_strands=False,
-                shuffle_seed=None, units=None, guides_out=None):
+                shuffle_seed=None, units=None, guides_out=None, up="z"):
     """Export the strands in `input_path` to `out`; returns the list of files written.
     The command line's engine, callable from benchmarks. Raises InputError for bad input.
-    guides and root_uv are file names here (KEYS strand file, UV.npy)."""
+    guides and root_uv are file names here (KEYS strand file, UV.npy). `up`: z|y|auto, which
+    way is up in the input (hairio/formats/up_axis.py); it is turned into our Z-up frame first."""
     from .formats import read_strands
+    from .formats.up_axis import file_frame, strands_to_z_up
 
     out = os.fspath(out)
     format, scale, axis = _check_request(out, format, scale, axis, guides is not None)
+    turned = file_frame(input_path, up) != "none"
     if format in BLENDER_FORMATS and not groom_library_available(format):
+        if turned:
+            raise InputError(f"--up {up}: Blender's {format} exporter reads the input as it is; export to .npz "
+                             "with --up first, then from that file")
         return _export_with_blender(input_path, out, format, scale, axis, root_uv)
     strands = read_strands(input_path)
+    if turned:
+        strands = strands_to_z_up(strands, input_path, up)
     # Root UVs mean something to TressFX files and grooms; the others have no place for them.
     uv = _load_root_uv(root_uv, strands.num_strands) if format in ("tfx",) + BLENDER_FORMATS else None
     return export_strands(strands, out, format, vertices_per_strand, pinned, pin_tip,
@@ -195,6 +203,9 @@ def build_parser(prog="groom export"):
     ap.add_argument("--scale", type=float, default=1.0, help="multiply points and widths (100: metres to cm)")
     ap.add_argument("--axis", help="hair/tfx/npz/data: none|y-up|unreal|directx (default none); "
                                    "abc: y-up|z-up (default y-up); usd: z-up|y-up (default z-up)")
+    ap.add_argument("--up", choices=("z", "y", "auto"), default="z",
+                    help="which way is up in INPUT: z keeps it as it is (the default), y turns a Y-up file into "
+                         "our Z up first, auto does so for the formats that are Y up (TressFX .tfx, USC .data)")
     ap.add_argument("--no-flip-v", action="store_true", help="tfx: keep V as is (default flips it for DirectX)")
     ap.add_argument("--pad-strands", action="store_true", help="tfx: pad the strand count to a multiple of 64")
     ap.add_argument("--shuffle-seed", type=int, help="tfx: shuffle strands for TressFX's LOD")
@@ -210,7 +221,7 @@ def export_main(argv=None, prog="groom export"):
         written = export_file(args.input, args.out, args.format, args.vertices_per_strand, args.pinned,
                               args.pin_tip, args.guides, args.root_uv, args.scale, args.axis,
                               not args.no_flip_v, args.pad_strands, args.shuffle_seed, args.units,
-                              args.guides_out)
+                              args.guides_out, args.up)
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

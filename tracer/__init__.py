@@ -10,13 +10,18 @@ reference tracer of the same model. numpy + moderngl + hairio only.
     img = r.render(cam, RenderSettings(spp=4, shadows=True))   # (H, W, 4) float32
     ref = reference_render(strands, cam, RenderSettings(spp=4, shadows=True))  # float64
 
-Images are linear, premultiplied RGBA with row 0 at the top. Modules: cylinders (strands
-to cut cylinders), grid (uniform grid, CSR lists), camera (Blender-exact projection),
-settings (lights, render settings), renderer + shaders/trace.glsl (the GPU side),
-gl_context (which backend makes the context, where raw GL entry points come from),
-reference (float64 CPU tracer), png, worker (out-of-process renderer), scenes (synthetic
-strands for tests and benchmarks), __main__ (python -m tracer render).
+Images are linear, premultiplied RGBA with row 0 at the top. Modules: layout (the constants
+and buffer layouts both builds and every shader share), cylinders (strands to cut
+cylinders), grid (uniform grid, CSR lists, the frame both builds use), camera
+(Blender-exact projection), settings (lights, render settings), shading (the registry of
+shading models), renderer and the modules it delegates to (gl_state, scene_buffers,
+strand_upload, scene_grid, draw; shaders/ for the GLSL), stats, gl_context (which backend
+makes the context, where raw GL entry points come from), reference (float64 CPU tracer,
+split as the shaders are), png, worker (out-of-process renderer), scenes (synthetic strands
+for tests and benchmarks), __main__ (python -m tracer render). docs/ARCHITECTURE.md maps
+them.
 """
+from . import layout
 from .camera import Camera
 from .settings import Light, RenderSettings
 from .cylinders import Cylinders, strands_to_cylinders

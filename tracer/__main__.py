@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """python -m tracer render INPUT --out IMAGE.png [--size 512x512] [--spp N]
-[--shadows|--no-shadows] [--layers K] [--shading phong|kajiya-kay]
-[--camera auto|x,y,z:tx,ty,tz:fov]
+[--shadows|--no-shadows] [--layers K] [--shading MODEL]
+[--camera auto|x,y,z:tx,ty,tz:fov] [--up auto|z|y] [--mesh MESH.obj [--mesh-color R,G,B]]...
 
 Bad input exits 2 with one line naming it and writes nothing. What can be known before the
 render is checked before it: the size, the samples, the destination (a folder, a missing
@@ -27,6 +27,8 @@ TILE_PIXELS = 1 << 18
 TILE_SIDE = 2048
 # Rows converted to 8-bit sRGB at once: the conversion works in float64 (~10 MiB at 2048 wide).
 CONVERT_ROWS = 32
+# A mesh without --mesh-color: a light neutral grey, like skin in a clay render.
+DEFAULT_MESH_COLOR = (0.7, 0.7, 0.7)
 
 
 def read_any(path):
@@ -57,10 +59,14 @@ def parse_size(text):
     return w, h
 
 
-def parse_camera(text, strands, size):
+def parse_camera(text, strands, size, meshes=None):
+    """The camera of --camera; `auto` frames the strands and the meshes (a MeshSet) together."""
     from .camera import Camera
     if text == "auto":
         lo, hi = strands.bounds()
+        if meshes is not None:
+            mlo, mhi = meshes.bounds()
+            lo, hi = (mlo, mhi) if not strands.num_points else (np.minimum(lo, mlo), np.maximum(hi, mhi))
         return Camera.frame_bounds(lo, hi, size)
     try:
         eye, target, fov = text.split(":")
@@ -72,6 +78,34 @@ def parse_camera(text, strands, size):
     except ValueError:
         raise InputError(f"--camera {text!r}: expected auto or x,y,z:tx,ty,tz:fov") from None
     return Camera.look_at(eye, target, fov_deg=fov, size=size)
+
+
+def parse_color(text, option="--mesh-color"):
+    """R,G,B of three finite numbers >= 0 (linear)."""
+    try:
+        rgb = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        rgb = ()
+    if len(rgb) != 3 or not all(np.isfinite(rgb)) or min(rgb) < 0:
+        raise InputError(f"{option} {text!r}: expected R,G,B, three numbers >= 0, e.g. 0.8,0.6,0.5")
+    return rgb
+
+
+def read_meshes(paths, colors, frame_of):
+    """The --mesh files as a tracer.meshes.MeshSet (None for none): each .obj read, turned
+    into our frame by `frame_of(points, path)`, with the --mesh-color of the same position
+    (DEFAULT_MESH_COLOR where fewer colours than meshes are given)."""
+    from hairio.obj import read_obj
+    from .meshes import mesh_set
+    if len(colors) > len(paths):
+        raise InputError(f"--mesh-color: {len(colors)} colours for {len(paths)} meshes; give one --mesh-color "
+                         "after each --mesh it colours")
+    meshes = []
+    for k, path in enumerate(paths):
+        verts, tris = read_obj(path)
+        rgb = parse_color(colors[k]) if k < len(colors) else DEFAULT_MESH_COLOR
+        meshes.append((frame_of(verts, path), tris, rgb, path))
+    return mesh_set(meshes)
 
 
 def tile_camera(camera, x0, y0, w, h):
@@ -105,7 +139,7 @@ def render_png(renderer, camera, settings, out, tile_pixels=TILE_PIXELS, tile_si
             band = np.empty((h, W, 4), np.uint8)
             for x0, w in row:
                 img = renderer.render(tile_camera(camera, x0, y0, w, h), settings)
-                spent[0] += renderer.stats["render_s"]
+                spent[0] += renderer.stats.render_s
                 for r in range(0, h, CONVERT_ROWS):    # float64 temporaries of a few rows at a time
                     band[r:r + CONVERT_ROWS, x0:x0 + w] = to_srgb8(img[r:r + CONVERT_ROWS])
             yield band
@@ -115,7 +149,9 @@ def render_png(renderer, camera, settings, out, tile_pixels=TILE_PIXELS, tile_si
 
 
 def build_parser():
+    from hairio.formats.up_axis import UP_CHOICES
     from .settings import MAX_SPP
+    from .shading import DEFAULT_SHADING, SHADING_MODELS
     parser = argparse.ArgumentParser(prog="python -m tracer", description="Render strands with the GPU ray tracer.")
     sub = parser.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a strand file to a PNG")
@@ -133,11 +169,21 @@ def build_parser():
     r.add_argument("--no-shadows", dest="shadows", action="store_false", help="no shadow rays: faster, flatter")
     r.add_argument("--layers", type=int, default=4,
                    help="semi-transparent hits composited front to back per ray, 1..64 (default %(default)s)")
-    r.add_argument("--shading", choices=("phong", "kajiya-kay"), default="kajiya-kay",
-                   help="shading model (default %(default)s)")
+    r.add_argument("--shading", choices=[m.name for m in SHADING_MODELS], default=DEFAULT_SHADING,
+                   help="shading model: " + "; ".join(f"{m.name}: {m.description}" for m in SHADING_MODELS)
+                        + " (default %(default)s)")
     r.add_argument("--camera", default="auto",
-                   help="auto (frame the strands' bounds from the front) or EYE:TARGET:FOV as "
+                   help="auto (frame the strands' and meshes' bounds from the front) or EYE:TARGET:FOV as "
                         "x,y,z:tx,ty,tz:degrees, e.g. 0,-3,1:0,0,1:40 (default %(default)s)")
+    r.add_argument("--up", choices=UP_CHOICES, default="auto",
+                   help="which way is up in INPUT (and in the meshes, which come in its frame): z keeps the "
+                        "coordinates, y turns a Y-up file into Z up, auto does so for the formats that are "
+                        "Y up (TressFX .tfx, USC .data) (default %(default)s)")
+    r.add_argument("--mesh", action="append", default=[], metavar="MESH.obj",
+                   help="an opaque mesh beside the strands (a head, a body); repeatable")
+    r.add_argument("--mesh-color", action="append", default=[], metavar="R,G,B",
+                   help="linear base colour of the --mesh before it, 0..1 each "
+                        f"(default {','.join(str(c) for c in DEFAULT_MESH_COLOR)}); repeatable")
     return parser
 
 
@@ -152,8 +198,19 @@ def main(argv=None):
         settings = RenderSettings(spp=args.spp, shadows=args.shadows, layers=args.layers,
                                   shading=args.shading, background=(0.0, 0.0, 0.0, 0.0))
         settings.check()
+        from hairio.formats.up_axis import file_frame
+        from hairio.formats.axes import unconvert_points
+        frame = file_frame(args.input, args.up)
+
+        def to_our_frame(points, path):
+            return points if frame == "none" else unconvert_points(points, frame)
+
         t0 = time.perf_counter()
         strands = read_any(args.input)
+        if frame != "none":
+            from hairio.formats.up_axis import strands_to_z_up
+            strands = strands_to_z_up(strands, args.input, args.up)
+        meshes = read_meshes(args.mesh, args.mesh_color, to_our_frame)
         t1 = time.perf_counter()
         from .renderer import Renderer
         renderer = Renderer()
@@ -161,8 +218,9 @@ def main(argv=None):
             renderer.set_strands(strands)
         except InputError as e:     # strands the tracer cannot resolve: name the file they came from
             raise InputError(f"{args.input}: {e}") from None
-        camera = parse_camera(args.camera, strands, size)
-        st = dict(renderer.stats)
+        renderer.set_meshes(meshes)
+        camera = parse_camera(args.camera, strands, size, meshes)
+        st = renderer.stats.as_dict()
         try:
             render_s = render_png(renderer, camera, settings, args.out)
         except OSError as e:     # the disk filled up, or the place changed, while rendering
@@ -172,7 +230,8 @@ def main(argv=None):
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    print(f"read {t1 - t0:.3f} s: {strands.num_strands} strands, {st['num_cylinders']} cylinders")
+    print(f"read {t1 - t0:.3f} s: {strands.num_strands} strands, {st['num_cylinders']} cylinders"
+          + (f", {st['num_triangles']} mesh triangles" if st["num_triangles"] else ""))
     print(f"upload {st['upload_s']:.3f} s (cylinders {st['cylinders_s']:.3f} s)")
     print(f"grid build {st['grid_s']:.3f} s: {st['grid_dims']} cells, {st['grid_refs']} references")
     print(f"render {render_s:.3f} s at {size[0]}x{size[1]}, {args.spp} spp")

@@ -18,7 +18,7 @@ Choices the SPEC leaves open, made here:
   left with fewer than two distinct points makes no cylinder.
 * Sharp bends: past 90° the shared plane would cut the cylinder into an unbounded piece
   ((p - P_{i+1})·N2 <= 0 then holds for points far beyond the tip). Where the angle between
-  the two axes exceeds `SHARP_BEND_DEG`, both cylinders end on a plane square to their own
+  the two axes exceeds `layout.SHARP_BEND_DEG`, both cylinders end on a plane square to their own
   axis instead (a flat end cap, like a strand end), which stays bounded.
 * Joint planes vs. end caps: the tracer treats a strand as one solid tube. A ray that enters
   a cylinder through a plane it shares with its neighbour, at a point the neighbour's section
@@ -36,8 +36,8 @@ import numpy as np
 
 from hairio import InputError
 
-SHARP_BEND_DEG = 80.0
-_COS_SHARP = np.cos(np.radians(SHARP_BEND_DEG))
+from . import layout
+
 MERGE_EPS = 1e-7
 
 
@@ -235,16 +235,17 @@ def cylinders_from_plan(plan):
     u2 = u1.copy()
     u2[:-1][has_next[:-1]] = u1[1:][has_next[:-1]]
     cosang = np.einsum("ij,ij->i", u1, u2)
-    sharp = has_next & (cosang < _COS_SHARP)
+    cos_sharp = np.float64(layout.cos_sharp())
+    sharp = has_next & (cosang < cos_sharp)
     u2[sharp] = u1[sharp]
     cosang[sharp] = 1.0
     # Plane 1 of cylinder k is plane 2 of cylinder k-1 unless k is a strand's first or the
     # joint is sharp; both of those make it a cap.
     first = np.ones(len(top), bool)
     first[1:] = ~has_next[:-1] | sharp[:-1]
-    flags = first.astype(np.uint8) | ((~has_next | sharp).astype(np.uint8) << 1)
+    flags = (first * layout.CAP_PLANE1 | (~has_next | sharp) * layout.CAP_PLANE2).astype(np.uint8)
     r = plan.radius[i]
-    cosang = np.clip(cosang, _COS_SHARP, 1.0)
+    cosang = np.clip(cosang, cos_sharp, 1.0)
     ext = r * np.sqrt(1.0 - cosang * cosang) / cosang
     return Cylinders(
         top=top, tip=tip, n2=u2.astype(np.float32), radius=r,

@@ -14,12 +14,10 @@ use the numpy builds.
 """
 import numpy as np
 
-from .cylinders import _COS_SHARP
+from . import layout
+from .shader_source import shader_source
 
-GROUP = 64                  # the shaders' local_size_x
 MAX_GROUPS = 65535          # per dispatch dimension, the minimum GL guarantees
-MAX_VISITS = 60000          # loop steps one invocation may take (llvmpipe stops at 65,535)
-MAX_REPEATS = 4096          # repeated-point candidates one cylinder pass reports
 
 
 def compute_available(ctx):
@@ -27,7 +25,7 @@ def compute_available(ctx):
 
 
 def _groups(n):
-    g = max(1, -(-n // GROUP))
+    g = max(1, -(-n // layout.GROUP))
     gy = -(-g // MAX_GROUPS)
     return -(-g // gy), gy
 
@@ -41,22 +39,38 @@ def set_uniforms(prog, **values):
 
 
 class GpuBuilder:
-    """Compute passes of one context: make_cylinders, count, fill."""
+    """Compute passes of one context: make_cylinders, count, fill. The passes are compiled
+    with the header of tracer/layout.py as it is when they run (one set per header)."""
 
-    def __init__(self, ctx, load_shader):
+    def __init__(self, ctx):
         self.ctx = ctx
-        head = "#version 430 core\n"
-        self._cyl = ctx.compute_shader(f"{head}#define MAX_REPEATS {MAX_REPEATS}\n{load_shader('cylinders_build.glsl')}")
-        grid = load_shader("grid_build.glsl")
-        self._grid = [ctx.compute_shader(f"{head}#define PASS {p}\n#define MAX_VISITS {MAX_VISITS}\n{grid}")
-                      for p in (0, 1)]
+        self._passes = {}
+
+    def _programs(self):
+        """(cylinder pass, [grid count pass, grid fill pass]) for the current layout."""
+        key = layout.glsl_header()
+        progs = self._passes.get(key)
+        if progs is None:
+            ctx = self.ctx
+            progs = (ctx.compute_shader(shader_source(430, ["cylinders_build.glsl"])),
+                     [ctx.compute_shader(shader_source(430, ["grid_build.glsl"], {"PASS": p})) for p in (0, 1)])
+            self._passes[key] = progs
+        return progs
+
+    @property
+    def _cyl(self):
+        return self._programs()[0]
+
+    @property
+    def _grid(self):
+        return self._programs()[1]
 
     def make_cylinders(self, store, n_cyl, repeat_distance=0.0, first=0, count=None):
         """Writes cylinders first..first+count (all by default) into store["tex_cyl"] from the
         point buffers store["tex_pos"], "tex_rad", "tex_col", "tex_alpha" and the cylinder ->
         top point index store["tex_cp"] (tracer.gl_buffers.BufferTexture each). Returns the
         top points of the cylinders whose points lie within `repeat_distance` (not checked
-        when 0), or None when there are more than MAX_REPEATS of them."""
+        when 0), or None when there are more than layout.MAX_REPEATS of them."""
         count = n_cyl - first if count is None else count
         if count <= 0:
             return np.zeros(0, np.int64)
@@ -64,8 +78,8 @@ class GpuBuilder:
         for unit, name in enumerate(("tex_pos", "tex_rad", "tex_col", "tex_alpha", "tex_cp")):
             store[name].use(unit)       # the shader's layout(binding = unit)
         set_uniforms(prog, n_items=int(count), first_item=int(first), n_cyl=int(n_cyl),
-                     cos_sharp=float(_COS_SHARP), repeat2=float(repeat_distance) ** 2 if repeat_distance > 0 else -1.0)
-        repeats = self.ctx.buffer(reserve=4 * (MAX_REPEATS + 1))
+                     repeat2=float(repeat_distance) ** 2 if repeat_distance > 0 else -1.0)
+        repeats = self.ctx.buffer(reserve=4 * (layout.MAX_REPEATS + 1))
         repeats.clear()
         store["tex_cyl"].bind_to_image(0, write=True)
         repeats.bind_to_storage_buffer(1)
@@ -75,7 +89,7 @@ class GpuBuilder:
         found = None
         if n_found == 0:
             found = np.zeros(0, np.int64)
-        elif n_found <= MAX_REPEATS:
+        elif n_found <= layout.MAX_REPEATS:
             found = np.sort(np.frombuffer(repeats.read(size=4 * n_found, offset=4), np.int32)).astype(np.int64)
         repeats.release()
         return found

@@ -3,7 +3,9 @@
 
 Every cylinder is listed in every cell its padded capsule (radius times `pad_factor`) may
 touch, cut slab by slab along its dominant axis (tighter than its whole bounding box), with
-no cap per cell. The resolution comes from the cylinder count and the extent: the cell size
+no cap per cell. Both builds (this one and the compute passes, tracer/gpu_build.py) lay the
+grid over the scene with one function, `plan_frame`. The resolution comes from the cylinder
+count and the extent: the cell size
 is the smallest that lists a cylinder in about `MAX_REFS_PER_CYLINDER` cells on average
 (see choose_resolution); cells need not be cubes.
 """
@@ -13,8 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-MAX_DIM = 1024          # 3D textures of GL 3.3 guarantee 256; every driver we target has >= 2048
-MAX_CELLS = 1 << 23
+from . import layout
+from .cylinders import column_bounds
+
 MAX_REFS_PER_CYLINDER = 8.0
 MAX_CELLS_PER_CYLINDER = 4.0
 MAX_REFS = 32_000_000   # references in all (128 MB of lists), see choose_resolution
@@ -49,7 +52,7 @@ class Grid:
 
 def _dims_for(extent, h):
     dims = np.maximum(1, np.ceil(extent / h)).astype(np.int64)
-    return np.minimum(dims, MAX_DIM)
+    return np.minimum(dims, layout.MAX_DIM)
 
 
 def expected_refs(box_size, h):
@@ -89,8 +92,8 @@ def choose_resolution(box_size, extent, max_refs=None, count=None):
     if max_refs is None:
         max_refs = float(np.clip(MAX_REFS / max(1, count), MIN_REFS_PER_CYLINDER, MAX_REFS_PER_CYLINDER))
     sample = box_size if n <= 20_000 else box_size[:: n // 20_000 + 1]
-    cells = min(MAX_CELLS, MAX_CELLS_PER_CYLINDER * count)
-    floor_h = max(float(extent.max()) / MAX_DIM, float(np.prod(extent) / max(cells, 1)) ** (1 / 3))
+    cells = min(layout.MAX_CELLS, MAX_CELLS_PER_CYLINDER * count)
+    floor_h = max(float(extent.max()) / layout.MAX_DIM, float(np.prod(extent) / max(cells, 1)) ** (1 / 3))
     lo_h, hi_h = floor_h, max(floor_h, float(extent.max()))
     if expected_refs(sample, lo_h) <= max_refs:
         return _dims_for(extent, lo_h)
@@ -115,6 +118,45 @@ def grid_frame(lo, hi, box_size, dims=None, count=None):
         dims = grid_dims(box_size, extent, count)
     dims = np.asarray(dims, np.int64)
     return lo, extent / dims, dims
+
+
+# Cylinders whose boxes give the resolution: at most about this many, evenly spaced.
+FRAME_SAMPLE = 20_000
+
+
+def plan_frame(plan, pad_factor=1.0, bounds=None, dims=None):
+    """(corner, cell size, cell counts) of the grid over a tracer.cylinders.CylinderPlan
+    whose capsules are widened `pad_factor` times: the one frame both builds use, made
+    from the plan alone (the GPU build never has the cylinders on the host). `bounds`:
+    column_bounds of the plan's points when the caller has them already; `dims`
+    overrides the resolution."""
+    step = max(1, len(plan) // FRAME_SAMPLE + 1)
+    top = plan.top_point[::step]
+    rmax = float(plan.radius.max()) if len(plan.radius) else 0.0
+    return _segments_frame(column_bounds(plan.points) if bounds is None else bounds, rmax,
+                           plan.points[top], plan.points[top + 1], plan.radius[top], pad_factor, len(plan), dims)
+
+
+def cylinders_frame(cylinders, pad_factor=1.0, dims=None):
+    """The frame of plan_frame for tracer.cylinders.Cylinders (their end points and radii;
+    for the cylinders of a plan it is the plan's frame)."""
+    step = max(1, len(cylinders) // FRAME_SAMPLE + 1)
+    ends = np.concatenate([cylinders.top, cylinders.tip])
+    return _segments_frame(column_bounds(ends), float(cylinders.radius.max()), cylinders.top[::step],
+                           cylinders.tip[::step], cylinders.radius[::step], pad_factor, len(cylinders), dims)
+
+
+def _segments_frame(bounds, rmax, top, tip, radius, pad_factor, count, dims):
+    """The frame over segments whose end points lie within `bounds`, widened by `rmax`:
+    every capsule lies within its points' box widened by its radius times the pad, plus
+    the reach of a bent cylinder past its tip (at most r·tan(SHARP_BEND_DEG), see
+    tracer/cylinders.py), so the scene box needs no per-cylinder work. The resolution comes
+    from the padded boxes of `top`..`tip` (the cylinders, or an even sample of `count`)."""
+    reach = rmax * (pad_factor + layout.tan_sharp()) * (1 + 1e-6)
+    lo, hi = bounds
+    a, b = top.astype(np.float64), tip.astype(np.float64)
+    size = np.abs(b - a) + 2 * pad_factor * radius[:, None]
+    return grid_frame(lo - reach, hi + reach, size, dims, count=count)
 
 
 def grid_dims(box_size, extent, count=None):
@@ -195,16 +237,14 @@ def _cells_touched(cylinders, pad_factor, lo, cs, dims):
     return rep2(c1), cell
 
 
-def build_grid(cylinders, pad_factor=1.0, dims=None):
-    """Grid over `cylinders` (tracer.cylinders.Cylinders). `dims` overrides the resolution."""
+def build_grid(cylinders, pad_factor=1.0, dims=None, frame=None):
+    """Grid over `cylinders` (tracer.cylinders.Cylinders) in `frame` (corner, cell size,
+    cell counts; default cylinders_frame). `dims` overrides the resolution."""
     n = len(cylinders)
     if n == 0:
         return Grid(np.zeros(3), np.ones(3), np.ones(3, np.int64), np.zeros(1, np.int32),
                     np.zeros(1, np.int32), np.zeros(0, np.int32))
-    blo, bhi = cylinders.bounds(pad_factor)
-    blo = blo.astype(np.float64)
-    bhi = bhi.astype(np.float64)
-    lo, cs, dims = grid_frame(blo.min(axis=0), bhi.max(axis=0), bhi - blo, dims)
+    lo, cs, dims = cylinders_frame(cylinders, pad_factor, dims) if frame is None else frame
     ncell = int(np.prod(dims))
     # Small chunks of cylinders on all cores (numpy drops the GIL in its loops). Small, so the
     # dozen temporaries per reference stay in cache instead of streaming ~40 MB arrays

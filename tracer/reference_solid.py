@@ -5,7 +5,7 @@ mistake the GPU tracer and its mirror (reference.py) share.
 Every strand is the union of its cut cylinders, each a convex solid: the points within r of
 the axis line through P_i, P_{i+1} that lie on the inner side of both cut planes (plane 1
 through P_i square to its own axis; plane 2 through P_{i+1} square to the next axis, or to
-its own at a strand's end and past SHARP_BEND_DEG). A ray meets a convex solid in one
+its own at a strand's end and past layout.SHARP_BEND_DEG). A ray meets a convex solid in one
 interval [t_in, t_out]; it enters a strand at t_in of one of its cylinders unless another
 cylinder of the same strand already holds the ray there (t_in' < t_in <= t_out'). The
 image is those entries, nearest first: layers are entries into strands (each strand one
@@ -27,10 +27,12 @@ import numpy as np
 
 from hairio import InputError
 
-from .cylinders import SHARP_BEND_DEG, plan_cylinders
+from . import layout
+from .cylinders import plan_cylinders
 from .ray_bundles import candidate_pairs
 from .reference import finish_pixels, pixel_samples
 from .settings import RenderSettings
+from .shading import Surface, shading_model
 
 BIG = 1e30
 PAIRS_PER_STEP = 4_000_000      # ray x cylinder pairs held in memory at once
@@ -70,7 +72,7 @@ def cut_cylinders(strands):
     n2 = u.copy()
     n2[:-1][follows[:-1]] = u[1:][follows[:-1]]
     cos = np.einsum("ij,ij->i", u, n2)
-    sharp = cos < np.cos(np.radians(SHARP_BEND_DEG))
+    sharp = cos < layout.cos_sharp()
     n2[sharp] = u[sharp]
     cos[sharp] = 1.0
     r = np.asarray(plan.radius, np.float64)[i]
@@ -201,11 +203,11 @@ def _light_through(cyl, p, L, dist, own_radius, settings, target=None):
 
 
 def _shade(cyl, ids, surf, o, d, t, settings):
+    model = shading_model(settings.shading)
     p = o + t[:, None] * d
     col = cyl.color[ids]
-    tangent = cyl.u[ids]
-    if settings.shading == "phong":
-        n = _normals(cyl, ids, surf, p, d)
+    n = _normals(cyl, ids, surf, p, d) if model.needs_normal else None
+    s = Surface(p=p, T=cyl.u[ids], N=n, V=d, color=col)
     out = settings.ambient * col
     for light in settings.lights:
         vec, lcol = light.packed()
@@ -219,17 +221,7 @@ def _shade(cyl, ids, surf, o, d, t, settings):
         lit = np.ones(len(p))
         if settings.shadows:
             lit = _light_through(cyl, p, L, dist, cyl.radius[ids], settings, vec[:3] if vec[3] > 0.5 else None)
-        if settings.shading == "kajiya-kay":
-            tl, tv = _dot(tangent, L), _dot(tangent, d)
-            sl, sv = np.sqrt(np.maximum(0, 1 - tl * tl)), np.sqrt(np.maximum(0, 1 - tv * tv))
-            diff, spec = sl, np.maximum(0, tl * tv + sl * sv) ** settings.shininess
-        else:
-            nl = _dot(n, L)
-            diff = np.maximum(nl, 0)
-            refl = 2 * nl[:, None] * n - L
-            spec = np.where(diff > 0, np.maximum(_dot(refl, -d), 0) ** settings.shininess, 0)
-        out = out + lit[:, None] * np.asarray(lcol) * (settings.diffuse * diff[:, None] * col
-                                                       + settings.specular * spec[:, None])
+        out = out + lit[:, None] * np.asarray(lcol) * model.reference(s, L, settings)
     return out
 
 

@@ -6,6 +6,8 @@ import numpy as np
 
 from hairio import InputError
 
+from .shading import DEFAULT_SHADING, shading_model
+
 MAX_LIGHTS = 8
 # Samples are summed in float32 (additive blending): the sum of n samples can be off by up
 # to n * 2^-24 of the pixel's value. 4096 keeps that below 0.025 %, a sixteenth of an 8-bit
@@ -50,7 +52,7 @@ class RenderSettings:
     shadows: bool = True
     shadow_mode: str = "hard"         # "hard": any hit darkens; "transmittance": product of (1 - alpha)
     layers: int = 4                   # alpha layers composited front to back
-    shading: str = "kajiya-kay"       # or "phong"
+    shading: str = DEFAULT_SHADING    # a name of tracer.shading.SHADING_MODELS
     lights: tuple = field(default_factory=lambda: (Light(),))
     background: tuple = (0.0, 0.0, 0.0, 0.0)   # straight RGBA; alpha 0 = transparent
     min_pixel_width: bool = False
@@ -76,8 +78,7 @@ class RenderSettings:
                              f"(error {MAX_SPP * 2.0 ** -24:.3%})")
         if self.shadow_mode not in ("hard", "transmittance"):
             raise InputError(f"shadow_mode: {self.shadow_mode!r}; use 'hard' or 'transmittance'")
-        if self.shading not in ("phong", "kajiya-kay"):
-            raise InputError(f"shading: {self.shading!r}; use 'phong' or 'kajiya-kay'")
+        shading_model(self.shading)
         if not 1 <= self.layers <= 64:
             raise InputError(f"layers: {self.layers}; use 1..64")
         if not 1 <= len(self.lights) <= MAX_LIGHTS:

@@ -4,10 +4,11 @@ Blender down and Blender's own GL context is never touched.
 
 `python -m tracer.worker` reads requests from stdin and answers on stdout, each message an
 8-byte little-endian length followed by a pickle: a request is (command, args), an answer is
-("ok", value) or ("error", kind, message). Commands: set_strands, update_strands, render,
-stats, quit. Only the parent that spawned the worker writes to its stdin; pickle is used
+("ok", value) or ("error", kind, message). Commands: set_strands, update_strands,
+set_meshes, render, stats, quit. Only the parent that spawned the worker writes to its stdin; pickle is used
 because both ends are this package.
 """
+import dataclasses
 import importlib.util
 import os
 import pickle
@@ -101,10 +102,12 @@ def serve(inp, out):
                 value = renderer.set_strands(*args)
             elif command == "update_strands":
                 value = renderer.update_strands(*args)
+            elif command == "set_meshes":
+                value = renderer.set_meshes(*args)
             elif command == "render":
                 value = renderer.render(*args)
             elif command == "stats":
-                value = dict(renderer.stats)
+                value = dataclasses.replace(renderer.stats)     # a copy: tracer.stats.RenderStats
             else:
                 raise ValueError(f"unknown command {command!r}")
             write_message(out, ("ok", value))
@@ -115,9 +118,10 @@ def serve(inp, out):
 
 
 class WorkerClient:
-    """Same API as Renderer (set_strands, update_strands, render, stats, close), served by a
-    child process. Any death or time-out raises WorkerError and the next call restarts the
-    worker (re-sending the last strands so a render still has its scene)."""
+    """Same API as Renderer (set_strands, update_strands, set_meshes, render, stats, close),
+    served by a child process. Any death or time-out raises WorkerError and the next call
+    restarts the worker (re-sending the last strands and meshes so a render still has its
+    scene)."""
 
     def __init__(self, python=sys.executable, extra_sys_path=(), timeout=120.0, env=None):
         self.python = python
@@ -127,6 +131,7 @@ class WorkerClient:
         self._proc = None
         self._answers = None
         self._strands = None
+        self._meshes = None
 
     # --- process management -----------------------------------------------------------
     def _start(self):
@@ -181,6 +186,8 @@ class WorkerClient:
             self._start()
             if command not in ("set_strands", "quit") and self._strands is not None:
                 self._exchange("set_strands", (self._strands,), timeout)
+            if command not in ("set_meshes", "quit") and self._meshes is not None:
+                self._exchange("set_meshes", (self._meshes,), timeout)
         return self._exchange(command, args, timeout)
 
     def _exchange(self, command, args, timeout):
@@ -212,6 +219,12 @@ class WorkerClient:
     def set_strands(self, strands):
         self._strands = strands
         return self._call("set_strands", strands)
+
+    def set_meshes(self, meshes):
+        """As Renderer.set_meshes; the meshes are checked here, before they travel."""
+        from .meshes import mesh_set
+        self._meshes = mesh_set(meshes)
+        return self._call("set_meshes", self._meshes)
 
     def update_strands(self, strand_ids, strands):
         self._strands = strands

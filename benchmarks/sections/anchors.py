@@ -113,17 +113,16 @@ def _tracer_job(sec, cfg, tracer, sc, spp):
             sc.cold = first.warmups[0]
         if spp == min(cfg.anc_spp):
             st = r.stats
-            sc.parts = (st.get("cylinders_s", 0.0), st.get("upload_s", 0.0), st.get("grid_s", 0.0),
-                        st.get("render_s", 0.0), st.get("grid_build", "numpy"))
+            sc.parts = (st.cylinders_s, st.upload_s, st.grid_s, st.render_s, st.grid_build or "numpy")
         flip = {"on": False}
 
         def rerender():
             flip["on"] = not flip["on"]
             return r.render(sc.moved if flip["on"] else sc.cam, rs)
 
-        uploaded = r.stats["bytes_uploaded"]
+        uploaded = r.stats.bytes_uploaded
         again, _ = measure(rerender, runs=cfg.runs, budget=left(sec))
-        no_upload = r.stats["bytes_uploaded"] == uploaded
+        no_upload = r.stats.bytes_uploaded == uploaded
         img = r.render(sc.cam, rs)
         sc.ours[spp] = (first, again, no_upload)
         sc.images[("ours", spp)] = img

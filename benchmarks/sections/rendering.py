@@ -244,7 +244,7 @@ def _grid(sec, cfg, tracer, strands, camera, acc, base):
             with grid_scale(scale):
                 r = tracer.Renderer()
                 t_build, _ = measure(lambda: r.set_strands(strands), runs=cfg.runs, budget=left(sec, 1.0))
-            stats = dict(r.stats)
+            stats = r.stats.as_dict()
             t, img = measure(lambda: r.render(camera, rs), runs=cfg.runs, budget=left(sec, 1.0))
         except TooSlow as e:
             rows.append([f"{scale:g}×", f"not measured: {e}", "", "", "", "", "", ""])

@@ -20,11 +20,11 @@ from benchmarks.sections import left, over_budget
 def _counters(renderer, camera, rs_kw):
     renderer.render(camera, settings(**rs_kw, count=True))
     st = renderer.stats
-    rays = max(1, int(st.get("traversed_pixels", 0)) * int(rs_kw.get("spp", 1)))
-    return {"rays": rays, "cells_per_ray": st.get("cells_visited", 0) / rays,
-            "tests_per_ray": st.get("cylinder_tests", 0) / rays,
-            "tests": st.get("cylinder_tests", 0), "cells": st.get("cells_visited", 0),
-            "per_full_cell": st.get("cylinders_per_full_cell", float("nan"))}
+    rays = max(1, int(st.traversed_pixels or 0) * int(rs_kw.get("spp", 1)))
+    cells, tests = st.cells_visited or 0, st.cylinder_tests or 0
+    return {"rays": rays, "cells_per_ray": cells / rays, "tests_per_ray": tests / rays,
+            "tests": tests, "cells": cells,
+            "per_full_cell": float("nan") if st.cylinders_per_full_cell is None else st.cylinders_per_full_cell}
 
 
 def run(sec, cfg):

@@ -40,9 +40,9 @@ def run(sec, cfg):
     t_off, _ = measure(lambda: r.render(cam, base), runs=cfg.runs)
     t_on, img = measure(lambda: r.render(cam, no_sh), runs=cfg.runs)
     r.render(cam, settings(spp=1, layers=4, shadows=False, count=True))
-    rays_off = r.stats.get("shadow_rays")
+    rays_off = r.stats.shadow_rays
     r.render(cam, settings(spp=1, layers=4, shadows=True, count=True))
-    rays_on = r.stats.get("shadow_rays")
+    rays_on = r.stats.shadow_rays
     x0, y0 = pick_window(img, 16, 16)
     win = crop_camera(cam, x0, y0, 16, 16)
     e = image_error(r.render(win, no_sh), tracer.reference_render(strands, win, no_sh))
@@ -61,10 +61,10 @@ def run(sec, cfg):
     # 3. screen bounds
     with no_screen_bounds(r):
         t_off, img_all = measure(lambda: r.render(cam, base), runs=cfg.runs)
-        px_all = r.stats.get("traversed_pixels")
+        px_all = r.stats.traversed_pixels
     t_on, img_box = measure(lambda: r.render(cam, base), runs=cfg.runs)
     row("screen bounds (vs every pixel)", t_on, t_off,
-        f"pixels traced {r.stats.get('traversed_pixels'):,} of {px_all:,}; images differ by max abs "
+        f"pixels traced {r.stats.traversed_pixels:,} of {px_all:,}; images differ by max abs "
         f"{fmt_num(float(np.abs(img_box - img_all).max()))}")
 
     # 4. bounds clipping: measured, not switchable (the walk starts where the ray enters the grid)
@@ -76,7 +76,7 @@ def run(sec, cfg):
 
     # 5. camera move: no re-upload
     moved = tracer_camera(orbit(matrix, np.radians(15), 0.5 * (lo + hi)), size)
-    before = r.stats["bytes_uploaded"]
+    before = r.stats.bytes_uploaded
     state = {"flip": False}
 
     def rerender():
@@ -84,7 +84,7 @@ def run(sec, cfg):
         return r.render(moved if state["flip"] else cam, base)
 
     t_on, _ = measure(rerender, runs=cfg.runs)
-    sent = r.stats["bytes_uploaded"] - before
+    sent = r.stats.bytes_uploaded - before
     t_off, _ = measure(lambda: (r.set_strands(strands), r.render(moved, base)), runs=cfg.runs)
     fresh = tracer.Renderer()
     fresh.set_strands(strands)

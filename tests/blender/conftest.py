@@ -97,7 +97,7 @@ def clean(extension):
     yield extension
     clear_scene()
     # Drop cached generators so nothing of this test outlives it.
-    importlib.import_module(f"{extension.__name__}.addon.live").forget()
+    importlib.import_module(f"{extension.__name__}.addon.live").forget_all()
 
 
 # bpy 4.2 as a Python module shuts Blender down (WM_exit) only when the bpy module object is

@@ -3,7 +3,6 @@
 headless through the operators' stroke properties (world points, as a script gives them) and
 checked against arrays read here from the scene and groom.stroke's own measures."""
 import importlib
-import time
 import types
 
 import numpy as np
@@ -315,9 +314,10 @@ def test_the_shortcut_is_registered_and_removed_with_the_extension(extension, ex
     assert len(entries()) == 1
 
 
-def test_release_to_regrown_hair_at_the_viewport_count(scalp, capsys):
-    """The figure: from release (the operator's execute) to the hair regrown around the new
-    key at the viewport count (live update)."""
+def test_a_drawn_key_has_its_wisp_at_the_viewport_count_after_one_live_update(scalp):
+    """From release (the operator's execute) one live update regrows the hair around the new
+    key at the viewport count. (The time it takes is a figure of the benchmark report's
+    Blender versions section, not of a test.)"""
     live = ext_module(scalp_extension(), "live")
     s = scalp.keystrand_hair
     draw(hanging_stroke(root=(-0.1, 0.0, 0.0), side=-1.0))
@@ -325,20 +325,14 @@ def test_release_to_regrown_hair_at_the_viewport_count(scalp, capsys):
     s.count, s.viewport_count = 20000, 2000
     assert bpy.ops.hair.generate() == {'FINISHED'}
     activate(scalp)
-    t0 = time.perf_counter()
     assert draw(hanging_stroke()) == {'FINISHED'}
-    t1 = time.perf_counter()
     bpy.context.view_layer.update()
     assert live.process(settle=False) == 1
-    t2 = time.perf_counter()
     hair = s.hair_object
     assert len(hair.data.curves) == 2000
     wisp = np.empty(2000, np.int32)
     hair.data.attributes["wisp"].data.foreach_get("value", wisp)
     assert set(wisp.tolist()) == {0, 1}, "the new key has no wisp yet"
-    with capsys.disabled():
-        print(f"\n[figure] release -> key {1e3 * (t1 - t0):.0f} ms, -> hair regrown at 2,000 strands "
-              f"{1e3 * (t2 - t0):.0f} ms (of 20,000)")
 
 
 # --- the modal tools, driven by events -------------------------------------------------

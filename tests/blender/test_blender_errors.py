@@ -266,3 +266,92 @@ def test_blender_export_failing_midway_leaves_no_file_and_no_temporary_data(clea
     raise_on(monkeypatch, export_blender, "_bake")
     run_failing(bpy.ops.hair.export, INTERNAL, folder=tmp_path, internal=True,
                 filepath=str(tmp_path / f"hair.{fmt}"), format=fmt)
+
+
+# --- live update: no operator to report on, so the panel says it ----------------------------
+
+class _Labels:
+    """A stand-in layout that keeps the text of every label drawn."""
+
+    def __init__(self):
+        self.texts = []
+
+    def label(self, text="", **kwargs):
+        self.texts.append(text)
+
+    def __getattr__(self, name):  # row(), column(), prop(), operator(), separator() ...
+        return lambda *args, **kwargs: self
+
+
+def panel_labels():
+    fake = type("P", (), {"layout": _Labels()})()
+    bpy.types.VIEW3D_PT_keystrand_hair.draw(fake, bpy.context)
+    return fake.layout.texts
+
+
+def live_scalp(clean):
+    scalp = keyed_scalp()
+    assert bpy.ops.hair.generate() == {'FINISHED'}
+    return scalp, scalp.keystrand_hair.hair_object
+
+
+def drag_a_key(scalp, dz):
+    key = next(o for o in bpy.data.objects if o.keystrand_hair.role == 'KEY' and o.keystrand_hair.scalp == scalp)
+    tip = key.data.splines[0].bezier_points[-1]
+    tip.co.z += dz
+    tip.handle_left.z += dz
+    tip.handle_right.z += dz
+    key.data.update_tag()
+    bpy.context.view_layer.update()
+
+
+def hair_points(hair):
+    points = np.empty(len(hair.data.points) * 3, np.float32)
+    hair.data.attributes["position"].data.foreach_get("vector", points)
+    return points
+
+
+def test_live_update_on_bad_input_keeps_the_hair_and_the_panel_says_why(clean):
+    live, transaction = ext_module(clean, "live"), ext_module(clean, "transaction")
+    scalp, hair = live_scalp(clean)
+    before = hair_points(hair)
+    scalp.keystrand_hair.min_length, scalp.keystrand_hair.max_length = 0.9, 0.5  # groom refuses it
+    drag_a_key(scalp, -0.02)
+    live.process(settle=True)
+    np.testing.assert_array_equal(hair_points(hair), before)
+    (note,) = transaction.background_errors(scalp)
+    assert note.startswith("Live update waits: ") and "min_length" in note and INTERNAL not in note
+    assert note in panel_labels()
+    # Fixed, the next edit regrows the hair and the note goes.
+    scalp.keystrand_hair.max_length = 1.0
+    drag_a_key(scalp, -0.01)
+    live.process(settle=True)
+    assert transaction.background_errors(scalp) == [] and not any("Live update" in t for t in panel_labels())
+    assert not np.array_equal(hair_points(hair), before)
+
+
+def test_a_bug_in_live_update_says_so_with_its_traceback(clean, monkeypatch, capfd):
+    live, transaction = ext_module(clean, "live"), ext_module(clean, "transaction")
+    scalp, hair = live_scalp(clean)
+    before = hair_points(hair)
+    raise_on(monkeypatch, live, "_update", after=False)
+    capfd.readouterr()
+    drag_a_key(scalp, -0.02)
+    live.process(settle=True)
+    np.testing.assert_array_equal(hair_points(hair), before)
+    (note,) = transaction.background_errors(scalp)
+    assert note.startswith(f"{INTERNAL} in Live update (Boom: planted in _update)") and "Please report" in note
+    assert note in panel_labels()
+    err = capfd.readouterr().err
+    assert "Traceback" in err and "Boom: planted in _update" in err
+
+
+def test_switching_live_update_off_drops_its_note(clean, monkeypatch):
+    live, transaction = ext_module(clean, "live"), ext_module(clean, "transaction")
+    scalp, _ = live_scalp(clean)
+    raise_on(monkeypatch, live, "_update", after=False)
+    drag_a_key(scalp, -0.02)
+    live.process(settle=True)
+    assert transaction.background_errors(scalp)
+    scalp.keystrand_hair.live_update = False
+    assert transaction.background_errors(scalp) == []

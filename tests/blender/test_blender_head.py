@@ -333,14 +333,24 @@ def test_head_axes_decide_the_hair_on_a_turned_scalp(clean):
     assert world.shape == local.shape and np.abs(world - local).max() > 1e-3
 
 
-def test_load_preset_keeps_the_head_s_axes(clean):
+def test_load_preset_places_its_keys_with_the_head_s_own_axes(clean):
+    """A preset describes a hairstyle, not a head: on a scalp whose head is Y up and faces +Z
+    in its mesh, the keys land where the preset placed with those axes puts them, not where
+    its own (Z up) axes would, and Generate then grows hair with the same axes."""
+    from groom import load_preset
     scalp = make_scalp()
     s = scalp.keystrand_hair
     s.head_axes = 'LOCAL'
     s.up, s.front = (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
-    assert bpy.ops.hair.load_preset(preset="wavy") == {'FINISHED'}
-    assert s.head_axes == 'LOCAL'
-    assert tuple(s.up) == (0.0, 1.0, 0.0) and tuple(s.front) == (0.0, 0.0, 1.0)
+    assert bpy.ops.hair.load_preset(preset="wavy", replace=True) == {'FINISHED'}
+    preset = load_preset(clean.__path__[0] + "/presets/wavy.json")
+    surface = mesh_surface(scalp)
+    mine = np.array([k.root for k in preset.place_keys(surface, up=(0, 1, 0), front=(0, 0, 1)).keys])
+    its_own = np.array([k.root for k in preset.place_keys(surface).keys])
+    roots = key_roots(scalp)
+    np.testing.assert_allclose(roots, mine, atol=1e-6)
+    assert np.abs(roots - its_own).max() > 0.02, "the preset's own axes give the same roots: no proof"
+    assert ext_module(clean, "properties").groom_params(s).up == (0.0, 1.0, 0.0)
 
 
 def test_a_flattened_scalp_is_reported_not_raised(clean):
@@ -349,5 +359,5 @@ def test_a_flattened_scalp_is_reported_not_raised(clean):
     scalp = make_scalp()
     scalp.scale = (1.0, 0.0, 1.0)
     bpy.context.view_layer.update()
-    with pytest.raises(scene_data.SceneError, match="zero scale.*Head Axes to Mesh"):
+    with pytest.raises(scene_data.InputError, match="zero scale.*Head Axes to Mesh"):
         head.scalp_axes(scalp)

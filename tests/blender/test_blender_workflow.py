@@ -206,26 +206,76 @@ def test_generate_again_refills_the_same_hair_object(clean):
     assert len([o for o in bpy.data.objects if o.type == 'CURVES']) == 1
 
 
-def test_settings_mirror_every_groom_parameter_with_its_default(clean):
+def test_the_settings_read_into_groom_are_exactly_groom_s_parameters(clean):
+    """The add-on's list of model settings and GroomParams' fields are the same names: a
+    parameter added to groom without a setting (or a setting groom does not know) fails."""
     import dataclasses
     from groom import GroomParams
+    properties = ext_module(clean, "properties")
+    s = make_scalp().keystrand_hair
+    fields = {f.name for f in dataclasses.fields(GroomParams)}
+    assert set(properties.settings_to_dict(s)) == fields
+    assert set(properties.PARAM_FIELDS) == fields - {"parting"}  # parting: its five settings
+    assert all(name in s.bl_rna.properties for name in properties.PARAM_FIELDS + properties.PARTING_FIELDS)
+
+
+def test_each_setting_has_its_parameter_s_type_default_and_choices(clean):
+    from groom import GroomParams
+    from groom import params as groom_params
+    from groom.sampling import SAMPLING_MODES
+    properties = ext_module(clean, "properties")
+    s = make_scalp().keystrand_hair
+    defaults = GroomParams()
+    choices = {"sampling_mode": SAMPLING_MODES, "normal_mode": groom_params.NORMAL_MODES,
+               "neighbour_mode": groom_params.NEIGHBOUR_MODES, "resolution_mode": groom_params.RESOLUTION_MODES,
+               "tolerance_units": groom_params.TOLERANCE_UNITS, "radius_mode": groom_params.RADIUS_MODES}
+    for name in properties.PARAM_FIELDS:
+        prop, value, default = s.bl_rna.properties[name], getattr(s, name), getattr(defaults, name)
+        assert prop.description, f"setting {name} has no tooltip"
+        if isinstance(default, bool):
+            assert prop.type == 'BOOLEAN' and value == default, name
+        elif isinstance(default, int):
+            assert prop.type == 'INT' and value == default, name
+        elif isinstance(default, float):
+            assert prop.type == 'FLOAT' and not prop.is_array and value == pytest.approx(default, rel=1e-6), name
+        elif isinstance(default, tuple):
+            assert prop.type == 'FLOAT' and prop.array_length == len(default), name
+            assert np.allclose(tuple(value), default, atol=1e-6), name
+        else:
+            assert prop.type == 'ENUM' and value == default, name
+            assert {item.identifier for item in prop.enum_items} == set(choices[name]), name
+    # Parting off by default, as GroomParams' parting None.
+    assert defaults.parting is None and not s.use_parting
+
+
+def test_every_value_a_setting_allows_groom_accepts(clean):
+    """The settings' hard limits lie inside groom's ranges: an artist cannot type a value
+    that Generate then refuses (only min > max length, checked by groom, remains)."""
+    properties = ext_module(clean, "properties")
     scalp = make_scalp()
     s = scalp.keystrand_hair
-    skipped = {"parting"}  # partings come from the mesh's `hair_group` attribute instead
-    for field in dataclasses.fields(GroomParams):
-        if field.name in skipped:
+    tried = 0
+    for name in properties.PARAM_FIELDS:
+        prop = s.bl_rna.properties[name]
+        if prop.type not in ('INT', 'FLOAT'):
             continue
-        assert field.name in s.bl_rna.properties, f"no setting for GroomParams.{field.name}"
-        prop = s.bl_rna.properties[field.name]
-        assert prop.description, f"setting {field.name} has no tooltip"
-        value = getattr(s, field.name)
-        default = getattr(GroomParams(), field.name)
-        if isinstance(default, tuple):
-            assert np.allclose(tuple(value), default, atol=1e-6), field.name
-        elif isinstance(default, (str, bool)):
-            assert value == default, field.name
-        else:
-            assert value == pytest.approx(default, rel=1e-6), field.name
+        for bound in (prop.hard_min, prop.hard_max):
+            if not np.isfinite(bound) or abs(bound) >= 2 ** 31 - 1:
+                continue
+            before = {n: getattr(s, n) for n in ("min_length", "max_length")}
+            value = (bound,) * prop.array_length if prop.is_array else bound
+            setattr(s, name, value)
+            if name in ("min_length", "max_length"):  # both at once: groom wants min <= max
+                s.min_length = s.max_length = bound
+            try:
+                properties.groom_params(s)
+            except Exception as e:
+                pytest.fail(f"{name} = {bound} (its limit in the panel) is refused by groom: {e}")
+            finally:
+                s.property_unset(name)
+                s.min_length, s.max_length = before["min_length"], before["max_length"]
+            tried += 1
+    assert tried >= 25, f"only {tried} limits tried"
 
 
 def test_live_update_regrows_only_the_edited_keys_wisps(clean):
@@ -464,7 +514,7 @@ def test_live_catch_up_runs_off_the_main_thread_and_uses_current_settings(clean)
     # Past the settle time, the catch-up starts on a thread and the call returns at once.
     live.process(now=1e12)
     names = [t.name for t in threading.enumerate()]
-    state = next(iter(live._states.values()))
+    state = next(iter(ext_module(clean, "generator_cache").states()))[1]
     assert state.catchup is None or "keystrand-hair-catch-up" in names
     live.process(settle=True)
     assert state.catchup is None
@@ -537,10 +587,91 @@ def test_live_update_reads_the_collider_again_when_it_moves(clean):
     assert live.process(settle=True) == 0  # the scene's first evaluation since the keys were made
     head.location.x += 0.0015  # a slip of 1.5 mm: the hair now cuts into the head's far side
     bpy.context.view_layer.update()
-    state = next(iter(live._states.values()))
+    state = next(iter(ext_module(clean, "generator_cache").states()))[1]
     assert live.process(settle=True) == 1 and state.collider_version == 1
     d, _, allowed = depths(s.hair_object, head)
     assert not (d < allowed).any(), d.min()
     # Nothing moved since: nothing read or grown again.
     bpy.context.view_layer.update()
     assert live.process(settle=True) == 0 and state.collider_version == 1
+
+
+# --- partings ------------------------------------------------------------------------------
+
+def parting_of(settings):
+    """GroomParams.parting as the settings hold it (float32 values), or None."""
+    if not settings.use_parting:
+        return None
+    parting = {"point": tuple(settings.parting_point), "normal": tuple(settings.parting_normal)}
+    if settings.parting_use_end:
+        parting["end"] = tuple(settings.parting_end)
+    return parting
+
+
+def key_with_settings(obj):
+    """read_key with the key's own settings: its part group, colour and root radius."""
+    from groom import KeyStrand
+    k = obj.keystrand_hair
+    return KeyStrand(read_key(obj).points, kind="cubic", group=k.key_group,
+                     color=tuple(k.key_color) if k.use_key_color else None,
+                     root_radius=k.key_radius if k.key_radius > 0 else None)
+
+
+def test_load_preset_carries_its_parting_onto_the_scalp(clean):
+    from groom import load_preset
+    scalp = make_scalp()
+    scalp.location = (0.2, 0.1, 1.3)  # the parting is kept in the mesh's own space
+    bpy.context.view_layer.update()
+    s = scalp.keystrand_hair
+    assert not s.use_parting
+    assert bpy.ops.hair.load_preset(preset="parted") == {'FINISHED'}
+    preset = load_preset(clean.__path__[0] + "/presets/parted.json")
+    expected = preset.place_keys(read_scalp_arrays(scalp), up=(0.0, 0.0, 1.0), front=(0.0, -1.0, 0.0)).params.parting
+    assert expected is not None and set(expected) == {"point", "normal", "end"}
+    got = parting_of(s)
+    assert got is not None and set(got) == set(expected)
+    for name in expected:
+        np.testing.assert_allclose(got[name], expected[name], atol=1e-6, err_msg=name)
+    # A preset without a parting switches it off again.
+    assert bpy.ops.hair.load_preset(preset="wavy") == {'FINISHED'}
+    assert not s.use_parting
+
+
+def test_generate_parts_the_hair_as_groom_does(clean):
+    """Every hair follows keys of its own side of the parting only, and the Curves object is
+    what groom grows with the settings' parting."""
+    from groom import generate
+    scalp = make_scalp()
+    assert bpy.ops.hair.load_preset(preset="parted") == {'FINISHED'}
+    s = scalp.keystrand_hair
+    s.count = 1500
+    assert bpy.ops.hair.generate() == {'FINISHED'}
+    got = curves_arrays(s.hair_object)
+    keys = sorted((o for o in bpy.data.objects if o.keystrand_hair.role == 'KEY'), key=lambda o: o.name)
+    surface = read_scalp_arrays(scalp)
+    parting = parting_of(s)
+    expected = generate(surface, [key_with_settings(k) for k in keys], params_of(scalp, parting=parting),
+                        collider=(surface.vertices, surface.triangles)).strands
+    np.testing.assert_array_equal(got["counts"], expected.counts)
+    np.testing.assert_array_equal(got["position"], expected.points)
+    # Roots on the normal's side of the plane, in front of its end, are parted (group 1).
+    roots = got["position"][np.concatenate([[0], np.cumsum(got["counts"])[:-1]])].astype(np.float64)
+    p, n, end = (np.array(parting[k]) for k in ("point", "normal", "end"))
+    parted = ((roots - p) @ n > 0) & ((roots - end) @ np.array(s.front) >= 0)
+    assert 0.05 < parted.mean() < 0.95, "the parting parts nothing here: the check below proves nothing"
+    key_group = np.array([k.keystrand_hair.key_group for k in keys])
+    np.testing.assert_array_equal(key_group[got["wisp"]], parted.astype(int))
+
+
+def test_save_preset_keeps_the_parting(clean, tmp_path):
+    from groom import load_preset
+    scalp = make_scalp()
+    assert bpy.ops.hair.load_preset(preset="parted") == {'FINISHED'}
+    s = scalp.keystrand_hair
+    s.parting_point = (0.03, 0.0, 0.0)  # the artist moves it
+    path = tmp_path / "mine.json"
+    assert bpy.ops.hair.save_preset(filepath=str(path)) == {'FINISHED'}
+    placed = load_preset(str(path)).place_keys(read_scalp_arrays(scalp), up=(0.0, 0.0, 1.0),
+                                               front=(0.0, -1.0, 0.0)).params.parting
+    for name, value in parting_of(s).items():
+        np.testing.assert_allclose(placed[name], value, atol=1e-5, err_msg=name)

@@ -103,3 +103,57 @@ def test_place_key_angles_rotate_about_the_root_axes():
     k = KeyStrand(place_key([[0, 0, 0], [0, 1, 1], [1, 0, 2]], np.ones(3), frame, (0.3, -0.2, 1.1)))
     k0 = KeyStrand(np.array([[0, 0, 0], [0, 1, 1], [1, 0, 2]], float))
     assert k.length() == pytest.approx(k0.length(), rel=1e-9)
+
+
+# --- the shapes a new key starts with, and the keys' fingerprint ---------------------------
+
+@pytest.mark.parametrize("shape", ["straight", "wavy", "curly", "swept"])
+def test_a_key_shape_starts_at_the_root_and_has_the_length_asked_for(shape):
+    from groom.keys import shape_profile
+    p = shape_profile(shape, 0.23)
+    np.testing.assert_array_equal(p[0], 0.0)
+    assert np.linalg.norm(np.diff(p, axis=0), axis=1).sum() == pytest.approx(0.23, rel=1e-12)
+
+
+def test_key_shapes_leave_the_scalp_and_differ_from_each_other():
+    from groom.keys import KEY_SHAPES, shape_profile
+    profiles = {s: shape_profile(s, 1.0) for s in KEY_SHAPES}
+    for s, p in profiles.items():
+        assert p[1:, 2].max() > 0.0, f"{s} never rises off the scalp"
+    assert profiles["straight"][-1, 0] > 0.5, "straight does not fall down the head"
+    assert profiles["swept"][-1, 0] < 0.0, "swept does not sweep back"
+    assert np.ptp(profiles["curly"][:, 1]) > np.ptp(profiles["straight"][:, 1])
+    ends = np.array([p[-1] for p in profiles.values()])
+    assert len(np.unique(ends.round(6), axis=0)) == len(KEY_SHAPES)
+
+
+@pytest.mark.parametrize("shape, length", [("spiky", 0.2), ("wavy", 0.0), ("wavy", float("nan"))])
+def test_an_unknown_shape_or_a_length_that_is_not_positive_is_refused(shape, length):
+    from groom.keys import shape_profile
+    with pytest.raises(InputError, match="key (shape|length)"):
+        shape_profile(shape, length)
+
+
+def test_changed_keys_names_exactly_the_keys_edited():
+    from groom.keys import changed_keys, keys_signature
+    rng = np.random.default_rng(3)
+    keys = [KeyStrand(rng.normal(size=(4, 3)), kind="cubic") for _ in range(4)]
+    old = keys_signature(keys)
+    assert changed_keys(keys_signature(keys), old) == []
+    edited = list(keys)
+    moved = keys[1].points.copy()
+    moved[-1, 2] += 1e-9
+    edited[1] = KeyStrand(moved, kind="cubic")
+    edited[3] = KeyStrand(keys[3].points, kind="cubic", color=(1, 0, 0))
+    assert changed_keys(keys_signature(edited), old) == [1, 3]
+    regrouped = keys[:2] + [KeyStrand(keys[2].points, kind="cubic", group=1), keys[3]]
+    assert changed_keys(keys_signature(regrouped), old) == [2]
+    longer = keys[:3] + [KeyStrand(rng.normal(size=(7, 3)), kind="cubic")]
+    assert changed_keys(keys_signature(longer), old) == [3]
+
+
+def test_a_different_number_of_keys_or_no_old_fingerprint_means_every_key_is_new():
+    from groom.keys import changed_keys, keys_signature
+    keys = [KeyStrand(np.eye(3)), KeyStrand(np.eye(3) * 2)]
+    assert changed_keys(keys_signature(keys), None) is None
+    assert changed_keys(keys_signature(keys[:1]), keys_signature(keys)) is None

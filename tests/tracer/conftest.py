@@ -36,7 +36,7 @@ def renderer(request):
     shaders and by numpy. Drivers without compute shaders (macOS) have only the numpy build."""
     from tracer import Renderer
     from tracer.gpu_build import compute_available
-    from tracer.renderer import shared_context
+    from tracer.gl_state import shared_context
     if request.param == "gpu" and not compute_available(shared_context()):
         pytest.skip("this driver has no compute shaders (OpenGL 4.3); the numpy build covers it")
     return Renderer(build=request.param)

@@ -7,9 +7,10 @@ import pytest
 
 from hairio import InputError
 from tracer import Camera, Renderer, RenderSettings
-from tracer import renderer as rmod
+from tracer import strand_upload
 from tracer.gpu_build import compute_available
-from tracer.renderer import IDX_SLACK, TEXELS_PER_CYL, shared_context
+from tracer.gl_state import shared_context
+from tracer.layout import IDX_SLACK, TEXELS_PER_CYL
 
 from tracer_scenes import curls
 
@@ -24,7 +25,7 @@ def _camera(s, size=(40, 40)):
 
 def _needed_texels(r):
     """The most texels any of the renderer's buffers needs for its current scene."""
-    return max(r.num_cylinders * TEXELS_PER_CYL, r.stats["grid_refs"] + IDX_SLACK, r.grid.num_cells,
+    return max(r.num_cylinders * TEXELS_PER_CYL, r.stats.grid_refs + IDX_SLACK, r.grid.num_cells,
                len(r.strands.points))
 
 
@@ -55,23 +56,23 @@ def test_buffers_kept_from_a_bigger_scene_render_a_smaller_one_like_fresh_ones(b
     reused = Renderer(build=build)
     reused.set_strands(big)
     reused.render(_camera(big), SETTINGS)
-    kept = {name: store.glo for name, store in reused._tex.items()}
+    kept = {name: store.glo for name, store in reused.buffers.items()}
     reused.set_strands(small)
-    assert all(reused._tex[name].glo == glo for name, glo in kept.items())     # really reused
+    assert all(reused.buffers[name].glo == glo for name, glo in kept.items())     # really reused
     a = reused.render(_camera(small), SETTINGS)
     fresh = Renderer(build=build)
     fresh.set_strands(small)
     b = fresh.render(_camera(small), SETTINGS)
     assert a[..., 3].max() > 0
     np.testing.assert_array_equal(a, b)
-    assert {k: reused.stats[k] for k in COUNTERS} == {k: fresh.stats[k] for k in COUNTERS}
+    assert {k: getattr(reused.stats, k) for k in COUNTERS} == {k: getattr(fresh.stats, k) for k in COUNTERS}
 
 
 @pytest.mark.parametrize("build", BUILDS)
 def test_updates_across_upload_chunks_equal_a_fresh_upload(build, monkeypatch):
     # Chunks of 16 cylinders or points: the changed strands start and end inside chunks,
     # cross chunk boundaries with and without whole chunks between, and sit side by side.
-    monkeypatch.setattr(rmod, "UPLOAD_CHUNK", 16)
+    monkeypatch.setattr(strand_upload, "UPLOAD_CHUNK", 16)
     s = curls(40, 7)
     r = Renderer(build=build)
     r.set_strands(s)
@@ -83,13 +84,13 @@ def test_updates_across_upload_chunks_equal_a_fresh_upload(build, monkeypatch):
             a = s.offsets[i]
             pts[a:a + s.counts[i]] += rng.normal(0, 0.01, 3).astype(np.float32)
         s = type(s).from_arrays(pts, s.counts, radius=s.radius, color=s.color, alpha=s.alpha)
-        before = r.stats["bytes_uploaded"]
+        before = r.stats.bytes_uploaded
         r.update_strands(changed, s)
-        sent = r.stats["bytes_uploaded"] - before
+        sent = r.stats.bytes_uploaded - before
         fresh = Renderer(build=build)
         fresh.set_strands(s)
         n = r.num_cylinders * TEXELS_PER_CYL
-        np.testing.assert_array_equal(np.frombuffer(r._tex["tex_cyl"].read(n), np.float32),
-                                      np.frombuffer(fresh._tex["tex_cyl"].read(n), np.float32))
+        np.testing.assert_array_equal(np.frombuffer(r.buffers["tex_cyl"].read(n), np.float32),
+                                      np.frombuffer(fresh.buffers["tex_cyl"].read(n), np.float32))
         np.testing.assert_array_equal(r.render(cam), fresh.render(cam))
-        assert sent < fresh.stats["bytes_uploaded"]      # only the changed chunks went up
+        assert sent < fresh.stats.bytes_uploaded      # only the changed chunks went up

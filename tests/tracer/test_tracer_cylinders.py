@@ -4,7 +4,7 @@ import pytest
 
 from hairio import InputError, Strands
 from tracer import strands_to_cylinders
-from tracer.cylinders import SHARP_BEND_DEG
+from tracer.layout import SHARP_BEND_DEG
 
 from tracer_scenes import curls, make_strands
 

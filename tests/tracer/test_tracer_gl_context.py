@@ -17,7 +17,7 @@ from hairio import InputError
 from tracer import Camera, Renderer, RenderSettings
 from tracer import gl_buffers, gl_context
 from tracer.gl_context import ENV, candidates, current_system, requested_backend
-from tracer.renderer import context_backend, shared_context
+from tracer.gl_state import context_backend, shared_context
 
 from tracer_scenes import curls
 
@@ -99,7 +99,7 @@ def test_the_context_in_use_is_made_by_the_backend_asked_for():
     # Read from the type of glcontext's loader, not from what was asked: a GLX run that fell
     # back to EGL fails here.
     used = gl_context.backend_of(shared_context())
-    assert used == context_backend() == Renderer(build="numpy").stats["gl_backend"]
+    assert used == context_backend() == Renderer(build="numpy").stats.gl_backend
     asked = requested_backend()
     if asked == "auto":
         assert used in candidates("auto", current_system(), os.environ.get("DISPLAY"))
@@ -242,7 +242,7 @@ import numpy as np
 from tracer import Camera, Renderer, RenderSettings
 from tracer.gl_buffers import gl
 from tracer.gpu_build import compute_available
-from tracer.renderer import context_backend, shared_context
+from tracer.gl_state import context_backend, shared_context
 from tracer_scenes import curls
 from hairio import InputError
 ctx = shared_context()

@@ -7,9 +7,10 @@ from hairio import InputError
 from tracer import Camera, Light, RenderSettings, Renderer, strands_to_cylinders
 from tracer import renderer as rmod
 from tracer.grid import _cells_touched
-from tracer import gpu_build
+from tracer import layout
 from tracer.gpu_build import compute_available
-from tracer.renderer import TEXELS_PER_CYL, shared_context
+from tracer.gl_state import shared_context
+from tracer.layout import TEXELS_PER_CYL, cylinder_texels
 
 from test_tracer_grid import _cell_of, _surface_samples
 from tracer_scenes import curls, make_strands
@@ -24,17 +25,12 @@ def gpu():
 
 
 def _gpu_cylinder_texels(r):
-    raw = np.frombuffer(r._tex["tex_cyl"].read(r.num_cylinders * TEXELS_PER_CYL), np.float32)
+    raw = np.frombuffer(r.buffers["tex_cyl"].read(r.num_cylinders * TEXELS_PER_CYL), np.float32)
     return raw.reshape(-1, TEXELS_PER_CYL, 4)
 
 
 def _numpy_cylinder_texels(c):
-    out = np.zeros((len(c), TEXELS_PER_CYL, 4), np.float32)
-    out[:, 0, :3], out[:, 0, 3] = c.top, c.radius
-    out[:, 1, :3], out[:, 1, 3] = c.tip, c.alpha
-    out[:, 2, :3], out[:, 2, 3] = c.n2, c.flags
-    out[:, 3, :3] = c.color
-    return out
+    return cylinder_texels(c).reshape(-1, TEXELS_PER_CYL, 4)
 
 
 def _hairpin_and_repeats():
@@ -70,7 +66,7 @@ def test_every_surface_point_lies_in_a_cell_whose_gpu_list_has_its_cylinder(gpu)
     rng = np.random.default_rng(5)
     s = curls(30, 12, radius=0.01)
     gpu.set_strands(s)
-    assert gpu.stats["grid_build"] == "gpu"
+    assert gpu.stats.grid_build == "gpu"
     g, idx, c = gpu.grid, gpu.grid_indices(), strands_to_cylinders(s)
     assert g.num_cells > 8 and len(idx) == g.cell_count.sum()
     for k in rng.choice(len(c), 60, replace=False):
@@ -127,15 +123,15 @@ def test_update_on_the_gpu_equals_a_fresh_upload(gpu):
         a = s.offsets[i]
         pts[a:a + s.counts[i]] += np.array([0.01, -0.02, 0.0], np.float32)
     s2 = type(s).from_arrays(pts, s.counts, radius=s.radius, color=s.color, alpha=s.alpha)
-    before = gpu.stats["bytes_uploaded"]
+    before = gpu.stats.bytes_uploaded
     gpu.update_strands(changed, s2)
-    sent = gpu.stats["bytes_uploaded"] - before
+    sent = gpu.stats.bytes_uploaded - before
     texels = _gpu_cylinder_texels(gpu).copy()
     cam = _scene_camera(s2)
     img = gpu.render(cam)
     fresh = Renderer(build="gpu")
     fresh.set_strands(s2)
-    before = fresh.stats["bytes_uploaded"]
+    before = fresh.stats.bytes_uploaded
     np.testing.assert_array_equal(texels, _gpu_cylinder_texels(fresh))
     np.testing.assert_array_equal(img, fresh.render(cam))
     assert sent < before            # only the changed strands' points went up
@@ -144,8 +140,7 @@ def test_update_on_the_gpu_equals_a_fresh_upload(gpu):
 def test_a_cylinder_too_big_for_one_invocation_falls_back_to_the_numpy_grid(monkeypatch):
     # The limit is compiled into the shaders; a small one makes an ordinary fat strand
     # too big without a scene of millions of cells.
-    monkeypatch.setattr(gpu_build, "MAX_VISITS", 200)
-    monkeypatch.setattr(rmod, "_BUILDER", None)
+    monkeypatch.setattr(layout, "MAX_VISITS", 200)
     rng = np.random.default_rng(2)
     tiny = [np.array([p, p + [0, 0, 0.002]]) for p in rng.uniform(0, 1, (3000, 3))]
     fat = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
@@ -154,8 +149,8 @@ def test_a_cylinder_too_big_for_one_invocation_falls_back_to_the_numpy_grid(monk
     gpu.set_strands(s)
     g = gpu.grid
     span = np.prod(np.minimum(g.dims, np.ceil(1.0 / g.cell_size) + 1))
-    assert span > gpu_build.MAX_VISITS
-    assert gpu.stats["grid_build"] == "numpy"
+    assert span > layout.MAX_VISITS
+    assert gpu.stats.grid_build == "numpy"
     cam = _scene_camera(s)
     cpu = Renderer(build="numpy")
     cpu.set_strands(s)

@@ -16,10 +16,10 @@ from hairio import InputError, Strands
 from tracer import Camera, RenderSettings
 from tracer.__main__ import main
 from tracer.png import encode_png, linear_to_srgb, to_srgb8, write_png
-from tracer.renderer import context_backend
+from tracer.gl_state import context_backend
 from tracer.worker import WorkerClient, WorkerError
 
-from tracer_scenes import curls
+from tracer_scenes import curls, uv_sphere
 
 
 def _decode_png(data):
@@ -106,9 +106,9 @@ def test_worker_renders_keeps_the_scene_and_restarts_after_a_crash():
         client.set_strands(s)
         first = client.render(cam, RenderSettings())
         assert first.shape == (24, 24, 4) and first[..., 3].max() > 0
-        sent = client.stats["bytes_uploaded"]
+        sent = client.stats.bytes_uploaded
         client.render(cam.moved(position=(0.3, -2.5, 0.6)), RenderSettings())
-        assert client.stats["bytes_uploaded"] == sent          # the scene stayed uploaded
+        assert client.stats.bytes_uploaded == sent          # the scene stayed uploaded
         with pytest.raises(InputError):
             client.render(cam, RenderSettings(spp=2))           # bad input comes back as InputError
         os.kill(client.pid, signal.SIGKILL)
@@ -131,7 +131,7 @@ def test_worker_imports_moderngl_from_where_this_process_does(tmp_path):
         client.set_strands(s)
         img = client.render(Camera.look_at((0, -2.5, 0.5), (0, 0, 0.5), size=(16, 16)), RenderSettings())
         assert img[..., 3].max() > 0
-        assert client.stats["gl_backend"] == context_backend()      # the backend asked for here
+        assert client.stats.gl_backend == context_backend()      # the backend asked for here
 
 
 def test_worker_is_given_the_backend_asked_for_here_even_with_its_own_environment(monkeypatch):
@@ -174,3 +174,25 @@ def test_every_render_option_has_help():
     sub = next(a for a in build_parser()._actions if a.dest == "command").choices["render"]
     missing = [a.dest for a in sub._actions if a.dest != "help" and not (a.help or "").strip()]
     assert missing == []
+
+
+def test_worker_draws_meshes_and_keeps_them_across_a_restart():
+    from tracer import Renderer
+    s = curls(6, 6)
+    meshes = [(*uv_sphere((0, -0.4, 0.5), 0.15), (0.1, 0.5, 0.9))]
+    cam = Camera.look_at((0, -2.5, 0.5), (0, 0, 0.5), size=(24, 24))
+    local = Renderer(build="numpy")
+    local.set_strands(s)
+    local.set_meshes(meshes)
+    want = local.render(cam, RenderSettings())
+    with WorkerClient(python=sys.executable, extra_sys_path=(_root(),), timeout=60) as client:
+        client.set_strands(s)
+        with pytest.raises(InputError, match="mesh 0: no faces"):
+            client.set_meshes([(np.eye(3), np.zeros((0, 3), int), (1, 1, 1))])     # refused before it travels
+        client.set_meshes(meshes)
+        np.testing.assert_allclose(client.render(cam, RenderSettings()), want, atol=1e-6)
+        os.kill(client.pid, signal.SIGKILL)
+        time.sleep(0.2)
+        with pytest.raises(WorkerError):
+            client.render(cam, RenderSettings())
+        np.testing.assert_allclose(client.render(cam, RenderSettings()), want, atol=1e-6)   # meshes re-sent

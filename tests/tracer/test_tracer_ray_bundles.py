@@ -8,7 +8,7 @@ import pytest
 from tracer import Camera
 from tracer.cylinders import strands_to_cylinders
 from tracer.ray_bundles import candidate_pairs
-from tracer.reference import _Cyl, intersect, pixel_samples
+from tracer.reference import CylinderSet as _Cyl, intersect, pixel_samples
 
 from tracer_scenes import curls
 

@@ -26,7 +26,7 @@ def test_hard_shadows_through_an_alpha_stack_match_the_reference(renderer):
     settings = RenderSettings(layers=4, shadows=True, shadow_mode="hard", shading="kajiya-kay",
                               lights=(light,), count=True)
     img, ref = assert_matches_reference(renderer, s, cam, settings)
-    assert renderer.stats["shadow_rays"] > renderer.stats["layers_traced"] // 2
+    assert renderer.stats.shadow_rays > renderer.stats.layers_traced // 2
     # The shadows are there: without them some covered pixels are much brighter.
     lit = renderer.render(cam, RenderSettings(layers=4, shadows=False, shading="kajiya-kay", lights=(light,)))
     covered = ref[..., 3] > 0.5

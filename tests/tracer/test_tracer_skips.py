@@ -12,27 +12,27 @@ CAM = Camera.look_at((0.4, -2.2, 0.6), (0, 0, 0.5), fov_deg=40, size=(40, 40))
 def test_no_shadow_rays_with_shadows_off(renderer):
     renderer.set_strands(curls(10, 8))
     renderer.render(CAM, RenderSettings(shadows=True, count=True))
-    assert renderer.stats["shadow_rays"] > 0
+    assert renderer.stats.shadow_rays > 0
     renderer.render(CAM, RenderSettings(shadows=False, count=True))
-    assert renderer.stats["shadow_rays"] == 0
+    assert renderer.stats.shadow_rays == 0
 
 
 def test_one_layer_when_every_alpha_is_one(renderer):
     renderer.set_strands(curls(10, 8, alpha=1.0))
     img = renderer.render(CAM, RenderSettings(layers=8, shadows=False, count=True))
-    assert renderer.stats["layers_max"] == 1
-    assert renderer.stats["layers_traced"] == np.count_nonzero(img[..., 3] > 0)
+    assert renderer.stats.layers_max == 1
+    assert renderer.stats.layers_traced == np.count_nonzero(img[..., 3] > 0)
     renderer.set_strands(curls(10, 8, alpha=0.5))
     img = renderer.render(CAM, RenderSettings(layers=8, shadows=False, count=True))
-    assert renderer.stats["layers_traced"] > np.count_nonzero(img[..., 3] > 0)
+    assert renderer.stats.layers_traced > np.count_nonzero(img[..., 3] > 0)
 
 
 def test_pixels_outside_the_projected_bounds_never_trace(renderer):
     renderer.set_strands(curls(10, 8))
     far = Camera.look_at((0, -8, 0.5), (0, 0, 0.5), fov_deg=40, size=(64, 64))
     img = renderer.render(far, RenderSettings(count=True))
-    x0, y0, x1, y1 = renderer.stats["screen_box"]
-    assert renderer.stats["traversed_pixels"] == (x1 - x0) * (y1 - y0) < 64 * 64 / 4
+    x0, y0, x1, y1 = renderer.stats.screen_box
+    assert renderer.stats.traversed_pixels == (x1 - x0) * (y1 - y0) < 64 * 64 / 4
     outside = np.ones((64, 64), bool)
     outside[y0:y1, x0:x1] = False
     assert np.all(img[outside] == 0)
@@ -42,10 +42,10 @@ def test_pixels_outside_the_projected_bounds_never_trace(renderer):
 
 def test_camera_and_light_changes_upload_nothing(renderer):
     renderer.set_strands(curls(10, 8))
-    sent = renderer.stats["bytes_uploaded"]
+    sent = renderer.stats.bytes_uploaded
     renderer.render(CAM, RenderSettings())
     renderer.render(CAM.moved(position=(1.0, -2.0, 0.7)), RenderSettings(shading="phong", spp=4))
-    assert renderer.stats["bytes_uploaded"] == sent
+    assert renderer.stats.bytes_uploaded == sent
 
 
 def test_update_strands_uploads_only_the_changed_rows_and_matches_a_full_upload(renderer):
@@ -53,7 +53,7 @@ def test_update_strands_uploads_only_the_changed_rows_and_matches_a_full_upload(
     from tracer.scenes import wavy_cap
     s = wavy_cap(3000, 8, radius=1e-3, seed=2)
     renderer.set_strands(s)
-    full_bytes = renderer.stats["bytes_uploaded"]
+    full_bytes = renderer.stats.bytes_uploaded
     pts = s.points.copy()
     changed = np.array([5, 6, 2900])
     rows = np.concatenate([np.arange(o, o + 8) for o in s.offsets[changed]])
@@ -61,9 +61,9 @@ def test_update_strands_uploads_only_the_changed_rows_and_matches_a_full_upload(
     s2 = Strands.from_arrays(pts, s.counts, s.radius, s.color, s.alpha)
     cam = Camera.frame_bounds(*s.bounds(), (48, 48))
     renderer.update_strands(changed, s2)
-    partial = renderer.stats["bytes_uploaded"] - full_bytes
+    partial = renderer.stats.bytes_uploaded - full_bytes
     img_update = renderer.render(cam, RenderSettings())
     renderer.set_strands(s2)
-    whole = renderer.stats["bytes_uploaded"] - full_bytes - partial
+    whole = renderer.stats.bytes_uploaded - full_bytes - partial
     np.testing.assert_array_equal(img_update, renderer.render(cam, RenderSettings()))
     assert partial < whole

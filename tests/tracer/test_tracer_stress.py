@@ -37,10 +37,21 @@ def test_camera_inside_the_hair_volume(renderer):
 
 
 def test_grazing_rays(renderer):
-    renderer.set_strands(make_strands([[[-1, 0, 0], [1, 0, 0]]], radius=0.05))
-    # Camera in the plane z = 0.05 (tangent to the cylinder's top) looking along it.
+    s = make_strands([[[-1, 0, 0], [1, 0, 0]]], radius=0.05)
+    renderer.set_strands(s)
+    # Camera in the plane z = 0.05 (tangent to the cylinder's top) looking along it: the
+    # centre row's rays graze the strand, the rows above miss it, the rows below meet it
+    # across the whole image (the strand is wider than the view).
     cam = Camera.look_at((0, -3, 0.05), (0, 0, 0.05), size=(33, 33), fov_deg=10)
-    _finite(renderer.render(cam, SETTINGS))
+    img = _finite(renderer.render(cam, SETTINGS))
+    alpha = img[..., 3]
+    assert np.all(alpha[:16] == 0)
+    assert np.all(alpha[17:22] == 1.0)
+    assert np.all(alpha[23:] == 0)
+    # Off the grazing row the pixels are the float64 reference's.
+    ref = reference_render(s, cam, SETTINGS)
+    off = np.r_[0:16, 17:33]
+    np.testing.assert_allclose(img[off], ref[off], atol=1e-5)
 
 
 def test_a_cell_with_thousands_of_cylinders(renderer):
@@ -49,7 +60,7 @@ def test_a_cell_with_thousands_of_cylinders(renderer):
     renderer.set_strands(make_strands(lines, radius=2e-4, alpha=0.5))
     cam = Camera.look_at((0, -0.05, 0.005), (0, 0, 0.005), size=(24, 24))
     img = _finite(renderer.render(cam, RenderSettings(layers=8, count=True)))
-    assert img[..., 3].max() > 0.5 and renderer.stats["cylinder_tests"] > 3000
+    assert img[..., 3].max() > 0.5 and renderer.stats.cylinder_tests > 3000
 
 
 def test_empty_scene_renders_the_background(renderer):

@@ -104,7 +104,7 @@ def test_empty_blocks_between_tufts_are_skipped_without_losing_hits(renderer):
     pts = np.concatenate([a.points, b.points + [2.0, 1.5, 0.7]])
     s = Strands.from_arrays(pts, np.concatenate([a.counts, b.counts]), radius=np.full(len(pts), 0.01))
     renderer.set_strands(s)
-    from tracer.renderer import block_occupancy
+    from tracer.scene_grid import block_occupancy
     assert block_occupancy(renderer.grid).mean() < 0.5
     cam = Camera.look_at((-1.5, -2.0, -0.2), (1.0, 0.75, 0.85), fov_deg=60, size=(48, 48))
     settings = RenderSettings(shadows=True, lights=(Light("directional", (1.0, 0.8, 0.2)),))

@@ -27,3 +27,27 @@ def curls(n_strands=12, n_points=10, seed=0, radius=0.015, alpha=1.0):
         lines.append(np.stack([x0 + 0.08 * np.sin(f * t + ph), y0 + 0.08 * np.cos(f * t + ph), t], 1))
     return make_strands(lines, radius=radius, alpha=alpha,
                         color=(0.7, 0.45, 0.25))
+
+
+def uv_sphere(centre, radius, rings=12, segments=24):
+    """A closed sphere: (vertices, triangles)."""
+    theta = np.linspace(0, np.pi, rings + 1)[1:-1]
+    phi = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    ring = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1).reshape(-1, 3)
+    verts = np.concatenate([[[0, 0, 1]], ring, [[0, 0, -1]]]) * radius + np.asarray(centre, float)
+    idx = 1 + np.arange((rings - 1) * segments).reshape(rings - 1, segments)
+    nxt = np.roll(idx, -1, axis=1)
+    tris = [np.stack([np.zeros(segments, int), idx[0], nxt[0]], 1),
+            np.stack([np.full(segments, len(verts) - 1), nxt[-1], idx[-1]], 1)]
+    tris += [np.stack([idx[:-1], idx[1:], nxt[1:]], -1).reshape(-1, 3),
+             np.stack([idx[:-1], nxt[1:], nxt[:-1]], -1).reshape(-1, 3)]
+    return verts, np.concatenate(tris)
+
+
+def plane(z, half, centre=(0.0, 0.0)):
+    """A square at height z: (vertices, triangles)."""
+    cx, cy = centre
+    v = np.array([[cx - half, cy - half, z], [cx + half, cy - half, z], [cx + half, cy + half, z],
+                  [cx - half, cy + half, z]])
+    return v, np.array([[0, 1, 2], [0, 2, 3]])

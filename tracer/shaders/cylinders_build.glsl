@@ -1,18 +1,17 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 // Continual cylinders made on the GPU (GL 4.3 compute) from the strand points, written
-// straight into the cylinder texture the trace shader reads: the same four texels per
-// cylinder, by the same rules, as tracer/cylinders.py (which the reference tracer uses):
-//   TOP: xyz top, w radius   TIP: xyz tip, w alpha   N2: xyz unit normal of plane 2, w cap
-//   flags   COL: rgb colour
+// straight into the cylinder texture the trace shader reads: the same TEXELS_PER_CYL texels
+// per cylinder (CYL_TOP, CYL_TIP, CYL_N2, CYL_COL: tracer/layout.py), by the same rules, as
+// tracer/cylinders.py (which the reference tracer uses).
 // Cylinder k runs from point p = cyl_point[k] to p + 1 of the same strand; plane 2 is
 // square to the next axis unless the strand ends there or bends sharper than
-// SHARP_BEND_DEG (then square to its own axis, and a cap).
-layout(local_size_x = 64) in;
+// SHARP_BEND_DEG (then square to its own axis, and a cap). The host prepends
+// "#version 430 core" and the generated header of tracer/layout.py.
+layout(local_size_x = GROUP) in;
 
 uniform int n_items;        // cylinders to make in this dispatch
 uniform int first_item;     // index of the first of them
 uniform int n_cyl;          // cylinders in the scene
-uniform float cos_sharp;    // cos(SHARP_BEND_DEG)
 uniform float repeat2;      // squared distance below which a point repeats its predecessor
                             // (0: the host dropped repeats already)
 
@@ -22,7 +21,7 @@ layout(binding = 1) uniform samplerBuffer tex_rad;      // radius
 layout(binding = 2) uniform samplerBuffer tex_col;      // rgb
 layout(binding = 3) uniform samplerBuffer tex_alpha;    // alpha
 layout(binding = 4) uniform isamplerBuffer tex_cp;      // per cylinder: index of its top point
-layout(rgba32f, binding = 0) uniform writeonly imageBuffer cyl_img;   // 4 texels per cylinder
+layout(rgba32f, binding = 0) uniform writeonly imageBuffer cyl_img;   // TEXELS_PER_CYL per cylinder
 // Segments no longer than the repeat distance (the host passes twice the numpy build's, so
 // float32 rounding cannot hide one): repeats[0] counts them, repeats[1..] list the first
 // MAX_REPEATS of their top points. The host checks each by the numpy rule, drops the repeated
@@ -35,7 +34,7 @@ int top_point(int k) { return texelFetch(tex_cp, k).x; }
 vec3 unit(vec3 v) { return v / sqrt(v.x * v.x + v.y * v.y + v.z * v.z); }
 
 void main() {
-    int k = first_item + int(gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * 64
+    int k = first_item + int(gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * GROUP
             + int(gl_LocalInvocationID.x);
     if (k >= first_item + n_items || k >= n_cyl) return;
     int p = top_point(k);
@@ -53,17 +52,18 @@ void main() {
     bool sharp = false;
     if (has_next) {
         u2 = unit(pos(p + 2) - B);
-        sharp = u1.x * u2.x + u1.y * u2.y + u1.z * u2.z < cos_sharp;
+        sharp = u1.x * u2.x + u1.y * u2.y + u1.z * u2.z < COS_SHARP;
         if (sharp) u2 = u1;
     }
     bool cap1 = first;
     if (!first) {
         vec3 u0 = unit(A - pos(p - 1));
-        cap1 = u0.x * u1.x + u0.y * u1.y + u0.z * u1.z < cos_sharp;
+        cap1 = u0.x * u1.x + u0.y * u1.y + u0.z * u1.z < COS_SHARP;
     }
-    int flags = (cap1 ? 1 : 0) | (!has_next || sharp ? 2 : 0);
-    imageStore(cyl_img, 4 * k, vec4(A, texelFetch(tex_rad, p).x));
-    imageStore(cyl_img, 4 * k + 1, vec4(B, texelFetch(tex_alpha, p).x));
-    imageStore(cyl_img, 4 * k + 2, vec4(u2, float(flags)));
-    imageStore(cyl_img, 4 * k + 3, vec4(texelFetch(tex_col, p).rgb, 0.0));
+    int flags = (cap1 ? CAP_PLANE1 : 0) | (!has_next || sharp ? CAP_PLANE2 : 0);
+    int base = TEXELS_PER_CYL * k;
+    imageStore(cyl_img, base + CYL_TOP, vec4(A, texelFetch(tex_rad, p).x));
+    imageStore(cyl_img, base + CYL_TIP, vec4(B, texelFetch(tex_alpha, p).x));
+    imageStore(cyl_img, base + CYL_N2, vec4(u2, float(flags)));
+    imageStore(cyl_img, base + CYL_COL, vec4(texelFetch(tex_col, p).rgb, 0.0));
 }

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 // Grid build on the GPU (GL 4.3 compute), the same listing as tracer/grid.py's numpy build:
 // every cylinder in every cell its padded capsule may touch, cut slab by slab along its
-// dominant axis. The host prepends "#version 430 core" and PASS:
+// dominant axis. The host prepends "#version 430 core", PASS and the generated header of
+// tracer/layout.py:
 //   PASS 0  count: cells[cell] += 1 for every (cylinder, cell)
 //   PASS 1  fill:  slot = cells[cell]++ (cells holds each cell's first slot on entry),
 //                  idx_img[slot] = cylinder id
@@ -13,7 +14,7 @@
 // A cylinder whose listing would take more than MAX_VISITS loop steps is not listed at all
 // but counted in `overflow`: llvmpipe silently cuts any invocation off after 65,535 loop
 // steps, so the host builds such a grid in numpy instead of trusting a truncated one.
-layout(local_size_x = 64) in;
+layout(local_size_x = GROUP) in;
 
 uniform int n_items;          // cylinders
 uniform vec3 grid_lo;
@@ -21,7 +22,7 @@ uniform vec3 inv_cell;        // 1 / cell size per axis
 uniform ivec3 dims;
 uniform float pad_factor;
 
-layout(binding = 0) uniform samplerBuffer tex_cyl;   // 4 texels per cylinder
+layout(binding = 0) uniform samplerBuffer tex_cyl;   // TEXELS_PER_CYL texels per cylinder
 layout(std430, binding = 0) buffer Cells { int cells[]; };
 #if PASS == 0
 layout(std430, binding = 1) buffer Overflow { int overflow; };
@@ -30,10 +31,10 @@ layout(std430, binding = 1) buffer Overflow { int overflow; };
 layout(r32i, binding = 1) uniform writeonly iimageBuffer idx_img;
 #endif
 
-vec4 cyl(int id, int j) { return texelFetch(tex_cyl, 4 * id + j); }
+vec4 cyl(int id, int j) { return texelFetch(tex_cyl, TEXELS_PER_CYL * id + j); }
 
 int item_index() {
-    return int(gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * 64 + int(gl_LocalInvocationID.x);
+    return int(gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * GROUP + int(gl_LocalInvocationID.x);
 }
 
 void visit(int cell, int id) {
@@ -68,12 +69,12 @@ void ranges(int slab, bool no_dir, float inv, vec3 G, vec3 DG, vec3 P, ivec3 D,
 void main() {
     int id = item_index();
     if (id >= n_items) return;
-    vec4 top = cyl(id, 0), tip = cyl(id, 1), n2 = cyl(id, 2);
+    vec4 top = cyl(id, CYL_TOP), tip = cyl(id, CYL_TIP), n2 = cyl(id, CYL_N2);
     vec3 axis = tip.xyz - top.xyz;
     float len = length(axis);
     // Past the tip, on the outer side of a bend, the cut cylinder reaches r·tan(angle)
     // further along its axis (tracer/cylinders.py: extension); the same bound as there.
-    float c = clamp(dot(axis, n2.xyz) / max(len, 1e-30), 0.17364817766693041, 1.0);
+    float c = clamp(dot(axis, n2.xyz) / max(len, 1e-30), COS_SHARP, 1.0);
     float ext = top.w * sqrt(max(0.0, 1.0 - c * c)) / c;
     vec3 far = tip.xyz + axis * (ext / max(len, 1e-30));
     vec3 g0 = (top.xyz - grid_lo) * inv_cell;

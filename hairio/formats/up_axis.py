@@ -1,0 +1,54 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Which way is up in a file, and bringing it into our frame (Z up, -Y front, SPEC §0).
+
+Our arrays never guess: a reader returns a file's coordinates as they are. Commands that
+show or convert files take `--up z|y|auto`: `z` keeps the coordinates, `y` reads the file as
+right-handed Y up with the face toward +Z (x, y, z -> x, -z, y: the face toward our -Y, the
+front), `auto` does so for the formats whose files are Y up (Y_UP_FORMATS) and keeps the
+others. The turn is a signed permutation of the axes (hairio/formats/axes.py), exact in
+float32. TressFX files are read right-handed too: the TressFX-OpenGL Sintel's hair and body
+then face the front, and Ratboy's mohawk sweeps back from its brow.
+"""
+import os
+
+from ..strands import Guides, Strands
+from ..validate import InputError
+from .axes import unconvert_points
+
+UP_CHOICES = ("z", "y", "auto")
+# Extension -> the file's frame (a name of axes.AXES) for formats whose files are Y up.
+Y_UP_FORMATS = {
+    ".tfx": "y-up",         # TressFX samples (AMD's, TressFX-OpenGL's)
+    ".data": "y-up",        # USC-HairSalon
+}
+
+
+def file_frame(path, up="auto"):
+    """The frame (a name of axes.AXES) the coordinates of the file at `path` are in, for
+    the `up` choice."""
+    if up not in UP_CHOICES:
+        raise InputError(f"--up {up!r}: choose one of {', '.join(UP_CHOICES)}")
+    ext = os.path.splitext(os.fspath(path))[1].lower()
+    if up == "z":
+        return "none"
+    if up == "y":
+        return "y-up"
+    return Y_UP_FORMATS.get(ext, "none")
+
+
+def points_to_z_up(points, path, up="auto"):
+    """`points` (N,3) read from the file at `path`, in our Z-up frame (float32)."""
+    frame = file_frame(path, up)
+    return points if frame == "none" else unconvert_points(points, frame)
+
+
+def strands_to_z_up(strands, path, up="auto"):
+    """`strands` read from the file at `path`, in our Z-up frame (their key strands too)."""
+    frame = file_frame(path, up)
+    if frame == "none":
+        return strands
+    guides = strands.guides
+    if guides is not None:
+        guides = Guides(strands_to_z_up(guides.keys, path, up), guides.group, guides.index, guides.weights)
+    return Strands.from_arrays(unconvert_points(strands.points, frame), strands.counts, strands.radius,
+                               strands.color, strands.alpha, strands.wisp, guides=guides, root_uv=strands.root_uv)

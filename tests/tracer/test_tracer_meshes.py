@@ -1,0 +1,133 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Opaque meshes beside the strands, against the float64 reference: they hide hair from
+the camera and from the lights, take the hair's shadows and cast their own; bad meshes are
+refused where they enter. Bounds as in test_tracer_vs_reference (float32 against float64:
+pixels may flip only on a silhouette or shadow edge, and rarely)."""
+import numpy as np
+import pytest
+
+from hairio import InputError
+from tracer import Camera, Light, RenderSettings, Renderer, reference_render
+from tracer.meshes import mesh_set
+
+from tracer_scenes import curls, make_strands, plane, uv_sphere
+from test_tracer_vs_reference import _boundary
+
+SUN = Light(vector=(0.2, 0.3, -1.0))
+
+
+@pytest.fixture
+def meshed(renderer):
+    """The session's renderer, its meshes taken away again after the test (they stay on a
+    renderer until the next set_meshes)."""
+    yield renderer
+    renderer.set_meshes(None)
+GREY = (0.6, 0.6, 0.6)
+
+
+def _matches_reference(renderer, strands, meshes, camera, settings):
+    renderer.set_strands(strands)
+    renderer.set_meshes(meshes)
+    img = renderer.render(camera, settings).astype(np.float64)
+    ref = reference_render(strands, camera, settings, meshes=meshes)
+    assert np.all(np.isfinite(img))
+    cov_g, cov_r = img[..., 3] > 1e-6, ref[..., 3] > 1e-6
+    differ = cov_g != cov_r
+    assert differ.mean() <= 0.01
+    assert np.all(_boundary(cov_r)[differ]), "coverage differs away from a silhouette"
+    err = np.abs(img - ref).max(axis=-1)
+    assert np.mean(err > 2e-3) <= 0.01, f"max err {err.max():.3g}"
+    return img, ref
+
+
+def test_a_sphere_in_front_of_a_strand_hides_it(meshed):
+    strand = make_strands([[[-0.6, 0, 0], [0, 0, 0.02], [0.6, 0, 0]]], radius=0.03)
+    sphere = uv_sphere((0, -0.4, 0), 0.15)
+    cam = Camera.look_at((0, -2.5, 0), (0, 0, 0), size=(64, 32), fov_deg=30)
+    # No highlight: hair then shows its colour times a grey level, as the mesh does.
+    settings = RenderSettings(shadows=True, lights=(SUN,), specular=0.0)
+    img, ref = _matches_reference(meshed, strand, [(*sphere, (0.2, 0.4, 0.9))], cam, settings)
+    centre = img[15, 32]
+    # The sphere's centre pixel shows the sphere's colour times its lighting, nothing of the hair.
+    np.testing.assert_allclose(centre[:3] / centre[2], np.array([0.2, 0.4, 0.9]) / 0.9, rtol=1e-5)
+    assert centre[3] == 1.0
+    # Beside the sphere the strand shows.
+    hair = np.array([0.8, 0.5, 0.2])
+    side = img[15, 4, :3]
+    np.testing.assert_allclose(side / side[0], hair / hair[0], rtol=1e-4)
+    # Without the sphere the centre pixel is hair.
+    meshed.set_meshes([])
+    bare = meshed.render(cam, settings)[15, 32, :3]
+    np.testing.assert_allclose(bare / bare[0], hair / hair[0], rtol=1e-4)
+
+
+def test_a_strand_shadows_a_plane(meshed):
+    strand = make_strands([[[-0.5, 0, 0.2], [0.5, 0, 0.2]]], radius=0.04)
+    floor = plane(0.0, 1.0)
+    cam = Camera.look_at((0, -0.01, 2.5), (0, 0, 0), up=(0, 1, 0), size=(48, 48), fov_deg=35)
+    settings = RenderSettings(shadows=True, lights=(Light(vector=(0.0, 0.0, -1.0)),))
+    img, _ = _matches_reference(meshed, strand, [(*floor, GREY)], cam, settings)
+    col = img[..., :3]
+    # Straight down: the floor gets the full sun but under the strand (which hides that from
+    # above), where it gets ambient only.
+    lit_level, shadow_level = GREY[0] * (settings.ambient + 1.0), GREY[0] * settings.ambient
+    floor_px = np.isclose(col[..., 1], col[..., 0]) & (img[..., 3] == 1.0)
+    assert np.isclose(col[..., 0][floor_px], lit_level, atol=1e-4).sum() > 500
+    # From the side the shadow shows.
+    cam2 = Camera.look_at((0, -2.0, 1.2), (0, 0.3, 0), size=(64, 48), fov_deg=40)
+    img2, _ = _matches_reference(meshed, strand, [(*floor, GREY)], cam2, settings)
+    grey = img2[..., :3]
+    assert np.isclose(grey[..., 0], shadow_level, atol=1e-4).sum() > 10
+    assert np.isclose(grey[..., 0], lit_level, atol=1e-4).sum() > 500
+
+
+def test_a_plane_shadows_strands(meshed):
+    tuft = curls(16, 8, radius=0.015)
+    roof = plane(1.3, 0.3, centre=(-0.3, 0.0))      # over the left half of the tuft
+    cam = Camera.look_at((0, -2.6, 0.5), (0, 0, 0.5), size=(64, 48), fov_deg=40)
+    settings = RenderSettings(shadows=True, lights=(Light(vector=(0.0, 0.0, -1.0)),))
+    img, ref = _matches_reference(meshed, tuft, [(*roof, GREY)], cam, settings)
+    hair = (img[..., 3] > 0.99) & (img[..., 0] > 1.5 * img[..., 2])       # the brown pixels (the roof is grey)
+    ambient_only = np.isclose(img[..., 0], 0.7 * settings.ambient, atol=2e-3)
+    left, right = hair & (np.arange(64) < 28)[None], hair & (np.arange(64) > 36)[None]
+    assert left.sum() > 30 and right.sum() > 30
+    assert (ambient_only & left).sum() > 0.8 * left.sum()         # under the roof: in its shadow
+    assert (ambient_only & right).sum() < 0.2 * right.sum()
+    meshed.set_meshes(None)
+    assert np.isclose(meshed.render(cam, settings)[..., 0], 0.7 * settings.ambient, atol=2e-3)[left].mean() < 0.5
+
+
+@pytest.mark.parametrize("mesh,match", [
+    ((np.array([[0, 0, 0], [1, 0, np.nan], [0, 1, 0]]), [[0, 1, 2]], GREY), "head: vertex 1 has NaN"),
+    ((np.eye(3), [[0, 1, 3]], GREY), "head: triangle 0 refers to vertex 3, but the mesh has 3 vertices"),
+    ((np.eye(3), np.zeros((0, 3), int), GREY), "head: no faces"),
+    ((np.eye(3), [[0, 1]], GREY), r"head: triangles have shape \(1, 2\)"),
+    ((np.eye(3), [[0, 1, 2]], (1.0, np.inf, 0)), "head: colour"),
+    ((np.eye(4), [[0, 1, 2]], GREY), r"head: vertices have shape \(4, 4\)"),
+])
+def test_bad_meshes_are_refused_naming_them(mesh, match):
+    with pytest.raises(InputError, match=match):
+        mesh_set([(*mesh, "head")])
+
+
+def test_a_refused_mesh_changes_nothing(meshed):
+    s = curls(6, 6)
+    meshed.set_strands(s)
+    sphere = uv_sphere((0, -0.5, 0.5), 0.1)
+    meshed.set_meshes([(*sphere, GREY)])
+    cam = Camera.look_at((0, -2.5, 0.5), (0, 0, 0.5), size=(32, 32))
+    before = meshed.render(cam)
+    with pytest.raises(InputError, match="mesh 1: no faces"):
+        meshed.set_meshes([(*sphere, GREY), (np.eye(3), np.zeros((0, 3), int), GREY)])
+    np.testing.assert_array_equal(meshed.render(cam), before)
+    assert meshed.stats.num_triangles == len(sphere[1])
+
+
+def test_meshes_without_strands(meshed):
+    from hairio import Strands
+    floor = plane(0.0, 1.0)
+    cam = Camera.look_at((0, -2.0, 1.5), (0, 0, 0), size=(32, 24))
+    settings = RenderSettings(lights=(Light(vector=(0.0, 0.0, -1.0)),))
+    img, ref = _matches_reference(meshed, Strands.empty(), [(*floor, GREY)], cam, settings)
+    assert (img[..., 3] == 1.0).mean() > 0.3
+    np.testing.assert_allclose(img[img[..., 3] == 1.0][:, :3], GREY[0] * (settings.ambient + 1.0), atol=1e-5)

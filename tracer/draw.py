@@ -1,0 +1,195 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Drawing: the trace program for a set of compile-time switches, the float framebuffers,
+the checks of what the GPU can draw, and the draw calls (tile by tile, one sample per
+draw) that turn a camera and settings into an image. Reads the scene's buffers and grid;
+uploads nothing but uniforms.
+"""
+import numpy as np
+
+from hairio import InputError
+from hairio.validate import check_memory
+
+from . import layout
+from .gl_buffers import set_samplers
+from .gpu_build import set_uniforms
+from .mesh_upload import MESH_BUFFERS
+from .shader_source import shader_source
+from .shading import shading_model
+
+# Host memory of one render: the framebuffer (a driver like llvmpipe keeps it in host memory),
+# its read-back bytes and the flipped image, RGBA float32 each.
+RENDER_COPIES = 3
+# The trace program's buffers, on texture units 0, 1, 2, and with meshes 3, 4, 5.
+TRACE_BUFFERS = ("tex_cyl", "tex_idx", "tex_cell")
+
+_VERTEX = """#version 330 core
+void main() {   // one triangle that covers the screen; the scissor picks the pixels
+    vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
+    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
+}
+"""
+
+
+def trace_files(settings, meshes=False):
+    """The trace program's files in dependency order (tracer/shaders/trace_scene.glsl lists
+    them): the scene, the shape, the accelerator interface and the grid that implements it,
+    with `meshes` the triangles and their grid, the shading model of `settings`, the
+    tracer's main."""
+    mesh_files = ["shapes_triangle.glsl", "accel_mesh_grid.glsl"] if meshes else []
+    return (["trace_scene.glsl", "shapes_cylinder.glsl", "accel.glsl", "accel_grid.glsl"] + mesh_files
+            + [shading_model(settings.shading).glsl, "trace_main.glsl"])
+
+
+class Drawer:
+    """Programs and framebuffers of one renderer (compiled and made on first use, kept)."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self._programs = {}
+        self._fbos = {}
+
+    def program(self, settings, camera, layers, meshes=False):
+        key = (layers, settings.shadows and (1 if settings.shadow_mode == "hard" else 2),
+               settings.shading, len(settings.lights), settings.spp_n, settings.min_pixel_width,
+               camera.type, settings.count, bool(meshes), layout.glsl_header())
+        prog = self._programs.get(key)
+        if prog is None:
+            defines = {
+                "LAYERS": layers,
+                "SHADOWS": int(key[1] or 0),
+                "NUM_LIGHTS": len(settings.lights),
+                "SPP_N": settings.spp_n,
+                "MIN_PX": int(settings.min_pixel_width),
+                "ORTHO": int(camera.type == "ORTHO"),
+                "COUNT": int(settings.count),
+                "MESHES": int(bool(meshes)),
+            }
+            program = self.ctx.program(vertex_shader=_VERTEX,
+                                       fragment_shader=shader_source(330, trace_files(settings, meshes), defines))
+            set_samplers(program, **{name: unit for unit, name in enumerate(TRACE_BUFFERS + MESH_BUFFERS)})
+            prog = (program, self.ctx.vertex_array(program, []))
+            self._programs[key] = prog
+        return prog
+
+    def framebuffer(self, w, h, count):
+        key = (w, h, count)
+        fbo = self._fbos.get(key)
+        if fbo is None:
+            import moderngl
+            atts = []
+            try:
+                atts.append(self.ctx.texture((w, h), 4, dtype="f4"))
+                if count:
+                    atts.append(self.ctx.texture((w, h), 4, dtype="f4"))
+                fbo = self.ctx.framebuffer(color_attachments=atts)
+            except moderngl.Error as e:
+                # Drivers have limits of their own below GL_MAX_TEXTURE_SIZE (llvmpipe refuses
+                # a float framebuffer past 2 GiB: 12000² is INCOMPLETE_ATTACHMENT).
+                for t in atts:
+                    t.release()
+                raise InputError(f"camera size {w}x{h}: the GPU driver cannot make a float framebuffer of "
+                                 f"{w * h * 16 / 2**30:.2f} GiB ({e}); render a smaller image, or in tiles "
+                                 "(python -m tracer render does)") from None
+            self._fbos[key] = fbo
+        return fbo
+
+    def check_camera(self, camera, settings):
+        """What the GPU cannot draw is refused before the framebuffer is made: a camera so far
+        out that squared distances overflow, an image wider than the driver draws, or one
+        whose copies need more memory than there is."""
+        far = float(np.abs(camera.position).max())
+        if not far <= layout.MAX_CAMERA_COORDINATE:
+            raise InputError(f"camera: position {far:.3g} from the origin; the GPU tracer squares distances in "
+                             f"float32, so it takes cameras within ±{layout.MAX_CAMERA_COORDINATE:.0e}: move it closer "
+                             "or scale the scene down")
+        w, h = camera.size
+        side = min(int(self.ctx.info["GL_MAX_TEXTURE_SIZE"]), *(int(d) for d in self.ctx.info["GL_MAX_VIEWPORT_DIMS"]))
+        if max(w, h) > side:
+            raise InputError(f"camera size {w}x{h}: this GPU draws at most {side} pixels a side in one image; "
+                             "render a larger image in tiles (python -m tracer render does)")
+        check_memory(f"camera size {w}x{h}", (RENDER_COPIES + settings.count) * w * h * 16,
+                     "render a smaller image, or in tiles (python -m tracer render writes any size band by band)")
+
+    def draw(self, buffers, grid, camera, settings, layers, box, mesh_grid=None, mesh_offset=0.0):
+        """The image (H, W, 4) float32, row 0 = top, and the summed work counters (4,):
+        pixels in `box` (x0, y0, x1, y1; None: none) traced, the rest background. With
+        `mesh_grid` the meshes uploaded with it are traced too."""
+        import moderngl
+        w, h = camera.size
+        fbo = self.framebuffer(w, h, settings.count)
+        fbo.use()
+        self.ctx.scissor = None
+        fbo.clear(*settings.premultiplied_background())
+        counts = np.zeros(4)
+        if box is not None:
+            meshes = mesh_grid is not None
+            prog, vao = self.program(settings, camera, layers, meshes)
+            buffers.bind(TRACE_BUFFERS + (MESH_BUFFERS if meshes else ()))
+            _set_uniforms(prog, grid, camera, settings)
+            if meshes:
+                set_uniforms(prog, mesh_lo=tuple(float(x) for x in mesh_grid.lo),
+                             mesh_cell_size=tuple(float(x) for x in mesh_grid.cell_size),
+                             mesh_dims=tuple(int(x) for x in mesh_grid.dims), mesh_offset=float(mesh_offset))
+            self.ctx.blend_func = moderngl.ONE, moderngl.ONE
+            self.ctx.blend_equation = moderngl.FUNC_ADD
+            x0, y0, x1, y1 = box
+            step = settings.tile
+            for ty in range(y0, y1, step):
+                for tx in range(x0, x1, step):
+                    tw, th = min(step, x1 - tx), min(step, y1 - ty)
+                    # GL's window origin is the bottom-left corner.
+                    self.ctx.scissor = (tx, h - ty - th, tw, th)
+                    # One sample per draw (the shader's main says why): the first replaces the
+                    # cleared background, the others add to it (colour and counters alike).
+                    for s in range(settings.spp):
+                        set_uniforms(prog, sample_index=s)
+                        if s == 1:
+                            self.ctx.enable(moderngl.BLEND)
+                        vao.render(vertices=3)
+                    self.ctx.disable(moderngl.BLEND)
+                    if (x1 - x0) * (y1 - y0) > step * step:
+                        self.ctx.finish()
+            self.ctx.scissor = None
+            if settings.count:
+                raw = fbo.read(viewport=(x0, h - y1, x1 - x0, y1 - y0), components=4, dtype="f4", attachment=1)
+                counts = np.frombuffer(raw, np.float32).reshape(-1, 4).sum(axis=0, dtype=np.float64)
+        raw = fbo.read(components=4, dtype="f4", attachment=0)
+        return np.frombuffer(raw, np.float32).reshape(h, w, 4)[::-1].copy(), counts
+
+
+def screen_bounds(lo, hi, camera):
+    """Pixel rectangle (x0, y0, x1, y1), y from the top, that the box lo..hi can cover;
+    None when nothing can be seen."""
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    w, h = camera.size
+    x, y, depth = camera.project(corners)
+    if camera.type == "PERSP" and np.any(depth <= 1e-9 * (1 + np.abs(corners).max())):
+        return 0, 0, w, h         # the box reaches behind the camera: no projection bound
+    if camera.type == "ORTHO" and np.all(depth < 0):
+        return None
+    x0 = int(np.clip(np.floor(x.min()) - 1, 0, w))
+    x1 = int(np.clip(np.ceil(x.max()) + 1, 0, w))
+    y0 = int(np.clip(np.floor(y.min()) - 1, 0, h))
+    y1 = int(np.clip(np.ceil(y.max()) + 1, 0, h))
+    if x0 >= x1 or y0 >= y1:
+        return None
+    return x0, y0, x1, y1
+
+
+def _set_uniforms(prog, g, camera, settings):
+    set_uniforms(prog, grid_lo=tuple(float(x) for x in g.lo),
+                 cell_size=tuple(float(x) for x in g.cell_size),
+                 dims=tuple(int(x) for x in g.dims),
+                 cam_pos=tuple(float(x) for x in camera.position),
+                 cam_rot=tuple(float(x) for x in camera.rotation.T.ravel()),
+                 pixel_size=float(camera.pixel_size),
+                 shift_px=tuple(float(x) for x in camera.shift_px),
+                 image_size=(float(camera.size[0]), float(camera.size[1])))
+    packed = [light.packed() for light in settings.lights]
+    if "light_vec" in prog:
+        prog["light_vec"].write(np.array([p[0] for p in packed], np.float32).tobytes())
+    if "light_col" in prog:
+        prog["light_col"].write(np.array([p[1] for p in packed], np.float32).tobytes())
+    set_uniforms(prog, background=settings.premultiplied_background(),
+                 material=(settings.ambient, settings.diffuse, settings.specular, settings.shininess),
+                 mpw_cap=float(settings.min_pixel_width_cap), t_eps=float(settings.transmittance_eps))

@@ -1,0 +1,129 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The one rule set the numpy side and the shaders share: constants of the cylinder rules,
+the grid's limits and the layouts of the buffers both sides read or write.
+
+Nothing here is copied into a shader. Every shader is compiled with `glsl_header()` after
+its `#version` line (tracer/shader_source.py), generated from the values below when the
+program is made, and the Python side reads them as `layout.NAME` at the call, not as a
+name bound at import: change one here (a test sets the bend to 88°) and the numpy build,
+the compute build, the trace shader and the references all follow.
+"""
+import numpy as np
+
+# --- Coordinates the GPU can square ---------------------------------------------------------
+# The shaders square distances in float32 (3.4e38 = (1.8e19)^2): past these a hit's
+# arithmetic overflows and the image comes out empty while the float64 reference shows hair
+# (a strand 1e20 from the origin did). Points (strands, meshes) within 1e18 seen from a
+# camera within 1e19 keep every squared distance finite (measured: hair at 1e18 and cameras
+# out to 3e19 render as the reference does).
+MAX_POINT_COORDINATE = 1e18
+MAX_CAMERA_COORDINATE = 1e19
+
+# --- Cylinder rules (SPEC §6; tracer/cylinders.py says why) ---------------------------------
+# Past this angle between two axes the shared plane would cut an unbounded piece: both
+# cylinders end on a cap square to their own axis instead.
+SHARP_BEND_DEG = 80.0
+# Cap flags of a cylinder (its N2 texel's w): plane 1 / plane 2 is an end cap, not a joint.
+CAP_PLANE1 = 1
+CAP_PLANE2 = 2
+
+# --- Cylinder buffer: per cylinder, TEXELS_PER_CYL consecutive RGBA32F texels ---------------
+# 64 bytes, one cache line, so a cylinder test on a CPU driver touches one line.
+#   TOP: xyz top, w radius   TIP: xyz tip, w alpha   N2: xyz unit normal of plane 2, w cap
+#   flags   COL: rgb colour
+CYL_TEXELS = ("TOP", "TIP", "N2", "COL")
+TEXELS_PER_CYL = len(CYL_TEXELS)
+
+# --- Triangle buffer (meshes): per triangle, TEXELS_PER_TRI consecutive RGBA32F texels ------
+#   V0: xyz corner 0, w red   V1: xyz corner 1, w green   V2: xyz corner 2, w blue
+TRI_TEXELS = ("V0", "V1", "V2")
+TEXELS_PER_TRI = len(TRI_TEXELS)
+# A ray meets a triangle where its barycentric coordinates are each >= -TRI_EDGE_EPS and sum
+# to <= 1 + TRI_EDGE_EPS: a sliver of overlap, so float32 rounding on a shared edge cannot
+# open a crack between two triangles (both sides test the same rule).
+TRI_EDGE_EPS = 1e-6
+# Shadow rays leave a mesh this many times its box's diagonal off the surface (and ignore
+# the triangle they leave), so a surface does not shadow itself through rounding.
+MESH_SHADOW_OFFSET = 1e-5
+
+# --- Grid -------------------------------------------------------------------------------------
+MAX_DIM = 1024          # cells per axis; 3D textures of GL 3.3 guarantee 256, every driver we target >= 2048
+MAX_CELLS = 1 << 23     # cells in all (the cell table is one buffer texel each)
+BLOCK = 4               # cells per side of the empty-space-skipping blocks
+# The trace shader reads up to two list entries past a cell's list (it reads ahead); the
+# index buffer carries this many zeros after the last list.
+IDX_SLACK = 2
+# Cell table: per cell (id x + nx*(y + ny*z)) one ivec2 texel, x = first slot of its list
+# (EMPTY_BLOCK: the whole BLOCK³ block of this cell is empty), y = list length.
+EMPTY_BLOCK = -1
+
+# --- Compute passes (GL 4.3) -----------------------------------------------------------------
+GROUP = 64                  # local_size_x of the build shaders
+MAX_VISITS = 60000          # loop steps one invocation may take (llvmpipe stops at 65,535)
+MAX_REPEATS = 4096          # repeated-point candidates one cylinder pass reports
+
+
+def cos_sharp():
+    """cos(SHARP_BEND_DEG): joints whose axes meet at a smaller cosine are caps."""
+    return float(np.cos(np.radians(SHARP_BEND_DEG)))
+
+
+def tan_sharp():
+    """tan(SHARP_BEND_DEG): how far (in radii) a bent cylinder can reach past its tip."""
+    return float(np.tan(np.radians(SHARP_BEND_DEG)))
+
+
+def glsl_header():
+    """`#define`s of every constant above, for the shaders (generated, never edited)."""
+    values = {
+        "SHARP_BEND_DEG": float(SHARP_BEND_DEG), "COS_SHARP": cos_sharp(),
+        "CAP_PLANE1": CAP_PLANE1, "CAP_PLANE2": CAP_PLANE2,
+        "TEXELS_PER_CYL": TEXELS_PER_CYL,
+        **{f"CYL_{name}": slot for slot, name in enumerate(CYL_TEXELS)},
+        "TEXELS_PER_TRI": TEXELS_PER_TRI, **{f"TRI_{name}": slot for slot, name in enumerate(TRI_TEXELS)},
+        "TRI_EDGE_EPS": float(TRI_EDGE_EPS),
+        "MAX_DIM": MAX_DIM, "MAX_CELLS": MAX_CELLS, "BLOCK": BLOCK, "IDX_SLACK": IDX_SLACK,
+        "EMPTY_BLOCK": EMPTY_BLOCK,
+        "GROUP": GROUP, "MAX_VISITS": MAX_VISITS, "MAX_REPEATS": MAX_REPEATS,
+    }
+    lines = ["// Generated from tracer/layout.py when the program is made: edit the numbers there."]
+    lines += [f"#define {k} {_glsl_literal(v)}" for k, v in values.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _glsl_literal(v):
+    if isinstance(v, float):
+        text = repr(v)
+        return text if ("." in text or "e" in text) else text + ".0"
+    return str(int(v))
+
+
+def cylinder_texels(c, a=0, b=None):
+    """Cylinders a..b of `c` (tracer.cylinders.Cylinders) as RGBA float32 texels,
+    TEXELS_PER_CYL per cylinder one after the other, in the CYL_TEXELS order."""
+    b = len(c) if b is None else b
+    out = np.zeros((b - a, TEXELS_PER_CYL, 4), np.float32)
+    top, tip, n2, col = (CYL_TEXELS.index(k) for k in ("TOP", "TIP", "N2", "COL"))
+    out[:, top, :3], out[:, top, 3] = c.top[a:b], c.radius[a:b]
+    out[:, tip, :3], out[:, tip, 3] = c.tip[a:b], c.alpha[a:b]
+    out[:, n2, :3], out[:, n2, 3] = c.n2[a:b], c.flags[a:b]
+    out[:, col, :3] = c.color[a:b]
+    return out.reshape(-1, 4)
+
+
+def triangle_texels(corners, color):
+    """Triangles as RGBA float32 texels, TEXELS_PER_TRI per triangle in the TRI_TEXELS order:
+    `corners` (F, 3, 3) their corners, `color` (F, 3) their base colours."""
+    out = np.zeros((len(corners), TEXELS_PER_TRI, 4), np.float32)
+    out[:, :, :3] = corners
+    out[:, :, 3] = color
+    return out.reshape(-1, 4)
+
+
+def cell_table(start, count, in_full_block):
+    """(cells, 2) int32 of the cell table: each cell's first slot where its block holds any
+    cylinder, EMPTY_BLOCK where it does not, and its list length."""
+    cells = np.empty((len(count), 2), np.int32)
+    cells[:, 0] = np.where(in_full_block, start, EMPTY_BLOCK)
+    cells[:, 1] = count
+    return cells

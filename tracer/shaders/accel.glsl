@@ -1,0 +1,57 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+// The accelerator interface: all trace_main.glsl asks of an acceleration structure. An
+// accelerator (accel_grid.glsl; a BVH would be another file) implements two functions and
+// uses the hit list below:
+//
+//   void accel_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_const)
+//       Offers every cylinder the ray o + t·d (unit d) enters at 0 < t < tmax (tmax: where
+//       an opaque mesh hides what lies behind, else BIG) to the hit list with
+//       hits_offer(t, id, surf, alpha · ascale), each entry once (hit_cylinder_ab of
+//       shapes_cylinder.glsl gives t, surf, ascale and alpha; widen_* are its minimum
+//       pixel width arguments). Offers may come in any order: the list keeps the LAYERS
+//       nearest, ties by id. It may stop early once hits_settled() holds, provided every
+//       hit nearer than those it has not offered yet was offered (cells in ray order).
+//
+//   float accel_transmittance(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint)
+//       Shadow rays from p along unit d, cylinder `own` (the one shaded) left out.
+//       SHADOWS == 1: 0 at any hit in (tmin, tmax), writing the blocker's id to `hint`
+//       (the caller tries it first next time), else 1. SHADOWS == 2: the product of
+//       (1 - alpha) of every cylinder entered in (tmin, tmax), each counted once; 0 once
+//       it drops below t_eps.
+//
+// With COUNT it adds to counter.z the cells (or nodes) it visits and to counter.w the
+// cylinders it tests. Its buffers and uniforms are its own (the host binds them:
+// tracer/draw.py TRACE_BUFFERS).
+
+// The nearest LAYERS hits of the ray being traced, sorted by (distance, id); empty slots
+// are (BIG, NO_ID). Globals, read and written with constant indices only: llvmpipe then
+// keeps them in registers, where an insertion at a computed index was a per-lane scatter
+// through memory on every test (10 % of the 4-layer scene's time).
+float ht[LAYERS]; float ha[LAYERS]; int hid[LAYERS]; int hs[LAYERS];
+
+void hits_clear() {
+    for (int i = 0; i < LAYERS; ++i) { ht[i] = BIG; ha[i] = 0.0; hid[i] = NO_ID; hs[i] = 0; }
+}
+
+// Entry (t, id, surface, alpha) goes in by one pass of compare-and-swap; a miss (BIG,
+// NO_ID) changes nothing, so callers offer branch-free.
+void hits_offer(float ct, int cid, int cs, float ca) {
+    for (int i = 0; i < LAYERS; ++i) {
+        bool sw = ct < ht[i] || (ct == ht[i] && cid < hid[i]);
+        float ft = ht[i], fa = ha[i]; int fi = hid[i], fs = hs[i];
+        ht[i] = sw ? ct : ft; ha[i] = sw ? ca : fa; hid[i] = sw ? cid : fi; hs[i] = sw ? cs : fs;
+        ct = sw ? ft : ct; ca = sw ? fa : ca; cid = sw ? fi : cid; cs = sw ? fs : cs;
+    }
+}
+
+// No farther hit can change the image: the list is full, or its layers let less than
+// t_eps through.
+bool hits_settled() {
+    if (ht[LAYERS - 1] < BIG) return true;
+#if LAYERS > 1
+    float Tl = 1.0;
+    for (int i = 0; i < LAYERS; ++i) Tl *= 1.0 - ha[i];
+    if (Tl < t_eps) return true;
+#endif
+    return false;
+}

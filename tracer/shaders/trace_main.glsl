@@ -1,0 +1,201 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+// The tracer's own part (SPEC §7): camera rays, one sample per draw, the LAYERS nearest
+// hits composited front to back, shadow rays toward every light, shading by the model's
+// shade_light. Finds hits only through the accelerator interface (accel.glsl).
+
+uniform vec3 cam_pos;
+uniform mat3 cam_rot;
+uniform float pixel_size;
+uniform vec2 shift_px;
+uniform vec2 image_size;
+
+uniform vec4 light_vec[NUM_LIGHTS];   // w = 0: xyz is the direction light travels; w = 1: position
+uniform vec3 light_col[NUM_LIGHTS];
+uniform vec4 background;              // premultiplied
+
+layout(location = 0) out vec4 frag_color;
+#if COUNT
+layout(location = 1) out vec4 frag_count;   // the counters of trace_scene.glsl
+#endif
+
+// Fixed per-sample hash (lowbias32); the reference tracer computes the same integers.
+uint hash32(uint x) {
+    x ^= x >> 16; x *= 0x7feb352du;
+    x ^= x >> 15; x *= 0x846ca68bu;
+    x ^= x >> 16; return x;
+}
+
+#if SHADOWS
+// Transmittance toward a light from p (1 = lit): 0 behind a mesh, else the accelerator's,
+// after one guess.
+float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint) {
+#if COUNT
+    counter.x += 1.0;
+#endif
+#if MESHES
+    if (mesh_blocked(p, d, tmax, -1)) return 0.0;
+#endif
+#if SHADOWS == 1 && LAYERS > 1
+    // The cylinder that shadowed this pixel's previous (nearer) layer often shadows this
+    // one too: one test that can end the walk before it starts (5 % off the 4-layer
+    // real-hair scene). Any hit in (tmin, tmax) darkens, so which one is found first
+    // does not change the result.
+    {
+        int h = max(hint, 0), hsurf; float hasc, halpha;
+        float th = hit_cylinder(h, p, d, 0.0, 0.0, hsurf, hasc, halpha);
+#if COUNT
+        if (hint >= 0) counter.w += 1.0;
+#endif
+        if (hint >= 0 && h != own && th > tmin && th < tmax) return 0.0;
+    }
+#endif
+    return accel_transmittance(p, d, tmax, own, tmin, hint);
+}
+
+int occluder[NUM_LIGHTS];   // per light, the last cylinder that blocked a shadow ray
+#endif
+
+vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
+    vec4 A4 = cyl(id, CYL_TOP);
+    vec4 B4 = cyl(id, CYL_TIP);
+    Surface s;
+    s.color = cyl(id, CYL_COL).rgb;
+    s.T = normalize(B4.xyz - A4.xyz);
+    s.p = o + t * d;
+    s.V = d;
+    // A model that reads no normal (Kajiya-Kay) leaves this to the compiler to drop.
+    s.N = cylinder_normal(id, surf, s.p, d, B4.xyz, s.T);
+    vec3 result = material.x * s.color;
+    for (int l = 0; l < NUM_LIGHTS; ++l) {
+        vec3 L; float dist;
+        if (light_vec[l].w > 0.5) { L = light_vec[l].xyz - s.p; dist = length(L); L /= max(dist, 1e-30); }
+        else { L = -light_vec[l].xyz; dist = BIG; }
+        float lit = 1.0;
+#if SHADOWS
+        lit = shadow_ray(s.p, L, dist, id, 1e-3 * A4.w, occluder[l]);
+        if (lit <= 0.0) continue;
+#endif
+        result += lit * light_col[l] * shade_light(s, L);
+    }
+    return result;
+}
+
+#if MESHES
+// A mesh's point, shaded diffusely with its base colour (tracer/meshes.py): ambient plus
+// every light's colour times max(N·L, 0), in the shadow of hair and meshes. Shadow rays
+// leave mesh_offset off the surface, ignoring the triangle they leave.
+vec3 shade_mesh(int tri, vec3 o, vec3 d, float t, vec3 N) {
+    vec3 col = triangle_color(tri);
+    vec3 q = o + t * d + N * mesh_offset;
+    vec3 result = material.x * col;
+    for (int l = 0; l < NUM_LIGHTS; ++l) {
+        vec3 L; float dist;
+        if (light_vec[l].w > 0.5) { L = light_vec[l].xyz - q; dist = length(L); L /= max(dist, 1e-30); }
+        else { L = -light_vec[l].xyz; dist = BIG; }
+        float lit = 1.0;
+#if SHADOWS
+#if COUNT
+        counter.x += 1.0;
+#endif
+        if (mesh_blocked(q, L, dist, tri)) continue;
+        int hint = -1;
+        lit = accel_transmittance(q, L, dist, -1, 0.0, hint);
+        if (lit <= 0.0) continue;
+#endif
+        result += lit * light_col[l] * max(dot(N, L), 0.0) * col;
+    }
+    return result;
+}
+#endif
+
+// One primary ray: first find its LAYERS nearest hits without shading (accel_nearest fills
+// the hit list of accel.glsl), then shade them front to back. Keeping the shadow rays out
+// of the traversal loop matters on SIMD hardware (llvmpipe included): nested in it, one
+// lane's shadow ray stalls all the lanes still traversing.
+// Measured and dropped (llvmpipe, 2 cores, 512x512, CPU time against this loop): one flat
+// loop in which each pass either tests one candidate or steps one cell, so lanes with
+// short cell lists need not wait for their neighbours' long ones: every pass then pays for
+// both halves; 0 % on the real straight hair, 3-4 % slower on 10k and 100k wavy strands
+// (it won 5-12 % on wavy hair with the older, finer grids). The same for shadow rays (all
+// layers' shadow rays of a pixel walked in one loop, a lane starting its next ray when
+// one ends): 13 % slower on the real hair, as every pass pays for setting a ray up. Two
+// candidates per pass, to overlap their cache misses: 5 % faster on the real hair and on
+// 100k wavy strands, 12 % slower on 10k wavy strands, whose cells hold fewer candidates.
+vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
+    float tmesh = BIG;
+#if MESHES
+    // The nearest mesh hides every hair behind it.
+    int mtri; vec3 mn;
+    tmesh = mesh_nearest(o, d, BIG, mtri, mn);
+#endif
+    hits_clear();
+    accel_nearest(o, d, tmesh, widen_per_t, widen_const);
+    int n = 0;
+    for (int i = 0; i < LAYERS; ++i) n += ht[i] < BIG ? 1 : 0;
+    vec3 C = vec3(0.0);
+    float T = 1.0;
+#if SHADOWS
+    for (int l = 0; l < NUM_LIGHTS; ++l) occluder[l] = -1;
+#endif
+    for (int i = 0; i < n; ++i) {
+        if (i > 0 && T < t_eps) break;
+        // Entry i by constant indices (accel.glsl: a computed index would move the arrays
+        // to memory for the whole traversal).
+        float et = 0.0, ea = 0.0; int eid = 0, es = 0;
+        for (int j = 0; j < LAYERS; ++j) if (j == i) { et = ht[j]; ea = ha[j]; eid = hid[j]; es = hs[j]; }
+        C += T * ea * shade(eid, es, o, d, et);
+        T *= 1.0 - ea;
+#if COUNT
+        counter.y += 1.0;
+#endif
+    }
+#if MESHES
+    if (mtri >= 0) {            // opaque: what is left of the ray ends on the mesh
+        C += T * shade_mesh(mtri, o, d, tmesh, mn);
+        T = 0.0;
+    }
+#endif
+    return vec4(C + T * background.rgb, 1.0 - T + T * background.a);
+}
+
+
+// One sample per draw: the host draws every pixel SPP_N² times, sample_index = 0, 1, ...,
+// and adds the passes with blending. Mesa's llvmpipe caps the loop iterations of one
+// shader invocation (65535 back-edges over all loops together, then every loop exits
+// early, silently); all samples in one invocation with several layers and shadow rays ran
+// past it and dropped hits, so the work of one invocation is kept to one sample.
+uniform int sample_index;
+
+void main() {
+    int px = int(gl_FragCoord.x);
+    int py = int(image_size.y) - 1 - int(gl_FragCoord.y);   // row 0 = top
+    int s = sample_index;
+    vec2 jit = vec2(0.5);
+#if SPP_N > 1
+    uint h = hash32(hash32(hash32(uint(s)) ^ uint(py)) ^ uint(px));
+    vec2 rnd = vec2(float(h >> 8u), float(hash32(h ^ 0x68bc21ebu) >> 8u)) * (1.0 / 16777216.0);
+    jit = (vec2(s % SPP_N, s / SPP_N) + rnd) / float(SPP_N);
+#endif
+    float x = float(px) + jit.x, y = float(py) + jit.y;
+    float u = (x - 0.5 * image_size.x + shift_px.x) * pixel_size;
+    float v = (0.5 * image_size.y - y + shift_px.y) * pixel_size;
+    vec3 o, d;
+    float widen_per_t = 0.0, widen_const = 0.0;
+#if ORTHO
+    o = cam_pos + cam_rot * vec3(u, v, 0.0);
+    d = -cam_rot[2];
+    widen_const = 0.5 * pixel_size;
+#else
+    o = cam_pos;
+    vec3 dc = cam_rot * vec3(u, v, -1.0);
+    float len = length(dc);
+    d = dc / len;
+    // At distance t along this ray the depth is t / len and a pixel spans pixel_size times
+    // that; the minimum width is half of it.
+    widen_per_t = 0.5 * pixel_size / len;
+#endif
+    frag_color = trace(o, d, widen_per_t, widen_const) / float(SPP_N * SPP_N);
+#if COUNT
+    frag_count = counter;
+#endif
+}

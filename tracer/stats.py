@@ -1,0 +1,45 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""What a Renderer did: times, bytes, the grid it built and the work of its last render."""
+from dataclasses import asdict, dataclass
+from typing import Optional
+
+
+@dataclass
+class RenderStats:
+    """Renderer.stats. Cumulative: bytes_uploaded, uploads (a render adds nothing to
+    either: only set_strands/update_strands upload), renders, grid_rebuilds. Of the last
+    set_strands/update_strands: cylinders_s, upload_s, grid_s, num_cylinders and the grid's
+    grid_build ("gpu" or "numpy"), grid_dims, grid_refs, cylinders_per_full_cell,
+    full_cell_fraction. Of the last set_meshes: num_triangles, mesh_s. Of the last render: render_s, layers_max (layers the shader was
+    compiled for), screen_box and traversed_pixels (the projected bounds that were traced),
+    and with RenderSettings(count=True) the counters shadow_rays, layers_traced,
+    cells_visited, cylinder_tests (summed over samples). gl_backend: the shared context's
+    (egl, glx, wgl or cgl). None: not measured yet."""
+    gl_backend: str = ""
+    bytes_uploaded: int = 0
+    uploads: int = 0
+    renders: int = 0
+    grid_rebuilds: int = 0
+    cylinders_s: float = 0.0
+    upload_s: float = 0.0
+    grid_s: float = 0.0
+    render_s: float = 0.0
+    num_cylinders: Optional[int] = None
+    num_triangles: int = 0
+    mesh_s: float = 0.0
+    grid_build: Optional[str] = None
+    grid_dims: Optional[tuple] = None
+    grid_refs: Optional[int] = None
+    cylinders_per_full_cell: Optional[float] = None
+    full_cell_fraction: Optional[float] = None
+    layers_max: Optional[int] = None
+    screen_box: Optional[tuple] = None
+    traversed_pixels: Optional[int] = None
+    shadow_rays: Optional[int] = None
+    layers_traced: Optional[int] = None
+    cells_visited: Optional[int] = None
+    cylinder_tests: Optional[int] = None
+
+    def as_dict(self):
+        """A plain dict of every field (for reports and the worker's answers)."""
+        return asdict(self)
