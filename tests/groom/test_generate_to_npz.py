@@ -134,3 +134,12 @@ def test_a_missing_group_is_refused_before_any_block(scalp, tmp_path, monkeypatc
     with pytest.raises(InputError, match=r"group\(s\) \[1\]"):
         generate_to_npz(tmp_path / "h.npz", scalp, keys, params, block_strands=500)
     assert os.listdir(tmp_path) == []
+
+
+def test_roots_sampled_a_block_at_a_time_are_the_whole_samplings(scalp):
+    from groom.sampling import sample_roots
+    whole = sample_roots(scalp, 5000, seed=9)
+    for lo, hi in ((0, 1), (0, 1234), (1234, 4321), (4999, 5000)):
+        part = sample_roots(scalp, 5000, seed=9, lo=lo, hi=hi)
+        for name in ("points", "tri", "bary", "ids"):
+            np.testing.assert_array_equal(getattr(part, name), getattr(whole, name)[lo:hi], err_msg=name)
