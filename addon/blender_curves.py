@@ -14,6 +14,18 @@ Python loop over strands or points. Attributes written:
     surface_uv_coordinate  CURVE  FLOAT2  the root's UV on the scalp's UV map (Blender's own
                                       hair attachment attribute; only when the scalp has one)
 
+The guides a groom carries (hairio.Guides: the key strands and how every strand follows
+them), so an export from Blender carries them as the command line's does (only when the
+strands have them; a refill without guides removes them, as they would be stale):
+
+    keystrand_guide_index_0, _1, _2  CURVE  INT  the strand's main key (= wisp) and its two
+                                      neighbours, key indices
+    keystrand_guide_weights  CURVE  FLOAT_VECTOR  their interpolation weights (summing to 1)
+    keystrand_key_points, _counts, _group, _radius, _color   the key strands, as custom
+                                      properties of the Curves datablock (Curves have no key
+                                      domain): float32 Pk*3, int32 K, int32 K, float32 Pk,
+                                      float32 Pk*3, in the same space as the strands
+
 Curve type is POLY: the strands are polylines (the tracer's cylinders), so Blender's
 evaluated curve, its exporters and the tracer all see the same points.
 
@@ -38,7 +50,15 @@ LEGACY_COLOR_ATTRIBUTE = "color"
 # Blender's name for a hair curve's attachment UV (its sculpt tools and geometry nodes read it).
 ROOT_UV_ATTRIBUTE = "surface_uv_coordinate"
 
-ATTRIBUTES = ("position", "radius", COLOR_ATTRIBUTE, "alpha", "wisp", ROOT_UV_ATTRIBUTE)
+# The guides (see above): three per-curve key indices, their weights, and the key strands.
+GUIDE_INDEX_ATTRIBUTES = ("keystrand_guide_index_0", "keystrand_guide_index_1", "keystrand_guide_index_2")
+GUIDE_WEIGHTS_ATTRIBUTE = "keystrand_guide_weights"
+KEY_PROPERTIES = {"points": ("keystrand_key_points", np.float32), "counts": ("keystrand_key_counts", np.int32),
+                  "group": ("keystrand_key_group", np.int32), "radius": ("keystrand_key_radius", np.float32),
+                  "color": ("keystrand_key_color", np.float32)}
+
+ATTRIBUTES = ("position", "radius", COLOR_ATTRIBUTE, "alpha", "wisp", ROOT_UV_ATTRIBUTE) + \
+    GUIDE_INDEX_ATTRIBUTES + (GUIDE_WEIGHTS_ATTRIBUTE,)
 
 
 def _attribute(curves, name, data_type, domain):
@@ -166,8 +186,58 @@ def fill_curves(curves, strands, root_uv=None):
         "value", np.ascontiguousarray(strands.wisp, np.int32))
     if root_uv is not None:
         _attribute(curves, ROOT_UV_ATTRIBUTE, 'FLOAT2', 'CURVE').data.foreach_set("vector", root_uv.ravel())
+    write_guides(curves, strands.guides)
     curves.update_tag()
     return curves
+
+
+def write_guides(curves, guides):
+    """Store hairio.Guides on the Curves datablock (the attributes and properties in the
+    module's notes), or remove any stored there when `guides` is None."""
+    if guides is None:
+        for name in GUIDE_INDEX_ATTRIBUTES + (GUIDE_WEIGHTS_ATTRIBUTE,):
+            old = curves.attributes.get(name)
+            if old is not None:
+                curves.attributes.remove(old)
+        for name, _ in KEY_PROPERTIES.values():
+            if name in curves:
+                del curves[name]
+        return
+    index = np.ascontiguousarray(guides.index, np.int32)
+    for column, name in enumerate(GUIDE_INDEX_ATTRIBUTES):
+        _attribute(curves, name, 'INT', 'CURVE').data.foreach_set("value", np.ascontiguousarray(index[:, column]))
+    _attribute(curves, GUIDE_WEIGHTS_ATTRIBUTE, 'FLOAT_VECTOR', 'CURVE').data.foreach_set(
+        "vector", np.ascontiguousarray(guides.weights, np.float32).ravel())
+    keys = guides.keys
+    values = {"points": keys.points, "counts": keys.counts, "group": guides.group, "radius": keys.radius,
+              "color": keys.color}
+    for field, (name, dtype) in KEY_PROPERTIES.items():
+        # A float32 / int32 array becomes an ID property array of the same type (buffer protocol).
+        curves[name] = np.ascontiguousarray(values[field], dtype).ravel()
+
+
+def read_guides(curves):
+    """The hairio.Guides stored on a Curves datablock (write_guides), or None when it holds
+    none. InputError when they no longer fit the curves (edited since Generate)."""
+    from hairio import Guides, InputError
+    attrs = curves.attributes
+    names = GUIDE_INDEX_ATTRIBUTES + (GUIDE_WEIGHTS_ATTRIBUTE,)
+    if any(name not in attrs for name in names) or any(name not in curves for name, _ in KEY_PROPERTIES.values()):
+        return None
+    n_s = len(curves.curves)
+    index = np.empty((3, n_s), np.int32)
+    for column, name in enumerate(GUIDE_INDEX_ATTRIBUTES):
+        attrs[name].data.foreach_get("value", index[column])
+    weights = np.empty(n_s * 3, np.float32)
+    attrs[GUIDE_WEIGHTS_ATTRIBUTE].data.foreach_get("vector", weights)
+    values = {field: np.array(curves[name], dtype) for field, (name, dtype) in KEY_PROPERTIES.items()}
+    try:
+        keys = Strands.from_arrays(values["points"].reshape(-1, 3), values["counts"], values["radius"],
+                                   values["color"].reshape(-1, 3))
+        return Guides.from_arrays(keys, index.T, weights.reshape(-1, 3), values["group"], num_strands=n_s)
+    except InputError as e:
+        raise InputError(f"{curves.name}: the guides stored with the hair no longer fit it ({e}); "
+                         "press Generate to store them again") from None
 
 
 def root_uv(curves):
@@ -317,3 +387,22 @@ def curves_to_strands(obj):
         attrs["wisp"].data.foreach_get("value", wisp)
         kwargs["wisp"] = wisp
     return Strands.from_arrays(points.reshape(n_p, 3), np.diff(offsets), **kwargs)
+
+
+def hair_strands(obj, world_space=True):
+    """The hair Curves object's strands with what it stores beside them (guides, root UVs),
+    as the export writes them: in world space (points by the object's matrix, radii by its
+    uniform scale, the key strands likewise) or in the object's own space."""
+    from hairio import Guides
+    s = curves_to_strands(obj)
+    guides = read_guides(obj.data)
+    m = np.array(obj.matrix_world, np.float64)
+    if world_space and not np.allclose(m, np.eye(4)):
+        points, radius = transform_strand_arrays(s.points, s.radius, m)
+        s = Strands.from_arrays(points, s.counts, radius, s.color, s.alpha, s.wisp)
+        if guides is not None:
+            k = guides.keys
+            points, radius = transform_strand_arrays(k.points, k.radius, m)
+            guides = Guides(Strands.from_arrays(points, k.counts, radius, k.color), guides.group, guides.index,
+                            guides.weights)
+    return s.with_guides(guides, root_uv(obj.data))

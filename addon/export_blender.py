@@ -1,8 +1,10 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Alembic and USD export of a hair Curves object through Blender's own exporters.
 
-`export_hair` is the one export of a hair object, for the panel's Export and for
-`python -m groom export --format abc|usd` alike: it adds the groom attributes Unreal reads
+The panel's Export writes Alembic and USD with hairio's own writers (alembic3d, and the pxr
+Blender ships), as the command line does; this module is its fallback where the format's
+library does not import inside Blender (hairio.formats.registry: Format.available), and the
+operator then says what the file lacks. `export_hair` adds the groom attributes Unreal reads
 (hairio.unreal.groom_attributes, root UVs when known) and runs `export_curves_object`.
 
 `export_curves_object` never touches the user's scene: it copies the Curves datablock,
@@ -20,13 +22,11 @@ What the files hold (verified by tests/hairio/test_io_blender_export.py):
   Unreal is in centimetres: pass scale=100 for a scene in metres; points and widths are both
   scaled in the file.
   Limitation: Blender writes no other curve attributes to Alembic (checked in Blender 5.0:
-  only `width`), and no maintained Alembic Python library installs from the package index
-  here (PyAlembic is not published there; the `alembic` package is an unrelated database
-  tool). So groom_guide, groom_group_id, groom_root_uv, groom_color, groom_closest_guides,
-  groom_guide_weights and groom_version_* are not in our .abc. Workaround in Unreal: import
-  with "Generate guides" (guides and closest-guide weights are then built by Unreal), let it
-  compute root UVs, split hair groups into separate objects (each Alembic object becomes a
-  group), and set the color in the groom material; or export USD, which carries them.
+  only `width`), so groom_guide, groom_group_id, groom_root_uv, groom_color,
+  groom_closest_guides, groom_guide_weights and groom_version_* are not in this fallback's
+  .abc (hairio's writer, with the alembic3d the extension ships, writes them all). In Unreal:
+  import it with "Generate guides", let Unreal compute root UVs, and set the colour in the
+  groom material.
 - USD: a BasisCurves prim, type "linear", curveVertexCounts, per-vertex `widths`
   (= 2 * radius), and every attribute of `attributes` as a primvar of the same name
   (hairio.unreal.groom_attributes). Orientation and units are left to Blender's USD options
@@ -34,29 +34,24 @@ What the files hold (verified by tests/hairio/test_io_blender_export.py):
   scale s sets metersPerUnit = 1/s with a root scale (a Blender whose USD exporter has no
   unit options, 4.2, gets the points scaled by s instead, and the same metersPerUnit).
 
-Run as a script (what `python -m groom export --format abc|usd` does, in a subprocess so the
-command-line packages never import bpy):
-
-    python addon/export_blender.py STRANDS.npz OUT.abc [--scale 100] [--axis y-up] [--root-uv UV.npy]
+Bad requests are hairio.InputError (named input, what to do); a Blender exporter that ran and
+wrote nothing is ExporterFailed.
 """
 import contextlib
 import os
-import sys
 import tempfile
 
 import numpy as np
 import bpy
 
-FORMATS = {"abc": (".abc",), "usd": (".usd", ".usda", ".usdc")}
-AXES = {"abc": ("y-up", "z-up"), "usd": ("z-up", "y-up")}
+from hairio import InputError
+
+# The formats Blender's own exporters write (their extensions and axes: the format registry's).
+FORMATS = ("abc", "usd")
 
 # Blender's Alembic writer maps (x, y, z) -> (x, z, -y); its inverse, applied first, makes
 # the file hold Blender's own Z-up coordinates.
 _ALEMBIC_KEEP_Z_UP = np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], np.float64)
-
-
-class ExportError(ValueError):
-    """Bad export request: the message names the input and the fix."""
 
 
 class ExporterFailed(RuntimeError):
@@ -64,20 +59,22 @@ class ExporterFailed(RuntimeError):
 
 
 def _check(format, path, axis, scale):
+    from hairio.formats import BY_NAME
     if format not in FORMATS:
-        raise ExportError(f"format: {format!r}; choose 'abc' or 'usd'")
+        raise InputError(f"format: {format!r}; choose one of {', '.join(FORMATS)}")
+    fmt = BY_NAME[format]
     ext = os.path.splitext(os.fspath(path))[1].lower()
-    if ext not in FORMATS[format]:
-        raise ExportError(f"{path}: a {format} file must end in {' or '.join(FORMATS[format])}")
-    axis = AXES[format][0] if axis is None else axis
-    if axis not in AXES[format]:
-        raise ExportError(f"axis: {axis!r} for {format}; choose one of {', '.join(AXES[format])}")
+    if ext not in fmt.extensions:
+        raise InputError(f"{path}: a {format} file must end in {' or '.join(fmt.extensions)}")
+    axis = fmt.axes[0] if axis is None else axis
+    if axis not in fmt.axes:
+        raise InputError(f"axis: {axis!r} for {format}; choose one of {', '.join(fmt.axes)}")
     scale = float(scale)
     if not np.isfinite(scale) or scale <= 0:
-        raise ExportError(f"scale: {scale} is not a positive finite number")
+        raise InputError(f"scale: {scale} is not a positive finite number")
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
-        raise ExportError(f"{path}: output folder {folder!r} does not exist; create it first")
+        raise InputError(f"{path}: output folder {folder!r} does not exist; create it first")
     return ext, axis, scale
 
 
@@ -146,8 +143,8 @@ def export_curves_object(obj, path, format="abc", scale=1.0, axis=None, attribut
     Returns the path written.
     """
     if obj is None or obj.type != 'CURVES':
-        raise ExportError(f"obj: expected a hair Curves object, got "
-                          f"{'nothing' if obj is None else obj.type}")
+        raise InputError(f"obj: expected a hair Curves object, got "
+                         f"{'nothing' if obj is None else obj.type}")
     ext, axis, scale = _check(format, path, axis, scale)
     world = np.array(obj.matrix_world, np.float64)
     matrix = world.copy()
@@ -236,49 +233,3 @@ def _remove(block):
         bpy.data.objects.remove(block)
     else:
         bpy.data.hair_curves.remove(block)
-
-
-def main(argv=None):
-    """Script entry: read strands, build a Curves object in a new empty scene, export."""
-    import argparse
-    from hairio import InputError
-    from hairio.formats import read_strands
-    from .blender_curves import strands_to_curves
-
-    ap = argparse.ArgumentParser(prog="export_blender", description="Alembic/USD export through Blender")
-    ap.add_argument("input")
-    ap.add_argument("out")
-    ap.add_argument("--format", choices=sorted(FORMATS))
-    ap.add_argument("--scale", type=float, default=1.0)
-    ap.add_argument("--axis")
-    ap.add_argument("--root-uv", help=".npy (S, 2) root UVs for groom_root_uv")
-    ap.add_argument("--no-groom-attributes", action="store_true")
-    args = ap.parse_args(argv)
-    fmt = args.format or ("abc" if args.out.lower().endswith(".abc") else "usd")
-    try:
-        strands = read_strands(args.input)
-        root_uv = None
-        if args.root_uv:
-            try:
-                root_uv = np.load(args.root_uv, allow_pickle=False)
-            except (OSError, ValueError) as e:
-                raise InputError(f"--root-uv {args.root_uv}: cannot read a .npy array ({e})") from e
-        # A scene of its own, not read_factory_settings: resetting the preferences makes
-        # Blender remove the wheels of the user's enabled extensions from their shared
-        # site-packages, under a Blender that may be running beside this process.
-        scene = bpy.data.scenes.new("hair")
-        obj = strands_to_curves("hair", strands, collection=scene.collection)
-        export_hair(obj, args.out, fmt, scale=args.scale, axis=args.axis, root_uv=root_uv,
-                    groom_attributes=not args.no_groom_attributes)
-    except (InputError, ExportError, ExporterFailed) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    return 0
-
-
-if __name__ == "__main__":
-    # Run as a script: import this file again as addon.export_blender, a module of the package,
-    # so that its relative imports resolve, and run that module's main.
-    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    from addon import export_blender
-    sys.exit(export_blender.main())

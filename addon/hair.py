@@ -53,6 +53,14 @@ def build_generator(scalp_data, keys, settings, count=None, collider=None, progr
     return gen, gen.generate()
 
 
+def groom_strands(generator, result):
+    """The strands of a GroomResult with the guides they were interpolated with (the key
+    strands, each strand's three keys and weights), which write_hair stores on the hair
+    object so its exports carry them."""
+    from groom.generate import strands_with_guides
+    return strands_with_guides(result, generator.keys, generator.params)
+
+
 def write_hair(scalp, strands, root_uv=None):
     """Write strands (scalp space) into the scalp's hair object, creating it on first use;
     root_uv: the roots' UVs on the scalp's UV map (GroomResult.root_uv), or None.
@@ -103,7 +111,7 @@ def generate(scalp, depsgraph=None, count=None, progress=None):
         tx.keep_settings(scalp)
         if settings.role != 'SCALP':
             settings.role = 'SCALP'
-        hair = write_hair(scalp, result.strands, result.root_uv)
+        hair = write_hair(scalp, groom_strands(gen, result), result.root_uv)
     t3 = time.perf_counter()
     generator_cache.remember(scalp, scalp_data, keys, gen, result, collider)
     return hair, result, {"read_s": t1 - t0, "collider_s": t_collider - t1, "groom_s": t2 - t_collider,

@@ -102,7 +102,8 @@ def process(now=None, settle=False):
             continue
         clear_background(scalp, TASK)
         if result is not None:
-            hair.write_hair(scalp, result.strands, result.root_uv)
+            gen = state.full if view_count >= settings.count else state.view
+            hair.write_hair(scalp, hair.groom_strands(gen, result), result.root_uv)
             state.last_edit = now
             written += 1
     for uid, state in states():
@@ -180,7 +181,7 @@ def _finish_catch_up(uid, state, wait=False):
     scalp = _scalp_by_uid(uid)
     if state.dragging or scalp is None or hair.existing_hair(scalp) is None:
         return 0  # a newer drag is on screen; its own catch-up follows
-    hair.write_hair(scalp, result.strands, result.root_uv)
+    hair.write_hair(scalp, hair.groom_strands(state.full, result), result.root_uv)
     return 1
 
 

@@ -15,10 +15,12 @@ import time
 
 import numpy as np
 import bpy
-from bpy.props import EnumProperty, FloatVectorProperty, BoolProperty, StringProperty
+from bpy.props import EnumProperty, FloatProperty, FloatVectorProperty, BoolProperty, StringProperty
 from bpy.types import Operator
 from bpy_extras import view3d_utils
 from bpy_extras.io_utils import ExportHelper
+
+from hairio.formats.registry import BY_NAME, FORMATS
 
 from . import blender_curves, head, preview, progress, scene_data
 from .hair import existing_hair, generate, read_collider
@@ -26,13 +28,9 @@ from .properties import dict_to_settings, groom_params
 from .scene_data import find_scalp
 from .transaction import reports_errors, transaction
 
-EXPORT_FORMATS = (
-    ('npz', "NumPy arrays (.npz)", "Strand arrays (points, counts, radius, color, alpha, wisp)"),
-    ('hair', "Cem Yuksel HAIR (.hair)", "The HAIR file format used by many hair renderers"),
-    ('tfx', "AMD TressFX (.tfx)", "TressFX v4 binary for game engines (strands resampled)"),
-    ('abc', "Alembic (.abc)", "Alembic curves, through Blender's own exporter"),
-    ('usd', "Universal Scene Description (.usd)", "USD BasisCurves, through Blender's own exporter"),
-)
+# The export formats are hairio's one table (hairio.formats.registry); the operator's list,
+# its file filter and extension, and the File > Export menu are all read from it.
+EXPORT_FORMATS = tuple((f.name, f.label, f.description) for f in FORMATS)
 
 
 def _scalp_or_report(op, context):
@@ -331,44 +329,45 @@ class HAIR_OT_save_preset(Operator, ExportHelper):
         return {'FINISHED'}
 
 
-def export_to_file(hair, path, format, world_space=True, blender_exporter=None):
-    """Write a hair object to `path` through the command line's own writers, with the same
-    attributes (`python -m groom export` on the hair's strands writes the same file): numpy
-    formats, and Alembic/USD where their libraries import (alembic3d; pxr, which Blender
-    ships), through hairio.cli.export_strands; Alembic/USD elsewhere through Blender's own
-    exporters (export_blender.export_hair), as the command line falls back too. Alembic and
-    USD are always world space. Root UVs are the ones Generate stored from the scalp's UV
-    map, when it has one."""
-    from hairio.cli import export_strands, groom_library_available
+def export_to_file(hair, path, format, world_space=True, scale=1.0):
+    """Write a hair object to `path` in `format` (a registry name) through the command line's
+    own writers (hairio.cli.export_strands), with the guides, root UVs and source it holds, so
+    `python -m groom export` on the hair's .npz writes the same file. Returns (files written,
+    a warning or None). Only where a groom format's library does not import inside Blender
+    (alembic3d missing) does Blender's own exporter write it (export_blender), and the
+    warning says what that file lacks. Groom formats are always world space."""
+    from hairio.cli import export_strands
+    fmt = BY_NAME[format]
     uv = blender_curves.root_uv(hair.data)
-    if format in ('abc', 'usd'):
-        if not groom_library_available(format):
-            return blender_exporter.export_hair(hair, path, format, root_uv=uv)
-        world_space = True
-    strands = preview.world_strands(hair) if world_space else blender_curves.curves_to_strands(hair)
-    source = f"{os.path.basename(bpy.data.filepath) or 'unsaved .blend file'}: {hair.name}"
-    return export_strands(strands, path, format, root_uv=uv, source=source)
-
-
-def export_blender_module():
-    """addon/export_blender.py when present (Alembic/USD through Blender's exporters)."""
-    try:
+    if not fmt.available():
         from . import export_blender
-    except ImportError:
-        return None
-    return export_blender
+        if fmt.name not in export_blender.FORMATS:
+            fmt.require()       # the InputError that says what to install
+        export_blender.export_hair(hair, path, fmt.name, scale=scale, root_uv=uv)
+        return [path], (f"{fmt.library} is not installed in this Blender, so Blender's own exporter wrote "
+                        f"{os.path.basename(path)}: positions and widths only, no guides or groom "
+                        f"attributes; install {fmt.library} into Blender's Python for the full groom")
+    if fmt.library is not None:
+        world_space = True
+    strands = blender_curves.hair_strands(hair, world_space)
+    source = f"{os.path.basename(bpy.data.filepath) or 'unsaved .blend file'}: {hair.name}"
+    given = {"scale": scale, "source": source}
+    options = {name: value for name, value in given.items() if name in fmt.options}
+    return export_strands(strands, path, fmt.name, **options), None
 
 
-def _export_refused():
-    """export_blender's own bad-input error (its ExportError, a ValueError beside InputError)."""
-    module = export_blender_module()
-    return (module.ExportError,) if module else ()
+def _follow_format(op):
+    """Keep the file browser's extension and filter in step with the chosen format."""
+    fmt = BY_NAME[op.format]
+    op.filename_ext = fmt.extension
+    op.filter_glob = fmt.file_filter
+    return fmt
 
 
 def _cannot_write():
     """The errors that mean the file could not be written (not the user's input, not a bug)."""
-    module = export_blender_module()
-    return (OSError,) + ((module.ExporterFailed,) if module else ())
+    from .export_blender import ExporterFailed
+    return (OSError, ExporterFailed)
 
 
 class HAIR_OT_export(Operator, ExportHelper):
@@ -377,55 +376,57 @@ class HAIR_OT_export(Operator, ExportHelper):
     bl_label = "Export Hair"
     bl_options = {'REGISTER'}
 
-    filename_ext = ".npz"
-    filter_glob: StringProperty(default="*.npz;*.hair;*.tfx;*.abc;*.usd;*.usda;*.usdc", options={'HIDDEN'})
-    format: EnumProperty(name="Format", items=EXPORT_FORMATS, default='npz',
+    filename_ext = FORMATS[0].extension
+    filter_glob: StringProperty(default=";".join(f.file_filter for f in FORMATS), options={'HIDDEN'})
+    format: EnumProperty(name="Format", items=EXPORT_FORMATS, default=FORMATS[0].name,
                          description="File format; the file name's extension follows it")
     world_space: BoolProperty(name="World Space", default=True,
-                              description="Write points as placed in the scene (otherwise in the scalp's own space)")
+                              description="Write points as placed in the scene (otherwise in the scalp's own "
+                                          "space; Alembic and USD grooms are always world space)")
+    scale: FloatProperty(name="Scale", default=1.0, min=1e-6, soft_max=1000.0,
+                         description="Multiply points and widths (100 turns metres into Unreal's centimetres)")
 
     @classmethod
     def poll(cls, context):
         return _poll_hair(cls, context)
 
     def check(self, context):
-        # Keep the extension in step with the chosen format.
-        self.filename_ext = "." + self.format
+        fmt = _follow_format(self)
+        if self.filepath.lower().endswith(fmt.extensions):
+            return False        # .usda / .usdc stay as typed
         return ExportHelper.check(self, context)
 
     def invoke(self, context, event):
-        self.filename_ext = "." + self.format
+        _follow_format(self)
         return ExportHelper.invoke(self, context, event)
 
-    @reports_errors(failures=((lambda: _export_refused(), lambda op, e: str(e)),
-                              (lambda: _cannot_write(), lambda op, e: f"Cannot write {op.export_path}: {e}")))
+    # InputError is reported as the user's to fix, a file that cannot be written as such;
+    # anything else is a bug and says so (a ValueError from our own code is one too).
+    @reports_errors(failures=((_cannot_write, lambda op, e: f"Cannot write {op.export_path}: {e}"),))
     def execute(self, context):
+        from hairio.formats import with_extension
         scalp = find_scalp(context)
         hair = existing_hair(scalp) if scalp is not None else None
         if hair is None:
             self.report({'ERROR'}, "No generated hair to export: select a scalp and press Generate first")
             return {'CANCELLED'}
-        path = self.filepath
-        if not path:
+        if not self.filepath:
             self.report({'ERROR'}, "No file name given")
             return {'CANCELLED'}
-        if not path.lower().endswith("." + self.format) and not (
-                self.format == 'usd' and path.lower().endswith((".usda", ".usdc"))):
-            path = os.path.splitext(path)[0] + "." + self.format
-        module = export_blender_module() if self.format in ('abc', 'usd') else None
-        if self.format in ('abc', 'usd') and module is None:
-            self.report({'ERROR'}, f"Export to .{self.format} is not available in this version")
-            return {'CANCELLED'}
+        path = with_extension(self.filepath, BY_NAME[self.format])
         self.export_path = path  # named when it cannot be written
-        export_to_file(hair, path, self.format, self.world_space, module)
-        self.report({'INFO'}, f"Exported {path}")
+        written, warning = export_to_file(hair, path, self.format, self.world_space, self.scale)
+        if warning:
+            self.report({'WARNING'}, warning)
+        self.report({'INFO'}, f"Exported {', '.join(written)}")
         return {'FINISHED'}
 
 
 def menu_export(self, context):
-    for fmt, label, _desc in EXPORT_FORMATS:
-        op = self.layout.operator(HAIR_OT_export.bl_idname, text=f"Key-Strand Hair: {label}")
-        op.format = fmt
+    """File > Export: one entry per format of the registry."""
+    for fmt in FORMATS:
+        op = self.layout.operator(HAIR_OT_export.bl_idname, text=f"Key-Strand Hair: {fmt.label}")
+        op.format = fmt.name
 
 
 CLASSES = (HAIR_OT_add_key_strand, HAIR_OT_generate, HAIR_OT_render_preview, HAIR_OT_load_preset,

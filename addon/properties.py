@@ -12,7 +12,6 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorPro
 from bpy.types import PropertyGroup
 
 from hairio import InputError
-from tracer.shading import DEFAULT_SHADING, enum_items as shading_enum_items
 
 from . import generator_cache, head
 from .transaction import forget_background
@@ -23,6 +22,19 @@ ROLES = (
     ('KEY', "Key Strand", "A Bézier curve that shapes the hair around its root"),
     ('HAIR', "Hair", "Hair generated from a scalp's key strands"),
 )
+
+_SHADING_ITEMS = []
+
+
+def _shading_items(self, context):
+    """The tracer's registry of shading models (its first is the default), read when the menu
+    is first asked for, so that enabling the add-on imports no tracer. Blender needs the list
+    kept alive while it shows it, hence the module-level cache."""
+    if not _SHADING_ITEMS:
+        from tracer.shading import enum_items
+        _SHADING_ITEMS.extend(enum_items())
+    return _SHADING_ITEMS
+
 
 HEAD_AXES = (
     ('WORLD', "Scene", "Up and Front are directions in the scene (by default +Z is up and the face "
@@ -261,7 +273,7 @@ class HairSettings(PropertyGroup):
     preview_layers: IntProperty(name="Layers", default=4, min=1, soft_max=16,
                                 description="How many see-through hair layers are blended per pixel")
     preview_shading: EnumProperty(
-        name="Shading", default=DEFAULT_SHADING, items=shading_enum_items(),    # tracer's registry
+        name="Shading", default=0, items=_shading_items,    # tracer's registry, its default first
         description="How the hair reacts to light")
     preview_min_pixel_width: BoolProperty(
         name="Min Pixel Width", default=False,

@@ -69,64 +69,94 @@ def _child(key, mode, outdir, budget, timeout):
     return result, log
 
 
-def _header(mode, machine, started, finished=None):
+RESULTS = os.path.join(HERE, "results")
+
+
+def _header(runs):
+    """The report's head: what ran, where, when. `runs` are the stored runs' machine records."""
     lines = [
         "# Benchmarks: run time against error, side by side with Blender, and the stress suite",
         "",
-        f"Mode: **{mode}** (`python -m benchmarks --{mode if mode != 'gpu' else 'gpu-only'}`). "
-        "Every time is the median of at least 5 runs after one untimed warm-up; every ratio "
-        "compares two medians measured in the same run on this machine. Error figures are "
-        "linear RGBA against the float64 reference tracer (or a 64-sample stratified reference "
-        "for anti-aliasing), and geometric distances against the exact curve (SPEC §6, §8).",
+        "Made by `python -m benchmarks --quick | --full` (every section) or `--only SECTION ...` "
+        "(those sections again; the others keep their last measured figures). Each section says "
+        "when and in which mode it was measured. Every time is the median of at least 5 runs after "
+        "one untimed warm-up; every ratio compares two medians measured in the same run on this "
+        "machine. Error figures are linear RGBA against the float64 reference tracer (or a 64-sample "
+        "stratified reference for anti-aliasing), and geometric distances against the exact curve "
+        "(SPEC §6, §8).",
         "",
         "## Machine and versions",
         "",
-        "| | |",
-        "|---|---|",
     ]
-    lines += [f"| {k} | {str(v).replace('|', '·')} |" for k, v in machine.items()]
-    lines += ["", f"Started {started}" + (f", finished {finished}." if finished else ", still running.")
-              + f" The machine may be shared: its 1-minute load average was {machine['load_average']} at the "
-              f"start, {os.getloadavg()[0]:.1f} at the last write of this report (more than "
-              f"{machine['cores']} means other work competed for the cores; times are then noisier, ratios "
-              "less so, since both sides of a ratio ran in the same minutes).", ""]
+    newest = runs[-1] if runs else {}
+    lines += ["| | |", "|---|---|"]
+    lines += [f"| {k} | {str(v).replace('|', '·')} |" for k, v in newest.items() if k != "mode"]
+    lines += ["", "The machine may be shared: a section's load average above the number of cores means "
+              "other work competed for them; times are then noisier, ratios less so, since both sides "
+              "of a ratio ran in the same minutes.", ""]
     return "\n".join(lines)
+
+
+def _result_path(results_dir, key):
+    return os.path.join(results_dir, f"{key}.json")
+
+
+def load_results(results_dir):
+    """The stored result of every section that has one: {key: result}."""
+    out = {}
+    for key, _ in SECTIONS:
+        try:
+            with open(_result_path(results_dir, key)) as f:
+                out[key] = json.load(f)
+        except (OSError, ValueError):
+            continue
+    return out
+
+
+def render_report(results, runs):
+    """REPORT.md from the stored section results, in the sections' order."""
+    keys = [k for k, _ in SECTIONS]
+    titles = dict(SECTIONS)
+    body = [_header(runs)]
+    lines = []
+    for i, k in enumerate(keys, 1):
+        r = results.get(k)
+        for line in (r or {}).get("summary") or ["not measured yet"]:
+            lines.append(f"- §{i} {line}")
+    body.append("## Summary\n\nThe key figures of each section (details, settings and plots below).\n\n"
+                + "\n".join(lines))
+    for i, k in enumerate(keys, 1):
+        body.append(f"## {i}. {titles[k]}")
+        r = results.get(k)
+        if r is None:
+            body.append(f"*not measured yet: `python -m benchmarks --only {k}`.*")
+            continue
+        when = r.get("measured")
+        if when:
+            body.append(f"<sub>measured {when['date_utc']} in {when['mode']} mode at commit "
+                        f"{when['commit']}, load average {when['load_average']} at the start on "
+                        f"{when['cores']} cores; section time {fmt_time(r.get('elapsed', 0.0))}</sub>")
+        body.append(r["markdown"])
+    return "\n\n".join(body) + "\n"
 
 
 def orchestrate(mode, outdir, only=None):
     cfg = config_mod.for_mode(mode)
     os.makedirs(outdir, exist_ok=True)
-    machine = machine_info()
-    started = time.strftime("%H:%M:%S UTC", time.gmtime())
+    results_dir = RESULTS if os.path.abspath(outdir) == HERE else os.path.join(outdir, "results")
+    os.makedirs(results_dir, exist_ok=True)
     keys = [k for k, _ in SECTIONS if (only is None or k in only) and (mode != "gpu" or k == "gpu")]
-    titles = dict(SECTIONS)
-    results = {}
+    # A GPU run writes its own report; a CPU run, partial or whole, updates the sections it ran
+    # and keeps the others' last figures.
+    report_path = os.path.join(outdir, "REPORT_GPU.md" if mode == "gpu" else "REPORT.md")
+    results = {} if mode == "gpu" else load_results(results_dir)
     t_start = time.perf_counter()
     budget_total = BUDGET[mode]
-    # A partial run (--only, or --gpu-only on a GPU machine) must not replace the full report.
-    name = "REPORT_GPU.md" if mode == "gpu" else "REPORT_PARTIAL.md" if only else "REPORT.md"
-    report_path = os.path.join(outdir, name)
 
-    def write(finished=None):
-        body = [_header(mode, machine, started, finished)]
-        if finished:
-            body[0] += f"\nWhole run: {fmt_time(time.perf_counter() - t_start)}.\n"
-        lines = []
-        for i, k in enumerate(keys, 1):
-            r = results.get(k)
-            for line in (r or {}).get("summary") or ["not measured: the run ended before this section"]:
-                lines.append(f"- §{i} {line}")
-        body.append("## Summary\n\nThe key figures of each section (details, settings and plots below).\n\n"
-                    + "\n".join(lines))
-        for i, k in enumerate(keys, 1):
-            body.append(f"## {i}. {titles[k]}")
-            r = results.get(k)
-            if r is None:
-                body.append("*not measured: the run ended before this section.*")
-            else:
-                body.append(r["markdown"])
-                body.append(f"<sub>section time {fmt_time(r['elapsed'])}</sub>")
-        write_text_atomic(report_path, "\n\n".join(body) + "\n")
+    def write():
+        stamps = [r["measured"] for r in results.values() if r.get("measured")]
+        stamps.sort(key=lambda m: m["date_utc"])
+        write_text_atomic(report_path, render_report(results, stamps))
 
     for idx, k in enumerate(keys):
         left = budget_total - (time.perf_counter() - t_start)
@@ -134,16 +164,20 @@ def orchestrate(mode, outdir, only=None):
         limit = cfg.limits.get(k, 60)
         # Never let one section eat the time the ones after it were promised.
         limit = max(10.0, min(limit, (left - later) / SOFT))
-        print(f"[bench] {k}: limit {limit:.0f} s (load average {os.getloadavg()[0]:.1f}) ...", flush=True)
+        machine = machine_info()
+        print(f"[bench] {k}: limit {limit:.0f} s (load average {machine['load_average']}) ...", flush=True)
         r, log = _child(k, mode, outdir, budget=SOFT * limit, timeout=limit + 30)
+        r["measured"] = {**machine, "mode": mode}
         results[k] = r
+        if mode != "gpu":
+            write_text_atomic(_result_path(results_dir, k), json.dumps(r, indent=1, sort_keys=True) + "\n")
         for line in (r.get("summary") or []):
             print(f"[bench]   {line}", flush=True)
         if r.get("status") == "failed":
             print(f"[bench]   FAILED ({r['elapsed']:.0f} s); last output:\n{log[-1500:]}", flush=True)
         print(f"[bench] {k}: {r['elapsed']:.1f} s", flush=True)
         write()
-    write(finished=time.strftime("%H:%M:%S UTC", time.gmtime()))
+    write()
     total = time.perf_counter() - t_start
     print(f"[bench] wrote {report_path} in {total:.0f} s", flush=True)
     return 0
@@ -156,9 +190,12 @@ def main(argv=None):
                    help="every section at small sizes (under five minutes on 2 cores)")
     g.add_argument("--full", action="store_const", dest="mode", const="full",
                    help="the issue sizes (about half an hour on 2 cores)")
+    g.add_argument("--rewrite", action="store_const", dest="mode", const="rewrite",
+                   help="write REPORT.md again from the stored results (benchmarks/results/), measuring nothing")
     g.add_argument("--gpu-only", action="store_const", dest="mode", const="gpu",
                    help="on a GPU machine: 1920x1080 frames per second for 10k and 100k strands")
-    ap.add_argument("--only", nargs="+", metavar="SECTION", help=f"run only these of {[k for k, _ in SECTIONS]}")
+    ap.add_argument("--only", nargs="+", metavar="SECTION",
+                    help=f"run only these of {[k for k, _ in SECTIONS]}; the report keeps the others' last figures")
     ap.add_argument("--outdir", default=HERE, help="where REPORT.md goes, its plots in figures/ beside it (default: benchmarks/)")
     # internal: one section in this process
     ap.add_argument("--section", help=argparse.SUPPRESS)
@@ -172,6 +209,12 @@ def main(argv=None):
             json.dump(result, f)
         return 0
     mode = args.mode or "quick"
+    if mode == "rewrite":
+        results = load_results(RESULTS)
+        stamps = sorted((r["measured"] for r in results.values() if r.get("measured")),
+                        key=lambda m: m["date_utc"])
+        write_text_atomic(os.path.join(HERE, "REPORT.md"), render_report(results, stamps))
+        return 0
     if args.only:
         unknown = set(args.only) - {k for k, _ in SECTIONS}
         if unknown:

@@ -83,14 +83,15 @@ QUICK = Config(
     int_strands=5000,
     tfx_vertices=(4, 16, 64),
     limits={"generation": 150, "geometry": 35, "rendering": 45, "anchors": 90, "scaling": 45,
-            "skips": 30, "stress": 25, "gpu": 10, "integration": 40, "versions": 300},
+            "skips": 30, "stress": 25, "gpu": 10, "integration": 40, "export": 40,
+            "versions": 300},
 )
 
 FULL = Config(
     mode="full",
     limits={"generation": 400, "geometry": 300, "rendering": 240, "anchors": 900, "scaling": 300,
             "skips": 180, "stress": 100, "gpu": 20, "integration": 240,
-            "versions": 600},
+            "export": 420, "versions": 600},
 )
 
 GPU = Config(

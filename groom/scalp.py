@@ -11,6 +11,7 @@ import os
 import numpy as np
 
 from hairio import InputError, check_finite
+from hairio.obj import parse_obj
 
 # Below this (relative to the mesh size squared) a triangle counts as having no area:
 # its own normal is noise, so it borrows its vertices' normals instead.
@@ -387,76 +388,21 @@ def _geodesic_sphere(n):
 
 
 def load_obj(path):
-    """Read a Wavefront .obj: `v`, `vt` and `f` (polygons fan-triangulated; v, v/vt, v//vn,
-    v/vt/vn forms; negative indices count from the end). Returns a Scalp; UVs are kept per
-    vertex when the file gives one UV per position."""
+    """Read a Wavefront .obj as a Scalp (hairio.obj parses it: `v`, `vt` and `f`, polygons
+    fan-triangulated, every index form). UVs are kept per vertex when every face corner
+    gives one and they are finite; a vertex with NaN/Inf coordinates is refused."""
     path = os.fspath(path)
-    try:
-        with open(path, "r", encoding="utf-8", errors="replace") as f:
-            lines = f.readlines()
-    except OSError as e:
-        raise InputError(f"scalp mesh {path!r}: cannot read it ({e.strerror or e}); check the path") from e
-    verts, uvs, tris, tri_uv = [], [], [], []
-    for no, line in enumerate(lines, 1):
-        parts = line.split()
-        if not parts:
-            continue
-        tag = parts[0]
-        try:
-            if tag == "v":
-                verts.append([float(x) for x in parts[1:4]])
-                if len(verts[-1]) != 3:
-                    raise ValueError("a vertex needs 3 coordinates")
-            elif tag == "vt":
-                uvs.append([float(x) for x in (parts[1:3] + ["0"])[:2]])
-            elif tag == "f":
-                corners = []
-                for item in parts[1:]:
-                    fields = item.split("/")
-                    vi = _obj_index(fields[0], len(verts), "vertex")
-                    ti = None
-                    if len(fields) > 1 and fields[1]:
-                        ti = _obj_index(fields[1], len(uvs), "texture coordinate")
-                    corners.append((vi, ti))
-                for k in range(1, len(corners) - 1):
-                    tri = (corners[0], corners[k], corners[k + 1])
-                    tris.append([c[0] for c in tri])
-                    tri_uv.append([c[1] for c in tri])
-        except ValueError as e:
-            raise InputError(f"scalp mesh {path!r} line {no}: cannot parse {line.strip()!r} ({e})") from e
-    if not verts:
-        raise InputError(f"scalp mesh {path!r}: no vertices ('v' lines); is it an .obj mesh?")
-    if not tris:
-        raise InputError(f"scalp mesh {path!r}: no faces ('f' lines with 3+ corners); a scalp needs triangles")
-    verts = np.array(verts, np.float64)
+    mesh = parse_obj(path, "scalp mesh")
+    verts, tris = mesh.vertices, mesh.triangles
     if not np.isfinite(verts).all():
         bad = int(np.argmax(~np.isfinite(verts).all(axis=1)))
         raise InputError(f"scalp mesh {path!r}: vertex {bad} has NaN/Inf coordinates; repair the mesh")
-    tris = np.array(tris, np.int64)
-    if tris.min() < 0 or tris.max() >= len(verts):
-        raise InputError(f"scalp mesh {path!r}: a face refers to a vertex that does not exist")
-    uv = None
-    if uvs and all(t is not None for tri in tri_uv for t in tri):
-        uvs = np.array(uvs, np.float64)
-        tuv = np.array(tri_uv, np.int64)
-        if tuv.min() >= 0 and tuv.max() < len(uvs) and np.isfinite(uvs).all():
-            # Per-vertex UV: the last corner using a vertex wins (seams keep one side).
-            uv = np.zeros((len(verts), 2))
-            uv[tris.ravel()] = uvs[tuv.ravel()]
+    uv, uvs, tuv = None, mesh.uvs, mesh.triangle_uvs
+    if len(uvs) and tuv is not None and tuv.max() < len(uvs) and np.isfinite(uvs).all():
+        # Per-vertex UV: the last corner using a vertex wins (seams keep one side).
+        uv = np.zeros((len(verts), 2))
+        uv[tris.ravel()] = uvs[tuv.ravel()]
     try:
         return Scalp(verts, tris, uv=uv)
     except InputError as e:
         raise InputError(f"scalp mesh {path!r}: {str(e).removeprefix('scalp: ')}") from None
-
-
-def _obj_index(text, count, what):
-    """A 0-based index from an OBJ face corner: 1-based, or negative counting back from the
-    last of the `count` read so far. 0 is no index in OBJ (it would wrap to a later vertex),
-    and one past int64 names no vertex of any mesh."""
-    i = int(text)
-    if i == 0:
-        raise ValueError(f"{what} index 0: OBJ indices count from 1")
-    i = i - 1 if i > 0 else count + i
-    if not 0 <= i < 1 << 62:
-        raise ValueError(f"{what} index {text} lies outside the file")
-    return i

@@ -3,7 +3,7 @@
 
     python scripts/build_extension.py --out dist
 
-1. Fetch the platform wheels the manifest lists (moderngl, glcontext) into build/wheels/,
+1. Fetch the platform wheels the manifest lists (moderngl, glcontext, alembic3d) into build/wheels/,
    once; later builds reuse them and need no network.
 2. Build this project's own pure-Python wheel (groom, tracer, hairio; the packages
    pyproject.toml lists), so Blender installs them into its extensions' site-packages.

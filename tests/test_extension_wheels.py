@@ -14,7 +14,7 @@ BLENDER_PYTHONS = {"4.2": "311", "4.5": "311", "5.0": "311", "5.1": "313", "5.2"
 # Manifest platform -> the platform-tag prefix its wheels carry.
 PLATFORM_TAGS = {"linux-x64": ("manylinux", "x86_64"), "windows-x64": ("win_amd64", ""),
                  "macos-arm64": ("macosx_", "arm64"), "macos-x64": ("macosx_", "x86_64")}
-COMPILED = ("moderngl", "glcontext")
+COMPILED = ("moderngl", "glcontext", "alembic3d")
 
 
 def _manifest():

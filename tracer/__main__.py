@@ -1,11 +1,11 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """python -m tracer render INPUT --out IMAGE.png [--size 512x512] [--spp N]
-[--shadows|--no-shadows] [--layers K] [--shading MODEL]
+[--shadows|--no-shadows] [--layers K] [--shading MODEL] [--min-pixel-width|--no-min-pixel-width]
 [--camera auto|x,y,z:tx,ty,tz:fov] [--up auto|z|y] [--mesh MESH.obj [--mesh-color R,G,B]]...
 
 Bad input exits 2 with one line naming it and writes nothing. What can be known before the
-render is checked before it: the size, the samples, the destination (a folder, a missing
-or read-only place). The image is rendered in tiles of at most TILE_PIXELS and written to
+render is checked before it: the size, the memory of one band of tiles at that width, the
+samples, the destination (a folder, a missing or read-only place). The image is rendered in tiles of at most TILE_PIXELS and written to
 the PNG band by band as they finish, so a 16384 x 16384 image takes the memory of one band
 of tiles, not of the image (a whole 8192² image in float64 needs 2 GiB per copy). A disk
 that fills up while the PNG is written is an exit 2 too, and leaves no file.
@@ -19,10 +19,13 @@ import numpy as np
 
 from hairio import InputError
 
+# Samples are placed in float32 pixel coordinates of the whole image: below 16384 they
+# round to within 1/2048 of a pixel (a 32nd of the finest stratum, 64 per side at MAX_SPP);
+# each doubling of the size doubles that error.
 MAX_SIZE = 16384
 # Pixels per tile: 4 MiB of float32 RGBA from the GPU; tiles are at most TILE_SIDE wide, so
 # a band of them is at most 16384 x 128 pixels (8 MiB of 8-bit rows). Smaller tiles cost
-# more in per-draw overhead than they save (1/4 the pixels: 1.8x the render time at 4096²).
+# more in per-draw overhead than they save (docs/DECISIONS.md, "Tiles of 2^18 pixels").
 TILE_PIXELS = 1 << 18
 TILE_SIDE = 2048
 # Rows converted to 8-bit sRGB at once: the conversion works in float64 (~10 MiB at 2048 wide).
@@ -54,9 +57,34 @@ def parse_size(text):
         w, h = (int(x) for x in text.lower().split("x"))
     except ValueError:
         raise InputError(f"--size {text!r}: expected WIDTHxHEIGHT, e.g. 512x512") from None
-    if not (1 <= w <= MAX_SIZE and 1 <= h <= MAX_SIZE):
+    if min(w, h) < 1:
         raise InputError(f"--size {text!r}: width and height must lie in 1..{MAX_SIZE}")
+    if max(w, h) > MAX_SIZE:
+        raise InputError(f"--size {text!r}: width and height must lie in 1..{MAX_SIZE}; the tracer places samples "
+                         f"in float32 pixel coordinates, which {max(w, h)} pixels across round to "
+                         f"1/{1 / position_error(max(w, h)):.0f} of a pixel (1/{1 / position_error(MAX_SIZE):.0f} "
+                         f"at {MAX_SIZE})")
     return w, h
+
+
+def position_error(side):
+    """The largest rounding of a float32 sample position (0 <= x < side) in an image `side`
+    pixels across, in pixels: half the float32 spacing just below `side`."""
+    below = np.nextafter(np.float32(side), np.float32(0))
+    return float(np.spacing(below)) / 2
+
+
+def render_memory(size, tile_pixels=TILE_PIXELS, tile_side=TILE_SIDE):
+    """Bytes of host memory render_png takes for an image of `size` (W, H), whatever its
+    height: one band of 8-bit rows and its PNG scanlines twice (the filtered rows and their
+    bytes), one tile's float32 copies (tracer.draw.RENDER_COPIES), the float64 temporaries
+    of converting CONVERT_ROWS rows of a tile (about four), and 1 MiB for zlib."""
+    from .draw import RENDER_COPIES
+    W, _ = size
+    _, h, row = tiles(size, tile_pixels, tile_side)[0]
+    tw = row[0][1]
+    return (h * W * 4 + 2 * h * (1 + 4 * W) + RENDER_COPIES * tw * h * 16
+            + 4 * min(h, CONVERT_ROWS) * tw * 4 * 8 + (1 << 20))
 
 
 def parse_camera(text, strands, size, meshes=None):
@@ -108,17 +136,6 @@ def read_meshes(paths, colors, frame_of):
     return mesh_set(meshes)
 
 
-def tile_camera(camera, x0, y0, w, h):
-    """The camera that sees exactly pixels [x0, x0+w) x [y0, y0+h) of `camera`'s image:
-    same pixel size, the image centre shifted. At 1 spp a tile's pixels are the whole
-    image's bit for bit; with more samples the jitter follows the tile's own pixel
-    numbers (same stratification, another fixed pattern)."""
-    from .camera import Camera
-    W, H = camera.size
-    shift = np.asarray(camera.shift_px, np.float64) + [x0 + w / 2 - W / 2, H / 2 - h / 2 - y0]
-    return Camera(camera.type, camera.position, camera.rotation, (int(w), int(h)), camera.pixel_size, shift)
-
-
 def tiles(size, tile_pixels=TILE_PIXELS, tile_side=TILE_SIDE):
     """Row bands of tiles covering a (W, H) image: [(y0, h, [(x0, w), ...]), ...]."""
     W, H = size
@@ -138,7 +155,7 @@ def render_png(renderer, camera, settings, out, tile_pixels=TILE_PIXELS, tile_si
         for y0, h, row in tiles(camera.size, tile_pixels, tile_side):
             band = np.empty((h, W, 4), np.uint8)
             for x0, w in row:
-                img = renderer.render(tile_camera(camera, x0, y0, w, h), settings)
+                img = renderer.render(camera.window(x0, y0, w, h), settings)
                 spent[0] += renderer.stats.render_s
                 for r in range(0, h, CONVERT_ROWS):    # float64 temporaries of a few rows at a time
                     band[r:r + CONVERT_ROWS, x0:x0 + w] = to_srgb8(img[r:r + CONVERT_ROWS])
@@ -150,7 +167,7 @@ def render_png(renderer, camera, settings, out, tile_pixels=TILE_PIXELS, tile_si
 
 def build_parser():
     from hairio.formats.up_axis import UP_CHOICES
-    from .settings import MAX_SPP
+    from .settings import MAX_SPP, RenderSettings
     from .shading import DEFAULT_SHADING, SHADING_MODELS
     parser = argparse.ArgumentParser(prog="python -m tracer", description="Render strands with the GPU ray tracer.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -169,6 +186,16 @@ def build_parser():
     r.add_argument("--no-shadows", dest="shadows", action="store_false", help="no shadow rays: faster, flatter")
     r.add_argument("--layers", type=int, default=4,
                    help="semi-transparent hits composited front to back per ray, 1..64 (default %(default)s)")
+    defaults = RenderSettings()     # the options' defaults are the library's
+    on_off = {True: "on", False: "off"}
+    r.add_argument("--min-pixel-width", dest="min_pixel_width", action="store_true",
+                   default=defaults.min_pixel_width,
+                   help="widen hairs thinner than half a pixel (up to "
+                        f"{defaults.min_pixel_width_cap:g}x their radius) and make them fainter to match, so thin "
+                        "hair shows as strands, not dust; hair far thinner than a pixel stays faint "
+                        f"(default {on_off[defaults.min_pixel_width]})")
+    r.add_argument("--no-min-pixel-width", dest="min_pixel_width", action="store_false",
+                   help="trace every hair at its own radius")
     r.add_argument("--shading", choices=[m.name for m in SHADING_MODELS], default=DEFAULT_SHADING,
                    help="shading model: " + "; ".join(f"{m.name}: {m.description}" for m in SHADING_MODELS)
                         + " (default %(default)s)")
@@ -192,11 +219,15 @@ def main(argv=None):
     args = parser.parse_args(argv)
     try:
         size = parse_size(args.size)
+        from hairio.validate import check_memory
+        check_memory(f"--size {args.size}", render_memory(size),
+                     "render a narrower image (it is rendered in bands of tiles, each the image's width)")
         from hairio.atomic import check_destination
         check_destination(args.out, f"--out {args.out}")
         from .settings import RenderSettings
         settings = RenderSettings(spp=args.spp, shadows=args.shadows, layers=args.layers,
-                                  shading=args.shading, background=(0.0, 0.0, 0.0, 0.0))
+                                  shading=args.shading, min_pixel_width=args.min_pixel_width,
+                                  background=(0.0, 0.0, 0.0, 0.0))
         settings.check()
         from hairio.formats.up_axis import file_frame
         from hairio.formats.axes import unconvert_points
@@ -234,7 +265,8 @@ def main(argv=None):
           + (f", {st['num_triangles']} mesh triangles" if st["num_triangles"] else ""))
     print(f"upload {st['upload_s']:.3f} s (cylinders {st['cylinders_s']:.3f} s)")
     print(f"grid build {st['grid_s']:.3f} s: {st['grid_dims']} cells, {st['grid_refs']} references")
-    print(f"render {render_s:.3f} s at {size[0]}x{size[1]}, {args.spp} spp")
+    print(f"render {render_s:.3f} s at {size[0]}x{size[1]}, {args.spp} spp"
+          + (", minimum pixel width" if settings.min_pixel_width else ""))
     print(f"wrote {args.out}")
     return 0
 

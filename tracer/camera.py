@@ -20,6 +20,12 @@ sensor_width to W; VERTICAL fits sensor_height to H. With F the fitted dimension
 
 so a shift of 1 moves the view by one whole fitted dimension (the larger one under AUTO).
 Pixel aspect is 1. Scale in matrix_world is removed (only its rotation and translation count).
+
+A window (`Camera.window`, the tiles of a large render) sees pixels [x0, x0+w) x [y0, y0+h)
+of a larger image: the same pixel size, the shift moved so its pixels are that image's, and
+`pixel_origin` = (x0, y0) in that image. The tracers place a pixel's samples by its
+coordinates in the whole image (pixel_origin + its own) and the sample index, so a window's
+pixels are the whole image's, samples and all.
 """
 from dataclasses import dataclass
 
@@ -36,6 +42,7 @@ class Camera:
     size: tuple               # (W, H) pixels
     pixel_size: float         # image-plane units per pixel (at distance 1 for PERSP)
     shift_px: np.ndarray      # (2,) pixels
+    pixel_origin: tuple = (0, 0)   # (x0, y0): this image's pixel (0, 0) in the whole image
 
     def __post_init__(self):
         if self.type not in ("PERSP", "ORTHO"):
@@ -46,6 +53,9 @@ class Camera:
         if not (np.isfinite(self.pixel_size) and self.pixel_size > 0):
             raise InputError(f"camera: pixel size {self.pixel_size} must be finite and > 0 "
                              "(check lens, sensor and ortho_scale)")
+        ox, oy = self.pixel_origin
+        if int(ox) != ox or int(oy) != oy or ox < 0 or oy < 0:
+            raise InputError(f"camera pixel_origin: {self.pixel_origin}; expected two whole numbers >= 0")
 
     @property
     def width(self):
@@ -58,6 +68,15 @@ class Camera:
     @property
     def forward(self):
         return -self.rotation[:, 2]
+
+    @property
+    def centre_px(self):
+        """The optical axis (u = v = 0) in the whole image's pixel coordinates, x from the
+        left, y from the top: the same for a camera and all its windows, so the tracer
+        computes u, v from a pixel's whole-image coordinates the same way in each."""
+        w, h = self.size
+        return (self.pixel_origin[0] + w / 2 - float(self.shift_px[0]),
+                self.pixel_origin[1] + h / 2 + float(self.shift_px[1]))
 
     # --- constructors -------------------------------------------------------------------
     @classmethod
@@ -130,7 +149,18 @@ class Camera:
         """The same lens at a new place (re-render tests and benchmarks)."""
         return Camera(self.type, self.position if position is None else np.asarray(position, np.float64),
                       self.rotation if rotation is None else np.asarray(rotation, np.float64),
-                      self.size, self.pixel_size, self.shift_px)
+                      self.size, self.pixel_size, self.shift_px, self.pixel_origin)
+
+    def window(self, x0, y0, w, h):
+        """The camera that sees exactly pixels [x0, x0+w) x [y0, y0+h) of this camera's
+        image, with the samples those pixels have in it (see the module docstring)."""
+        W, H = self.size
+        x0, y0, w, h = (int(v) for v in (x0, y0, w, h))
+        if not (0 <= x0 and 0 <= y0 and w >= 1 and h >= 1 and x0 + w <= W and y0 + h <= H):
+            raise InputError(f"camera window {w}x{h} at ({x0}, {y0}): it must lie inside the {W}x{H} image")
+        shift = np.asarray(self.shift_px, np.float64) + [x0 + w / 2 - W / 2, H / 2 - h / 2 - y0]
+        origin = (int(self.pixel_origin[0]) + x0, int(self.pixel_origin[1]) + y0)
+        return Camera(self.type, self.position, self.rotation, (w, h), self.pixel_size, shift, origin)
 
     # --- rays and projection ------------------------------------------------------------
     def rays(self, x, y):

@@ -183,7 +183,8 @@ def _set_uniforms(prog, g, camera, settings):
                  cam_pos=tuple(float(x) for x in camera.position),
                  cam_rot=tuple(float(x) for x in camera.rotation.T.ravel()),
                  pixel_size=float(camera.pixel_size),
-                 shift_px=tuple(float(x) for x in camera.shift_px),
+                 centre_px=tuple(float(x) for x in camera.centre_px),
+                 pixel_origin=tuple(int(x) for x in camera.pixel_origin),
                  image_size=(float(camera.size[0]), float(camera.size[1])))
     packed = [light.packed() for light in settings.lights]
     if "light_vec" in prog:

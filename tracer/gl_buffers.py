@@ -5,7 +5,7 @@ samplerBuffer in GLSL, imageBuffer for compute writes), which moderngl does not 
 The scene's arrays live in them rather than in 2-D textures: a texel is found by its index
 alone (no row/column split, no rows padded to a power of two), partial updates are byte
 ranges, and on llvmpipe a texelFetch from a buffer costs less than a 2-D texture read
-(100,000 strands, 512x512: the whole render 14 % faster, same image).
+(docs/DECISIONS.md, "Scene data in buffer textures").
 
 The few GL entry points moderngl lacks are called through ctypes, loaded through the
 context's own glcontext loader (tracer/gl_context.py), so they come from the library that

@@ -70,21 +70,14 @@ def choose_resolution(box_size, extent, max_refs=None, count=None):
 
     Smaller cells mean fewer cylinder tests per ray but more references to build and more
     cell steps; on dense hair no size gets near a few cylinders per occupied cell without
-    listing each segment in dozens of cells. Measured on 100,000 wavy strands (1.5 M
-    cylinders, 512x512, llvmpipe on 2 cores, empty blocks skipped): build + trace is about
-    flat from 6 to 9 references per cylinder, the trace alone keeps improving up to ~9-12;
-    8 balances the two. A floor keeps the cell count within MAX_CELLS and MAX_DIM per axis,
-    and within MAX_CELLS_PER_CYLINDER times the cylinder count: sparse scenes (a few hundred
-    thousand cylinders in a head-sized box) otherwise get millions of nearly empty cells,
-    which every build pays for and every ray steps through (10,000 wavy strands, 572 k
-    cylinders: 8.4 M cells without the cap, 2.3 M with it; build 2.7x and render 1.4x less
-    CPU time, same image). Past MAX_REFS references in all, fewer per cylinder are aimed at:
-    building them costs the same per reference, while a ray gains less from smaller cells
-    that are already full (5.7 M cylinders, 100,000 wavy strands: 8 per cylinder cost 8.2 s
-    of CPU time for build + render, 6 per cylinder 5.7 s), but not below
-    MIN_REFS_PER_CYLINDER: under ~5 the cells fill so fast that the trace pays more than the
-    build saves (200,000 strands, 11.4 M cylinders at 2.8 per cylinder: 626 cylinders per
-    full cell, render 3.7x slower). `box_size` (N,3): sizes of the
+    listing each segment in dozens of cells. About 8 references per cylinder balance build
+    and trace. A floor keeps the cell count within MAX_CELLS and MAX_DIM per axis, and
+    within MAX_CELLS_PER_CYLINDER times the cylinder count, so sparse scenes do not get
+    millions of nearly empty cells that every build pays for and every ray steps through.
+    Past MAX_REFS references in all, fewer per cylinder are aimed at (building costs the
+    same per reference, while a ray gains less from smaller cells that are already full),
+    but not below MIN_REFS_PER_CYLINDER, under which the trace pays more than the build
+    saves. The figures: docs/DECISIONS.md, "Grid resolution". `box_size` (N,3): sizes of the
     cylinders' padded boxes, or of a sample of them; `count`: how many cylinders there are
     (default: len(box_size))."""
     n = len(box_size)
@@ -196,8 +189,8 @@ def _cells_touched(cylinders, pad_factor, lo, cs, dims):
     total = int(nslab.sum())
     first = np.cumsum(nslab) - nslab
     # Expansion by one repeat of the owner index, then gathers: np.repeat with per-element
-    # counts copies element by element and cost a third of the whole build; a gather from
-    # a cache-sized chunk array is a few times cheaper.
+    # counts copies element by element, a gather from a cache-sized chunk array does not
+    # (docs/DECISIONS.md, "The numpy grid build in small chunks").
     c1 = np.repeat(np.arange(n, dtype=np.int32), nslab)
     rep = lambda x: np.take(x, c1)  # noqa: E731
     slab = rep(i0 - first.astype(np.int32)) + np.arange(total, dtype=np.int32)
@@ -248,7 +241,7 @@ def build_grid(cylinders, pad_factor=1.0, dims=None, frame=None):
     ncell = int(np.prod(dims))
     # Small chunks of cylinders on all cores (numpy drops the GIL in its loops). Small, so the
     # dozen temporaries per reference stay in cache instead of streaming ~40 MB arrays
-    # through memory: measured 2-3x faster than one chunk per core on 10 M references.
+    # through memory (docs/DECISIONS.md, "The numpy grid build in small chunks").
     # Each chunk comes back as (cell, cylinder) keys sorted by cell.
     step = max(1, min(CHUNK, -(-n // (os.cpu_count() or 1))))
     jobs = [(a, min(n, a + step)) for a in range(0, n, step)]

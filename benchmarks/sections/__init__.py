@@ -16,6 +16,7 @@ SECTIONS = [
     ("stress", "Stress: SPEC §9 cases and randomised scenes"),
     ("gpu", "GPU"),
     ("integration", "Extension and export figures (issues 4 and 5)"),
+    ("export", "Export of a groom with guides, per format (issue 17)"),
     ("versions", "Blender versions: Generate and Render Preview in each Blender of the matrix"),
 ]
 

@@ -51,6 +51,27 @@ def write_npz(path, strands, units="m", up="Z", front="-Y", source=None, extra=N
         fj.write(text)
 
 
+# What the sidecar says of each target frame (axes.AXES) and of common scales.
+FRAME_NAMES = {"none": ("Z", "-Y", "right"), "y-up": ("Y", "+Z", "right"), "unreal": ("Z", "+Y", "left"),
+               "directx": ("Y", "-Z", "left")}
+UNIT_NAMES = {1.0: "m", 100.0: "cm", 1000.0: "mm"}
+
+
+def export_npz(path, strands, axis="none", scale=1.0, root_uv=None, units=None, source=None):
+    """Write `strands` turned to `axis` and multiplied by `scale` (axes.convert_strands), with
+    a sidecar naming that frame and the units (default from the scale: m, cm, mm), and
+    `root_uv` (S, 2) joining the arrays when given. Returns [path, its sidecar]."""
+    from .axes import convert_strands
+    if root_uv is not None:
+        strands = check_strands(strands).with_guides(strands.guides, root_uv)
+    strands = convert_strands(check_strands(strands), axis, scale)
+    scale = float(scale)
+    up, front, handedness = FRAME_NAMES[axis]
+    write_npz(path, strands, units=units or UNIT_NAMES.get(scale, f"{1 / scale:g} m"), up=up, front=front,
+              source=source, handedness=handedness)
+    return [os.fspath(path), sidecar_path(path)]
+
+
 def read_npz(path):
     return Strands.load_npz(path)
 

@@ -4,8 +4,8 @@
 Our arrays never guess: a reader returns a file's coordinates as they are. Commands that
 show or convert files take `--up z|y|auto`: `z` keeps the coordinates, `y` reads the file as
 right-handed Y up with the face toward +Z (x, y, z -> x, -z, y: the face toward our -Y, the
-front), `auto` does so for the formats whose files are Y up (Y_UP_FORMATS) and keeps the
-others. The turn is a signed permutation of the axes (hairio/formats/axes.py), exact in
+front), `auto` does so for the formats whose files are Y up (their `frame` in the format
+registry, hairio/formats/registry.py) and keeps the others. The turn is a signed permutation of the axes (hairio/formats/axes.py), exact in
 float32. TressFX files are read right-handed too: the TressFX-OpenGL Sintel's hair and body
 then face the front, and Ratboy's mohawk sweeps back from its brow.
 """
@@ -16,11 +16,6 @@ from ..validate import InputError
 from .axes import unconvert_points
 
 UP_CHOICES = ("z", "y", "auto")
-# Extension -> the file's frame (a name of axes.AXES) for formats whose files are Y up.
-Y_UP_FORMATS = {
-    ".tfx": "y-up",         # TressFX samples (AMD's, TressFX-OpenGL's)
-    ".data": "y-up",        # USC-HairSalon
-}
 
 
 def file_frame(path, up="auto"):
@@ -33,7 +28,9 @@ def file_frame(path, up="auto"):
         return "none"
     if up == "y":
         return "y-up"
-    return Y_UP_FORMATS.get(ext, "none")
+    from .registry import BY_EXTENSION
+    fmt = BY_EXTENSION.get(ext)
+    return "none" if fmt is None else fmt.frame
 
 
 def points_to_z_up(points, path, up="auto"):

@@ -261,8 +261,8 @@ def test_blender_export_failing_midway_leaves_no_file_and_no_temporary_data(clea
     keyed_scalp()
     bpy.ops.hair.generate()
     # Blender's exporters are the path where the format's own library does not import.
-    import sys
-    monkeypatch.setattr(sys.modules["hairio.cli"], "groom_library_available", lambda format: False)
+    from hairio.formats import Format
+    monkeypatch.setattr(Format, "available", lambda self: self.library is None)
     raise_on(monkeypatch, export_blender, "_bake")
     run_failing(bpy.ops.hair.export, INTERNAL, folder=tmp_path, internal=True,
                 filepath=str(tmp_path / f"hair.{fmt}"), format=fmt)

@@ -22,7 +22,7 @@ import bpy
 sys.path.insert(0, ROOT)
 from hairio import Strands
 from addon.blender_curves import strands_to_curves
-from addon.export_blender import export_curves_object, ExportError
+from addon.export_blender import export_curves_object
 from hairio.unreal import groom_attributes
 
 def state():
@@ -117,7 +117,7 @@ def test_failed_exports_raise_and_leave_no_file(exported):
     tmp, s, result = exported
     # missing folder, wrong extension, unknown axis: rejected up front; an attribute of the
     # wrong length fails inside Blender, after the temporary file was made
-    assert result["errors"][:3] == ["ExportError"] * 3
+    assert result["errors"][:3] == ["InputError"] * 3
     assert result["errors"][3] is not None
     assert not list(tmp.glob("x.*")) and not list(tmp.glob(".tmp-*"))
 

@@ -2,6 +2,7 @@
 """The export command: every format, options reaching the writers, bad input exits 2 and
 writes nothing."""
 import json
+import os
 import pathlib
 import struct
 import subprocess
@@ -101,19 +102,77 @@ def test_bad_input_exits_2_and_writes_nothing(npz, tmp_path, case, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
-def test_abc_and_usd_through_blender_in_a_subprocess(npz, tmp_path):
-    src, s = npz
-    # the command runs bpy in a child process and never imports it itself
-    code = ("import sys; from hairio.cli import export_main; "
-            f"rc = export_main([{str(src)!r}, '--out', {str(tmp_path / 'h.abc')!r}, '--scale', '100']); "
-            "print(rc, 'bpy' in sys.modules)")
-    run = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
-    assert run.stdout.strip().splitlines()[-1] == "0 False", run.stderr
-    assert (tmp_path / "h.abc").read_bytes()[:5] == b"Ogawa"
-    assert export_main([str(src), "--out", str(tmp_path / "h.usda")]) == 0
-    text = (tmp_path / "h.usda").read_text()
-    assert 'type = "linear"' in text and "primvars:groom_color" in text
+def test_an_installed_wheel_writes_grooms_with_guides(tmp_path):
+    """`pip install` of the project's wheel into a fresh environment (no network: the wheel
+    is built here, the libraries come from this one's site-packages) writes .abc and .usd
+    with guides: hairio needs nothing outside itself (no checkout, no addon/)."""
+    import importlib.util
+    import venv
+    spec = importlib.util.spec_from_file_location("build_extension", ROOT / "scripts" / "build_extension.py")
+    builder = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(builder)
+    wheel = builder.build_project_wheel(tmp_path)
+    env_dir = tmp_path / "env"
+    venv.EnvBuilder(with_pip=False).create(env_dir)
+    python = env_dir / "bin" / "python"
+    # numpy, alembic3d and usd-core from this environment, after the new one's own packages.
+    new_site = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+                              capture_output=True, text=True, check=True).stdout.strip()
+    import site
+    pathlib.Path(new_site, "outer.pth").write_text("\n".join(site.getsitepackages()) + "\n")
+    install = subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "--quiet",
+                              "--no-deps", "--no-index", str(wheel)], capture_output=True, text=True, timeout=300)
+    assert install.returncode == 0, install.stderr
+    s = make_wavy(30, (6, 12), seed=2)
+    keys = make_wavy(3, (8, 8), seed=3)
+    from hairio import Guides
+    index = np.stack([s.wisp % 3, (s.wisp + 1) % 3, (s.wisp + 2) % 3], axis=1)
+    weights = np.tile(np.float32([0.6, 0.3, 0.1]), (s.num_strands, 1))
+    s.with_guides(Guides.from_arrays(keys, index, weights, num_strands=s.num_strands)).save_npz(tmp_path / "g.npz")
+    code = ("import sys, hairio; from hairio.cli import export_main; print(hairio.__file__); "
+            "print(export_main(['g.npz', '--out', 'g.abc', '--scale', '100']), export_main(['g.npz', '--out', 'g.usda']))")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    run = subprocess.run([str(python), "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=120, env=env)
+    assert run.returncode == 0, run.stderr
+    lines = run.stdout.strip().splitlines()
+    where, status = lines[0], lines[-1]
+    assert pathlib.Path(where).is_relative_to(env_dir), where
+    assert status == "0 0", run.stderr
+    assert (tmp_path / "g.abc").read_bytes()[:5] == b"Ogawa"
+    for name in ("g.abc", "g.usda"):
+        back = read_strands(tmp_path / name)
+        np.testing.assert_array_equal(back.guides.index, index, err_msg=name)
+        assert back.guides.keys.num_strands == 3
     assert not list(tmp_path.glob(".tmp-*"))
+
+
+def test_a_missing_groom_library_says_what_to_install_and_writes_nothing(npz, tmp_path, monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "alembic3d", None)       # import alembic3d now fails
+    src, s = npz
+    assert export_main([str(src), "--out", str(tmp_path / "h.abc")]) == 2
+    assert "pip install alembic3d" in capsys.readouterr().err
+    assert list(tmp_path.glob("h.*")) == []
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--pinned", "3"], "--pinned: .hair files take no such option"),
+    (["--root-uv", "uv.npy"], "--root-uv: .hair files take no such option"),
+    (["--follow-hairs", "4"], "--follow-hairs: .hair files take no such option"),
+])
+def test_an_option_the_format_does_not_take_is_refused(npz, tmp_path, args, message, capsys):
+    src, s = npz
+    assert export_main([str(src), "--out", str(tmp_path / "x.hair"), *args]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "x.hair").exists()
+
+
+def test_help_lists_every_format_of_the_registry(capsys):
+    from hairio.formats import FORMATS
+    with pytest.raises(SystemExit):
+        export_main(["--help"])
+    out = capsys.readouterr().out
+    for f in FORMATS:
+        assert f"{f.name:5} {', '.join(f.extensions)}:\n" in out, f.name
 
 
 def test_module_entry_point(npz, tmp_path):

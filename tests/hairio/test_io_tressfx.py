@@ -1,15 +1,16 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """TressFX .tfx v4: header and layout parsed independently, resampling, pinning, UVs,
 padding, guides + render strands, the real files."""
+import pathlib
 import struct
 
 import numpy as np
 import pytest
 
 from hairio import InputError, Strands
-from hairio.formats import (load_tfx, loaded_strand_count, read_strands, read_tfx, resample_strands,
-                            resampling_error, resampling_errors, spherical_root_uv, write_tfx,
-                            write_tfx_pair)
+from hairio.formats import (load_tfx, loaded_strand_count, padding_strands, read_strands, read_tfx,
+                            resample_strands, resampling_error, resampling_errors, spherical_root_uv,
+                            write_tfx, write_tfx_pair)
 
 from hairio_scenes import make_wavy
 
@@ -66,20 +67,55 @@ def test_layout_matches_the_v4_header(tmp_path, wavy):
     np.testing.assert_array_equal(t["thickness"], 2 * wavy.radius[wavy.offsets])
 
 
-def test_resampling_is_even_in_arc_length_and_stays_on_the_strand(wavy):
-    r = resample_strands(wavy, 32)
-    assert (r.counts == 32).all()
-    pts = r.points.reshape(-1, 32, 3).astype(np.float64)
-    seg = np.linalg.norm(np.diff(pts, axis=1), axis=2)
-    orig_len = np.array([polyline_length(p) for p in np.split(wavy.points.astype(np.float64),
-                                                               np.cumsum(wavy.counts)[:-1])])
-    # chords are never longer than the arc they cut, and equal arcs give near-equal chords
-    assert (seg.sum(axis=1) <= orig_len * (1 + 1e-6)).all()
-    assert seg.sum(axis=1).min() > 0.97 * orig_len.min()
+@pytest.mark.parametrize("n", [4, 8, 16, 32, 64])
+def test_resampled_chords_are_equal_within_one_percent_and_stay_on_the_strand(wavy, n):
+    r = resample_strands(wavy, n)
+    assert (r.counts == n).all()
+    pts = r.points.reshape(-1, n, 3).astype(np.float64)
+    chord = np.linalg.norm(np.diff(pts, axis=1), axis=2)
+    np.testing.assert_array_less(np.abs(chord / chord.mean(axis=1, keepdims=True) - 1), 0.01)
+    # every vertex lies on its own strand's polyline; root and tip are kept
+    polylines = np.split(wavy.points.astype(np.float64), np.cumsum(wavy.counts)[:-1])
+    d = [distance_to_polylines(p[None], q[None]).max() for p, q in zip(pts, polylines)]
+    assert max(d) < 1e-6
+    np.testing.assert_array_equal(pts[:, 0], wavy.points[wavy.offsets])
+    np.testing.assert_allclose(pts[:, -1], wavy.points[wavy.offsets + wavy.counts - 1], atol=1e-7)
     # a straight strand resamples exactly evenly
     line = Strands.from_arrays(np.array([[0, 0, 0], [0, 0, 0.1], [0, 0, 1.0]]), [3])
     z = resample_strands(line, 5).points[:, 2]
     np.testing.assert_allclose(z, [0, 0.25, 0.5, 0.75, 1.0], atol=1e-7)
+
+
+def test_equal_arc_steps_would_leave_curled_chords_far_apart():
+    """What the chord equalisation is for: on curled strands equal arc steps give chords that
+    differ by far more than 1 % (a chord across a curl is shorter than its arc)."""
+    curly = make_wavy(40, (64, 96), seed=3, curl=6.0)
+    from hairio.formats.tressfx import _arc_table, _points_at
+    pts, g, roots, tips = _arc_table(curly)
+    arc = (g[tips] - g[roots])[:, None] * np.linspace(0, 1, 16)[None, :]
+    chord = np.linalg.norm(np.diff(_points_at(pts, g, roots, tips, arc), axis=1), axis=2)
+    assert np.abs(chord / chord.mean(axis=1, keepdims=True) - 1).max() > 0.05
+    r = resample_strands(curly, 16).points.reshape(-1, 16, 3).astype(np.float64)
+    chord = np.linalg.norm(np.diff(r, axis=1), axis=2)
+    assert np.abs(chord / chord.mean(axis=1, keepdims=True) - 1).max() < 0.01
+
+
+def test_marching_places_equal_chords_across_a_corner():
+    """A right-angled corner: the chord across it is shorter than its arc, and which chord
+    crosses it changes as vertices move. Marching chords of one length (solved so the last
+    one ends at the tip) makes them equal all the same, every vertex on the strand."""
+    from hairio.formats.tressfx import _arc_table, _march_equal_chords, _points_at
+    t = np.linspace(0, 1, 40)[:, None]
+    corner = np.concatenate([t * [0, 0, 1.0], [0, 0, 1.0] + t[1:] * [0.7, 0, 0]])
+    s = Strands.from_arrays(corner, [len(corner)])
+    pts, g, roots, tips = _arc_table(s)
+    for n in (5, 8, 13):
+        arc, apart = _march_equal_chords(pts, g, roots, tips, n)
+        q = _points_at(pts, g, roots, tips, arc)[0]
+        chord = np.linalg.norm(np.diff(q, axis=0), axis=1)
+        assert apart[0] < 1e-6 and np.ptp(chord) < 1e-6 * chord.mean(), n
+        np.testing.assert_allclose(q[[0, -1]], corner[[0, -1]], atol=1e-12)
+        assert (np.diff(arc[0]) > 0).all()
 
 
 def test_round_trip_within_the_resampling_error(tmp_path, wavy):
@@ -159,6 +195,34 @@ def test_loader_padding_rule_and_padded_files(tmp_path, wavy):
     np.testing.assert_array_equal(t["pos"][wavy.num_strands:], np.repeat(t["pos"][wavy.num_strands - 1:wavy.num_strands], 64 - wavy.num_strands, 0))
 
 
+@pytest.mark.parametrize("shuffle", [None, 5])
+def test_a_padded_file_reads_back_without_its_padding(tmp_path, wavy, shuffle):
+    p = tmp_path / "pad.tfx"
+    write_tfx(p, wavy, vertices_per_strand=8, pad_strands=True, shuffle_seed=shuffle)
+    assert parse_tfx(p)["n_s"] == 64
+    assert padding_strands(load_tfx(p)) == 64 - wavy.num_strands
+    back = read_tfx(p)
+    assert back.num_strands == wavy.num_strands
+    want = resample_strands(wavy, 8).points.reshape(-1, 8, 3)
+    got = back.points.reshape(-1, 8, 3)
+    if shuffle is None:
+        np.testing.assert_array_equal(got, want)
+    else:
+        np.testing.assert_array_equal(np.sort(got[:, 0], axis=0), np.sort(want[:, 0], axis=0))
+
+
+def test_whole_groups_of_different_strands_are_no_padding(tmp_path):
+    s = make_wavy(128, (6, 6), seed=8)
+    p = tmp_path / "whole.tfx"
+    write_tfx(p, s, vertices_per_strand=4, pad_strands=True)
+    assert padding_strands(load_tfx(p)) == 0 and read_tfx(p).num_strands == 128
+    # the last strand repeated without whole-group padding (65 strands) is kept as written
+    last = make_wavy(64, (6, 6), seed=8)
+    twice = Strands.from_arrays(np.concatenate([last.points, last.points[-6:]]), np.full(65, 6))
+    write_tfx(p, twice, vertices_per_strand=4)
+    assert read_tfx(p).num_strands == 65
+
+
 def test_shuffle_keeps_every_strand(tmp_path, wavy):
     p = tmp_path / "s.tfx"
     write_tfx(p, wavy, vertices_per_strand=8, shuffle_seed=7)
@@ -174,6 +238,45 @@ def test_guides_and_render_strands_go_to_separate_files(tmp_path, wavy):
     assert b.endswith("hair_guides.tfx")
     assert parse_tfx(a)["n_s"] == wavy.num_strands and parse_tfx(b)["n_s"] == 7
     np.testing.assert_array_equal(parse_tfx(b)["pos"][:, 0, :3], guides.points[guides.offsets])
+
+
+def test_follow_hair_guides_come_from_the_wisps(tmp_path):
+    """Guides for TressFX's follow hairs: every wisp gets about one guide per F + 1 of its
+    strands, each a strand of that wisp near its patch's middle; the radius covers the
+    patches' roots; the JSON beside the guides holds the loader's three numbers."""
+    import json
+    from hairio.formats import follow_hair_guides, write_strands
+    s = make_wavy(300, (12, 20), seed=6)
+    follow = 4
+    index, load = follow_hair_guides(s, follow)
+    assert load["numFollowHairsPerGuideHair"] == follow
+    assert len(np.unique(index)) == len(index)
+    for w in np.unique(s.wisp):
+        in_wisp = int((s.wisp == w).sum())
+        assert int((s.wisp[index] == w).sum()) == -(-in_wisp // (follow + 1)), w
+    roots = s.points[s.offsets].astype(np.float64)
+    # each strand's nearest guide of its own wisp lies within about the radius
+    near = [np.linalg.norm(roots[index[s.wisp[index] == s.wisp[i]]] - roots[i], axis=1).min()
+            for i in range(s.num_strands)]
+    assert np.median(near) <= load["maxRadiusAroundGuideHair"] + 1e-9
+    assert load["maxRadiusAroundGuideHair"] > 0 and load["tipSeparationFactor"] >= 0
+    written = write_strands(tmp_path / "h.tfx", s, follow_hairs=follow, vertices_per_strand=8)
+    assert [pathlib.Path(w).name for w in written] == ["h.tfx", "h_guides.tfx", "h_guides.tfx.json"]
+    assert parse_tfx(tmp_path / "h.tfx")["n_s"] == s.num_strands
+    guides = parse_tfx(tmp_path / "h_guides.tfx")
+    np.testing.assert_array_equal(guides["pos"][:, 0, :3], s.points[s.offsets][index])
+    meta = json.loads((tmp_path / "h_guides.tfx.json").read_text())
+    assert meta["numFollowHairsPerGuideHair"] == follow and meta["guides"] == len(index)
+    assert meta["maxRadiusAroundGuideHair"] == pytest.approx(load["maxRadiusAroundGuideHair"])
+
+
+def test_follow_hairs_and_key_guides_are_one_or_the_other(tmp_path, wavy):
+    from hairio.formats import write_strands
+    with pytest.raises(InputError, match="give one"):
+        write_strands(tmp_path / "h.tfx", wavy, follow_hairs=3, guides=make_wavy(3, (4, 4)))
+    with pytest.raises(InputError, match="follow_hairs"):
+        write_strands(tmp_path / "h.tfx", wavy, follow_hairs=0)
+    assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize("bad", [dict(vertices_per_strand=12), dict(vertices_per_strand=128),

@@ -14,16 +14,18 @@ def _hash32(x):
     return x
 
 
-def sample_positions(width, height, spp_n):
+def sample_positions(width, height, spp_n, origin=(0, 0)):
     """Continuous pixel coordinates (x from the left, y from the top) of every sample,
     shape (H, W, spp_n², 2): pixel centres for one sample, otherwise one jittered sample per
-    stratum, jittered by the shader's hash of (sample, row, column)."""
+    stratum, jittered by the shader's hash of (sample, row, column), the row and column in
+    the whole image of which this one is the window at `origin` (Camera.pixel_origin)."""
     py, px, s = np.meshgrid(np.arange(height), np.arange(width), np.arange(spp_n * spp_n), indexing="ij")
     if spp_n == 1:
         jx = np.full(px.shape, 0.5)
         jy = np.full(px.shape, 0.5)
     else:
-        h = _hash32(_hash32(_hash32(s.astype(np.uint32)) ^ py.astype(np.uint32)) ^ px.astype(np.uint32))
+        gx, gy = (px + int(origin[0])).astype(np.uint32), (py + int(origin[1])).astype(np.uint32)
+        h = _hash32(_hash32(_hash32(s.astype(np.uint32)) ^ gy) ^ gx)
         rx = (h >> np.uint32(8)).astype(np.float64) / 16777216.0
         ry = (_hash32(h ^ np.uint32(0x68BC21EB)) >> np.uint32(8)).astype(np.float64) / 16777216.0
         jx = ((s % spp_n) + rx) / spp_n
@@ -35,7 +37,7 @@ def pixel_samples(camera, spp_n, pixels=None):
     """Sample positions (P·spp_n², 2) of the whole image (pixels None: P = W·H, row by row)
     or of the pixels (P,2) int columns x, y; the same samples as the GPU's for those pixels."""
     w, h = camera.size
-    pos = sample_positions(w, h, spp_n)
+    pos = sample_positions(w, h, spp_n, camera.pixel_origin)
     if pixels is None:
         return pos.reshape(-1, 2)
     px = np.asarray(pixels, np.int64)

@@ -19,11 +19,8 @@ ivec2 cell_entry(ivec3 c) { return texelFetch(tex_cell, c.x + dims.x * (c.y + di
 // skipped lies in the empty block, so nothing can be missed; at exact ties of two faces
 // the cell we land in may differ from the step-by-step walk by one index, but then the
 // ray is on that shared edge and the next steps put it right. False when the ray ends or
-// leaves the grid inside the block.
-// Measured and dropped: a per-block distance to the nearest full block (a coarser level,
-// made from the cell counts) to jump whole cubes of empty blocks at once. It cut the cell
-// steps by 8-20 %, but the extra fetch runs on every step (see hit_cylinder on branches):
-// 3 % faster on 10k wavy strands, 6 % slower on 1k, no change on the real hair.
+// leaves the grid inside the block. Nothing coarser pays for its fetch on every step
+// (docs/DECISIONS.md, "No empty-space skipping beyond one block of cells").
 bool skip_empty_block(inout ivec3 cell, inout vec3 tnext, inout float tcur, vec3 tdelta,
                       ivec3 stp, float t1) {
     ivec3 b0 = (cell / BLOCK) * BLOCK;
@@ -147,8 +144,8 @@ void accel_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_co
             // entry and its first candidate, read before this cell's tests so that their
             // cache misses overlap the tests: the render is memory-bound on a CPU. Inside
             // a cell the next candidate's texels and the list entry after it are read a
-            // pass ahead for the same reason (together 15-20 % less time; reading two
-            // candidates ahead lost 2-5 % to the extra reads at each cell's end).
+            // pass ahead for the same reason, and no further (docs/DECISIONS.md, "Read one
+            // cell and one candidate ahead").
             Walk next;
             bool inside = next_cell(w, empty, last, texit, tdelta, stp, t1, next);
             int count = empty ? 0 : w.sc.y;

@@ -6,9 +6,9 @@
 //   PASS 0  count: cells[cell] += 1 for every (cylinder, cell)
 //   PASS 1  fill:  slot = cells[cell]++ (cells holds each cell's first slot on entry),
 //                  idx_img[slot] = cylinder id
-// The counters are a storage buffer, not an image: llvmpipe's buffer atomics take ~60 % of
-// the time of its image atomics (measured on 43 M references). The lists go straight into
-// the index buffer texture the trace shader reads.
+// The counters are a storage buffer, not an image: its atomics are the cheaper kind
+// (docs/DECISIONS.md, "Grid build counters in a storage buffer"). The lists go straight
+// into the index buffer texture the trace shader reads.
 // The order of a cell's list depends on the order the atomics of PASS 1 ran in; the trace
 // shader breaks ties between equal distances by id, so images do not depend on it.
 // A cylinder whose listing would take more than MAX_VISITS loop steps is not listed at all
@@ -101,8 +101,9 @@ void main() {
 #endif
         return;
     }
-    // One loop over every listed cell, slab by slab, row by row (nested loops made every
-    // lane wait for the longest inner loop of its neighbours: 25-30 % slower on llvmpipe).
+    // One loop over every listed cell, slab by slab, row by row: nested loops make every
+    // lane wait for the longest inner loop of its neighbours (docs/DECISIONS.md, "One loop
+    // over the grid build's cells").
     int slab = i0;
     int ja0, ja1, jb0, jb1;
     ranges(slab, no_dir, inv, G, DG, P, D, ja0, ja1, jb0, jb1);

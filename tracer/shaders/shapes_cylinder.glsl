@@ -13,10 +13,9 @@
 // r(1/cos θ - 1) on the outside of every bend.
 float hit_cylinder_ab(int id, vec4 A4, vec4 B4, vec3 o, vec3 d, float widen_per_t, float widen_const,
                       out int surf, out float ascale, out float alpha) {
-    // No cheaper pre-test (bounding sphere, distance to the axis line) pays off: cells are
-    // shorter than the cylinders, so nearly every candidate passes such a test, and the
-    // extra fetch costs more than the quadratic below, which rejects misses at disc < 0
-    // (measured on llvmpipe: 25 % slower with a sphere test, 45 % with a line test).
+    // No cheaper pre-test: cells are shorter than the cylinders, so nearly every candidate
+    // would pass one, and the quadratic below rejects misses at disc < 0 (docs/DECISIONS.md,
+    // "No pre-test before the cylinder intersection").
     // Nor does an early return: llvmpipe runs a branch as masked straight-line code for
     // all 8 lanes (only loops jump, and a loop body runs at least once), so every test
     // pays for all of this function; what saves time is fewer tests or fewer fetches.

@@ -6,8 +6,9 @@
 uniform vec3 cam_pos;
 uniform mat3 cam_rot;
 uniform float pixel_size;
-uniform vec2 shift_px;
-uniform vec2 image_size;
+uniform vec2 image_size;      // this draw's image (a window of the whole image, or all of it)
+uniform ivec2 pixel_origin;   // its pixel (0, 0) in the whole image (tracer/camera.py)
+uniform vec2 centre_px;       // the optical axis in the whole image's pixels (Camera.centre_px)
 
 uniform vec4 light_vec[NUM_LIGHTS];   // w = 0: xyz is the direction light travels; w = 1: position
 uniform vec3 light_col[NUM_LIGHTS];
@@ -37,9 +38,9 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint
 #endif
 #if SHADOWS == 1 && LAYERS > 1
     // The cylinder that shadowed this pixel's previous (nearer) layer often shadows this
-    // one too: one test that can end the walk before it starts (5 % off the 4-layer
-    // real-hair scene). Any hit in (tmin, tmax) darkens, so which one is found first
-    // does not change the result.
+    // one too: one test that can end the walk before it starts (docs/DECISIONS.md,
+    // "Shadow rays try the last occluder first"). Any hit in (tmin, tmax) darkens, so
+    // which one is found first does not change the result.
     {
         int h = max(hint, 0), hsurf; float hasc, halpha;
         float th = hit_cylinder(h, p, d, 0.0, 0.0, hsurf, hasc, halpha);
@@ -111,16 +112,8 @@ vec3 shade_mesh(int tri, vec3 o, vec3 d, float t, vec3 N) {
 // One primary ray: first find its LAYERS nearest hits without shading (accel_nearest fills
 // the hit list of accel.glsl), then shade them front to back. Keeping the shadow rays out
 // of the traversal loop matters on SIMD hardware (llvmpipe included): nested in it, one
-// lane's shadow ray stalls all the lanes still traversing.
-// Measured and dropped (llvmpipe, 2 cores, 512x512, CPU time against this loop): one flat
-// loop in which each pass either tests one candidate or steps one cell, so lanes with
-// short cell lists need not wait for their neighbours' long ones: every pass then pays for
-// both halves; 0 % on the real straight hair, 3-4 % slower on 10k and 100k wavy strands
-// (it won 5-12 % on wavy hair with the older, finer grids). The same for shadow rays (all
-// layers' shadow rays of a pixel walked in one loop, a lane starting its next ray when
-// one ends): 13 % slower on the real hair, as every pass pays for setting a ray up. Two
-// candidates per pass, to overlap their cache misses: 5 % faster on the real hair and on
-// 100k wavy strands, 12 % slower on 10k wavy strands, whose cells hold fewer candidates.
+// lane's shadow ray stalls all the lanes still traversing. The flat loops tried instead:
+// docs/DECISIONS.md, "The trace loop finds the nearest hits first".
 vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
     float tmesh = BIG;
 #if MESHES
@@ -166,9 +159,11 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
 // past it and dropped hits, so the work of one invocation is kept to one sample.
 uniform int sample_index;
 
+// A pixel's samples depend only on its place in the whole image and the sample index, so
+// the tiles of a large render are the image rendered whole.
 void main() {
-    int px = int(gl_FragCoord.x);
-    int py = int(image_size.y) - 1 - int(gl_FragCoord.y);   // row 0 = top
+    int px = int(gl_FragCoord.x) + pixel_origin.x;
+    int py = int(image_size.y) - 1 - int(gl_FragCoord.y) + pixel_origin.y;   // row 0 = top
     int s = sample_index;
     vec2 jit = vec2(0.5);
 #if SPP_N > 1
@@ -177,8 +172,8 @@ void main() {
     jit = (vec2(s % SPP_N, s / SPP_N) + rnd) / float(SPP_N);
 #endif
     float x = float(px) + jit.x, y = float(py) + jit.y;
-    float u = (x - 0.5 * image_size.x + shift_px.x) * pixel_size;
-    float v = (0.5 * image_size.y - y + shift_px.y) * pixel_size;
+    float u = (x - centre_px.x) * pixel_size;
+    float v = (centre_px.y - y) * pixel_size;
     vec3 o, d;
     float widen_per_t = 0.0, widen_const = 0.0;
 #if ORTHO
