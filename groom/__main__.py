@@ -140,6 +140,10 @@ def generate_main(args):
     if args.seed is not None and args.seed < 0:
         raise InputError(f"--seed {args.seed}: must be >= 0")
     preset = load_preset(args.preset)
+    changes = {k: v for k, v in (("count", args.count), ("seed", args.seed)) if v is not None}
+    from .generate import check_npz_room, generate_to_npz
+    # A file the disk cannot take is refused before the scalp, keys and collider are made.
+    check_npz_room(args.out, preset.params.replace(**changes), f"--out {args.out!r}")
     up, front = _head_axes(args, preset.params)
     scalp = load_obj(args.scalp) if args.scalp else default_scalp()
     collider = _collider(args)
@@ -148,10 +152,8 @@ def generate_main(args):
     warning = placement.warning()
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
-    changes = {k: v for k, v in (("count", args.count), ("seed", args.seed)) if v is not None}
     params = placement.params.replace(**changes) if changes else placement.params
     progress = _Progress()
-    from .generate import generate_to_npz
     # The key strands, guides and weights travel in the .npz, so `export` can hand them to an
     # engine's simulation later.
     try:

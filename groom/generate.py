@@ -848,6 +848,21 @@ def npz_bytes_bound(params, spill_bytes=None):
     return archive + (n * pps * 12 if archive > spill_bytes else 0)
 
 
+def check_npz_room(path, params, what=None, spill_bytes=None):
+    """InputError, naming `what` (default: the path), when `path` cannot be written or its
+    disk has less room than npz_bytes_bound(params): what generate_to_npz checks before any
+    work (a caller may check it sooner, before its own preparations)."""
+    what = what or os.fspath(path)
+    check_destination(path, what)
+    folder = os.path.dirname(os.path.abspath(os.fspath(path)))
+    need, free = npz_bytes_bound(params, spill_bytes), shutil.disk_usage(folder).free
+    if need > free:
+        raise InputError(f"count {params.count:,}: {what} takes up to {need / 2**30:,.2f} GiB of disk while it is "
+                         f"written ({params.points_per_strand} points a strand at most, 32 bytes each) but "
+                         f"{folder!r} has {free / 2**30:,.2f} GiB free; grow fewer strands or fewer points per "
+                         f"strand, or write it elsewhere")
+
+
 def generate_to_npz(path, scalp, keys, params=None, collider=None, progress=None, block_strands=BLOCK_STRANDS,
                     spill_bytes=None, points_per_key=32, what=None):
     """Grow the strands a block at a time (BlockGenerator) straight into the .npz at `path`:
@@ -858,15 +873,7 @@ def generate_to_npz(path, scalp, keys, params=None, collider=None, progress=None
     path), when the folder cannot take the file or has less room than npz_bytes_bound.
     progress: as Generator's. Returns a GroomSummary. All or nothing: an error leaves no file."""
     params = params or GroomParams()
-    what = what or os.fspath(path)
-    check_destination(path, what)
-    folder = os.path.dirname(os.path.abspath(os.fspath(path)))
-    need, free = npz_bytes_bound(params, spill_bytes), shutil.disk_usage(folder).free
-    if need > free:
-        raise InputError(f"count {params.count:,}: {what} takes up to {need / 2**30:,.2f} GiB of disk while it is "
-                         f"written ({params.points_per_strand} points a strand at most, 32 bytes each) but "
-                         f"{folder!r} has {free / 2**30:,.2f} GiB free; grow fewer strands or fewer points per "
-                         f"strand, or write it elsewhere")
+    check_npz_room(path, params, what, spill_bytes)
 
     def growing(fraction, stage):
         if progress is not None and stage != "done":   # done once the file is

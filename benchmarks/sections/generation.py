@@ -12,6 +12,7 @@ alone (its result is not even copied out), so the comparison leans towards Blend
 every core: Blender's node through its task scheduler, groom through one worker thread per
 CPU for its whole-array numpy work.
 """
+import json
 import time
 
 import numpy as np
@@ -278,6 +279,35 @@ def _memory(sec, cfg):
              f"{ours['peak_rss_mb']:.0f} MiB.**")
     sec.summary.append(f"peak RSS at {count:,} strands: {best['peak_rss_mb']:.0f} MiB"
                        + (f" (command line; in process {ours['peak_rss_mb']:.0f} MiB)" if streamed else ""))
+    sec.text("Before the strands grew in blocks (commit 483dfc1, one run each at 1,000,000 strands, measured by "
+             "hand): python -m groom generate 4687 MiB (the whole result, then numpy.savez), groom.generate in "
+             "process 4007 MiB.")
+    _stream_runs(sec)
+
+
+def _stream_runs(sec):
+    """The command's runs past the section's budget (benchmarks/stream_run.py), as stored."""
+    from benchmarks.stream_run import result_path
+    rows = []
+    for count in (10_000_000,):
+        try:
+            with open(result_path(count)) as f:
+                r = json.load(f)
+        except (OSError, ValueError):
+            sec.not_measured(f"{count:,} strands written as they grow",
+                             f"run `python -m benchmarks.stream_run {count}`")
+            continue
+        m = r["measured"]
+        rows.append([f"{count:,}", f"{r['peak_rss_mb']:.0f}", fmt_time(r["time"]),
+                     f"{r['cpu_user'] + r['cpu_system']:.0f} s", f"{r['file_bytes'] / 1e9:.1f} GB",
+                     f"{m['commit']}, {m['date_utc']}, load {m['load_average']}"])
+        sec.summary.append(f"{count:,} strands (command line): {r['peak_rss_mb']:.0f} MiB peak RSS, "
+                           f"{fmt_time(r['time'])}")
+    if rows:
+        sec.table(["strands", "peak RSS of the process (MiB)", "time", "CPU", ".npz", "measured"], rows,
+                  caption=f"python -m groom generate --preset {PRESET} --count N, the strands grown and written a "
+                          "block at a time, one run in a fresh process by `python -m benchmarks.stream_run N` (too "
+                          "long for the section's budget; kept in benchmarks/results/stream_N.json).")
 
 
 def _incremental(sec, cfg, groom, scalp, collider, placement):
