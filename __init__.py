@@ -1,17 +1,15 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Key-Strand Hair: Blender extension entry point.
-
-The add-on is imported when Blender registers it, not when this file is imported: pytest
-imports a checkout's root __init__.py as a bare module when the folder's name is no Python
-identifier (a clone named keystrand-hair), where a relative import at the top would fail.
-"""
+"""Key-Strand Hair: Blender extension entry point."""
+# pytest imports a checkout's root __init__.py as a bare module (no package) when the
+# folder's name is no Python identifier (a clone named keystrand-hair): there is nothing to
+# register then, and a relative import would fail.
+if __package__:
+    from . import addon
 
 
 def register():
-    from . import addon
     addon.register()
 
 
 def unregister():
-    from . import addon
     addon.unregister()

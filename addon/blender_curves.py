@@ -212,8 +212,11 @@ def write_guides(curves, guides):
     values = {"points": keys.points, "counts": keys.counts, "group": guides.group, "radius": keys.radius,
               "color": keys.color}
     for field, (name, dtype) in KEY_PROPERTIES.items():
-        # A float32 / int32 array becomes an ID property array of the same type (buffer protocol).
-        curves[name] = np.ascontiguousarray(values[field], dtype).ravel()
+        # Through Python lists (doubles and ints, exact for float32 and int32 values): an ID
+        # property made from a numpy buffer here crashed Blender 5.0 later, when the
+        # transaction removed its backup copy of the datablock (a bus error in the
+        # viewport-count live update after a Generate).
+        curves[name] = np.asarray(values[field], dtype).ravel().tolist()
 
 
 def read_guides(curves):

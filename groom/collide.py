@@ -99,6 +99,8 @@ def _fibonacci_sphere(n):
 _SEARCH_DIRECTIONS = _fibonacci_sphere(200)
 # Strands walked together at most (see resolve_strands).
 _WALK_PART = 32768
+# Points a strand's translated rest is checked ahead at a time (_first_offence).
+_CHECK_AHEAD = 16
 # Samples along each key strand when looking for keys inside the collider, and how deep
 # (of the collider's size: 1 mm on the bundled head) a key may dip before it is reported.
 _KEY_CHECK_SAMPLES = 257
@@ -475,15 +477,21 @@ class Collider:
         beyond the grid fall in its border cells, which are all clear (the grid's padding)."""
         p = np.asarray(points)
         dt = p.dtype if p.dtype in (np.float32, np.float64) else np.float64
-        scaled = (p - self.origin.astype(dt)) * dt.type(1.0 / self.cell)
-        idx = np.empty(len(p), np.int64)
-        for axis, n in enumerate(self.shape):
-            i = np.clip(scaled[:, axis], 0, n - 2).astype(np.int64)
+        scaled = np.subtract(p, self.origin.astype(dt), dtype=dt)
+        scaled *= dt.type(1.0 / self.cell)
+        # The flat cell index in int32 (the grid has some 2 M nodes), built in place: about a
+        # third less memory traffic than fresh int64 arrays per axis.
+        n = len(p)
+        itype = np.int32 if np.prod(self.shape) < 2 ** 31 else np.int64
+        idx, i, col = np.empty(n, itype), np.empty(n, itype), np.empty(n, dt)
+        for axis, m in enumerate(self.shape):
+            np.clip(scaled[:, axis], 0, m - 2, out=col)
             if axis:
-                idx *= n
+                idx *= m
+                np.copyto(i, col, casting="unsafe")   # truncation = floor, col >= 0
                 idx += i
             else:
-                idx[:] = i
+                np.copyto(idx, col, casting="unsafe")
         return self.cell_lower[idx] >= clearance + 1e-6 * self.cell
 
     def value(self, points, gradient=False):
@@ -782,15 +790,16 @@ def _offending(collider, points, offsets, counts, radius, margin, lo, hi):
     if not look.size:
         return none
     # A closer look at those, with the clearance near the root.
-    strand_of = np.repeat(np.arange(len(cnt)), cnt)
-    suspect, which = np.unique(strand_of[look], return_inverse=True)
+    strand_of = np.searchsorted(off, look, side="right") - 1
+    suspect, which = np.unique(strand_of, return_inverse=True)
     which = which.ravel()
     roots = pts[off[suspect]].astype(np.float64)
     root_value = collider.value(roots)
     p = pts[look].astype(np.float64)
     m = 0.5 * (p + pts[look - 1])
-    short = _shortfall(collider, p, m, target[look].astype(np.float64), root_value[which], roots[which])
-    inside = int((collider.value(p) < -rad[look]).sum())
+    short, at_end = _shortfall(collider, p, m, target[look].astype(np.float64), root_value[which], roots[which],
+                               values=True)
+    inside = int((at_end < -rad[look]).sum())
     bad = short > 0
     first_bad = np.full(len(suspect), np.iinfo(np.int64).max)
     np.minimum.at(first_bad, which[bad], (look - off[suspect][which])[bad])
@@ -822,13 +831,14 @@ def _clearance(target, root_value, p, root):
     return np.minimum(target, root_value + RAMP_SLOPE * d)
 
 
-def _shortfall(collider, end, mid, target, root_value, root):
+def _shortfall(collider, end, mid, target, root_value, root, values=False):
     """How far the end (or twice how far the middle) of a segment falls short of its
-    clearance; <= 0 where it is clear."""
+    clearance; <= 0 where it is clear. values: also the ends' sampled distances."""
     both = collider.value(np.concatenate([end, mid]))
     n = len(end)
-    return np.maximum(_clearance(target, root_value, end, root) - both[:n],
-                      2.0 * (_clearance(target, root_value, mid, root) - both[n:]))
+    short = np.maximum(_clearance(target, root_value, end, root) - both[:n],
+                       2.0 * (_clearance(target, root_value, mid, root) - both[n:]))
+    return (short, both[:n]) if values else short
 
 
 def _turn_limits(pts, off, cnt):
@@ -898,7 +908,13 @@ def _walk(collider, pts, target, cnt, k0, root_value):
             u_new[li] = cos_lim[act[li], None] * up[li] + sin_lim[act[li], None] * w
         p0 = prev[act]
         need, rv, rt = target[at], root_value[act], roots[act]
-        short = _shortfall(collider, p0 + length[:, None] * u_new, p0 + 0.5 * length[:, None] * u_new, need, rv, rt)
+        end, mid = p0 + length[:, None] * u_new, p0 + 0.5 * length[:, None] * u_new
+        # Only segments the cells' lower bounds do not clear get the closer look (the bound
+        # clears a point for its target, so for the smaller clearance near a root too).
+        short = np.full(len(act), -1.0)
+        near = np.flatnonzero(~(collider.clear_of(end, need) & collider.clear_of(mid, need)))
+        if near.size:
+            short[near] = _shortfall(collider, end[near], mid[near], need[near], rv[near], rt[near])
         push = (short > 0) & (length > 0)
         if push.any():
             pi = np.flatnonzero(push)
@@ -996,16 +1012,18 @@ def _push_out(collider, p0, u, length, target, root_value, root, short):
 
 def _first_offence(collider, pts, target, off, cnt, k, prev, root_value, roots):
     """For strands whose rest (points k..) would be their original translated to put point
-    k-1 at prev: the first point of the rest that it or its segment's middle would bring too
-    close (cnt where none)."""
-    rest = cnt - k
+    k-1 at prev: the first point of the next _CHECK_AHEAD of the rest that it or its
+    segment's middle would bring too close (the end of those where none: the walk steps on
+    and looks again). Looking at the whole rest each time a strand came free looked at
+    twice the points the walk goes through."""
+    rest = np.minimum(cnt - k, _CHECK_AHEAD)
     idx = _flat_points(off + k, rest)
     s_of = np.repeat(np.arange(len(off)), rest)
     delta = (prev - pts[off + k - 1])[s_of]
     p = pts[idx] + delta
     m = 0.5 * (pts[idx] + pts[idx - 1]) + delta
     look = np.flatnonzero(~(collider.clear_of(p, target[idx]) & collider.clear_of(m, target[idx])))
-    first = cnt.copy()
+    first = k + rest
     if look.size:
         sl = s_of[look]
         bad = _shortfall(collider, p[look], m[look], target[idx[look]], root_value[sl], roots[sl]) > 0

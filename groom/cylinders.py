@@ -7,10 +7,11 @@ it bends, whose polyline provably stays within a tolerance of the exact curve, a
 `geometric_error` measures the result the way SPEC §6 defines it.
 """
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
-from . import rng
+from . import parallel, rng
 
 
 @dataclass(frozen=True, eq=False)
@@ -25,12 +26,18 @@ class AdaptiveResolution:
     needed: np.ndarray
 
 
+# Strands per range of the adaptive resolution's sweep: its bins x strands arrays (three of
+# float32, 8 MB at this size) stay modest, and each of its many small steps per bin has
+# enough strands that the threads are not held up by the interpreter between them.
+_CHUNK = 16384
+
 # A strand the cap stops gets the cap's cylinders placed for a looser tolerance, raised by
 # this factor until they suffice (so it is within 25 % of the best the cap allows).
 _RELAX = 1.25
 
 
-def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=32768, table_step=0.0):
+def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=_CHUNK, table_step=0.0,
+                   threads=None, clump=None):
     """Per-strand adaptive resolution: curve parameters σ of the fewest points whose polyline
     provably stays within `tolerance` (S,) of the exact strand, for the curvature bound below.
 
@@ -39,8 +46,10 @@ def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=
     `bins` (K, NB) from interpolate.curvature_bound. Points are placed greedily from the root:
     each segment is the longest whose h² times the largest bound over the bins it touches
     stays <= 8·tol. Greedy covering is optimal for such a monotone constraint, so straight
-    stretches get one long cylinder and bends get short ones. Each segment scans the bins it
-    covers once, so the work is about (strands x bins) whatever the resolution.
+    stretches get one long cylinder and bends get short ones. The placement sweeps the bins
+    from the root for all strands of a range at once (_greedy_range), so the work is about
+    (strands x bins) whatever the resolution, in ranges of `chunk` strands on `threads`
+    worker threads.
 
     The points themselves come from key tables of `table_step` (in σ) between samples, whose
     lerp strays from the curve by up to A·table_step²/8 (A the strand's largest bound), so
@@ -53,11 +62,24 @@ def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=
     meet, and `met` says which; only a strand that fits no tolerance so (none does after 60
     steps) falls back to equal steps, met = inf.
 
+    With clump (interpolate.evaluate_strands's `clump` argument, (scale, exponent,
+    towards)), the strand is (1-c)·its blend + c·its wisp key (guide 0) carried over, so
+    its bound per bin is the blend's plus c·(the key's - the blend's) where the key bends
+    more, plus |c''| times its root's distance to the key's root (shaping.py; what is the
+    same for every strand is already in `bins`, shaping.shaping_bound).
+
     Returns an AdaptiveResolution. Each strand's numbers depend only on its own inputs
     (incremental regeneration relies on it)."""
     tolerance = np.asarray(tolerance, np.float64)
+    mix = None
+    if clump is not None:
+        from .shaping import clump_bins
+        scale, exponent, towards = clump
+        c, _, c2 = clump_bins(scale, exponent, bins.shape[1])
+        gap = np.sqrt((np.asarray(towards, np.float64) ** 2).sum(axis=0))
+        mix = (c, c2 if c2.any() else None, gap)
     sigma, counts, capped, needed = _greedy_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk,
-                                                  table_step)
+                                                  table_step, threads, mix)
     met = tolerance.copy()
     todo = np.flatnonzero(capped & (frac > 0))
     if todo.size:
@@ -65,8 +87,9 @@ def adaptive_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=
         trial = tolerance[todo] * np.maximum(_RELAX, (needed[todo] / max_cylinders) ** 2)
         done_idx, done_sig, done_counts = [], [], []
         for _ in range(60):
+            sub = None if mix is None else (mix[0], mix[1], mix[2][todo])
             sig2, cnt2, cap2, _ = _greedy_sigma(frac[todo], guides[todo], weights[todo], bins, trial, max_cylinders,
-                                                chunk, table_step)
+                                                chunk, table_step, threads, sub)
             ends = np.cumsum(cnt2)
             fits = np.flatnonzero(~cap2)
             if fits.size:
@@ -100,87 +123,145 @@ def _replace_strands(sigma, counts, sel, new_sigma, new_counts):
     return np.concatenate([sigma, new_sigma])[src], out_counts
 
 
-def _greedy_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=32768, table_step=0.0):
+def _greedy_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=_CHUNK, table_step=0.0, threads=None,
+                  mix=None):
     """The greedy placement of adaptive_sigma: (sigma flat, counts, capped (S,) bool: the
     cap stopped the strand, which got max_cylinders equal steps, needed (S,) the count's
-    lower bound)."""
-    nb = bins.shape[1]
+    lower bound). mix: None or clump's (c (NB,), |c''| (NB,) or None, root gap (S,)).
+    Ranges of `chunk` strands on `threads` threads (parallel.run_jobs); a strand's numbers
+    do not depend on its range."""
+    bins_t = np.ascontiguousarray(np.asarray(bins, np.float32).T)   # (NB, K): a bin's row is contiguous
+
+    def part(lo, hi):
+        m = None if mix is None else (mix[0], mix[1], mix[2][lo:hi])
+        return _greedy_range(frac[lo:hi], guides[lo:hi], weights[lo:hi], bins_t, tolerance[lo:hi], max_cylinders,
+                             table_step, m)
+    parts = parallel.run_jobs([partial(part, lo, hi) for lo, hi in parallel.ranges(len(frac), size=chunk)], threads)
+    if not parts:
+        return np.zeros(0), np.zeros(0, np.int64), np.zeros(0, bool), np.zeros(0)
+    return tuple(np.concatenate([p[i] for p in parts]) for i in range(4))
+
+
+def _running(op, x, out):
+    """out[b] = op(out[b-1], x[b]) down the rows of x (NB, S): np.maximum.accumulate and
+    np.cumsum along axis 0, a row at a time (numpy's own walk the columns with a stride of a
+    row, some twenty times slower)."""
+    out[0] = x[0]
+    for b in range(1, len(x)):
+        op(out[b - 1], x[b], out=out[b])
+    return out
+
+
+def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step, mix=None):
+    """_greedy_sigma on one range of strands, sweeping the bins from the root.
+
+    Per strand the sweep carries the open segment's start c and the longest step its bins
+    allow so far, hm = sqrt(budget / max A) (the running minimum of each bin's own step
+    H = sqrt(budget / A)). A bin the segment can cross (c + hm reaches its far edge, the
+    tip in the strand's last bin) only lowers hm; otherwise the segment ends inside it, at
+    c + hm, or at the bin's near edge when even that is out of reach (the bins before
+    allowed it), and the bin is then covered by steps of its own H. So a segment is always
+    the longest whose h² times the largest bound over the bins it touches fits the budget,
+    as in the greedy search bin by bin, but the work per bin is a few whole-array
+    operations over the strands, not a search per segment (a tenth of the time at 100,000
+    strands). A strand leaves the sweep after its last bin, or when the cap stops it."""
+    nb = bins_t.shape[0]
+    s = len(f)
+    lanes = np.arange(s)
     step2 = float(table_step) ** 2
-    sig_parts, count_parts, cap_parts, need_parts = [], [], [], []
-    for lo in range(0, len(frac), chunk):  # chunks of strands bound the (strands x bins) tables
-        sl = slice(lo, lo + chunk)
-        f, g, w = frac[sl], guides[sl], weights[sl]
-        s = len(f)
-        a = w[:, 0, None] * bins[g[:, 0]] + w[:, 1, None] * bins[g[:, 1]] + w[:, 2, None] * bins[g[:, 2]]
-        last_bin = np.clip(np.ceil(f * nb).astype(np.int64) - 1, 0, nb - 1)
-        a[np.arange(nb)[None, :] > last_bin[:, None]] = 0.0  # bins past the tip do not count
-        # The tables' lerp moves each point by up to (the strand's largest bound)·step²/8.
-        budget = np.maximum(8.0 * tolerance[sl] - a.max(axis=1) * step2, 1e-300)
-        # Lower bound on the count: a segment that fits has ∫ sqrt(A / 8tol) <= 1 over it, so a
-        # strand with more than max_cylinders of that integral cannot fit: cap it right away.
-        covered = np.clip(f[:, None] * nb - np.arange(nb)[None, :], 0.0, 1.0) / nb
-        need = (np.sqrt(a / budget[:, None]) * covered).sum(axis=1)
-        suffix = np.maximum.accumulate(a[:, ::-1], axis=1)[:, ::-1].ravel()  # max(a[b:])
-        a_flat = a.ravel()
-        rows = [np.zeros(s)]
-        cur = np.zeros(s)
-        active = (f > 0) & (need <= max_cylinders)
-        hopeless = (f > 0) & ~active
-        for _ in range(max_cylinders):  # one greedy segment for all strands at once
-            idx = np.flatnonzero(active)
-            if not idx.size:
-                break
-            c, fe, bud, lb = cur[idx], f[idx], budget[idx], last_bin[idx]
-            b0 = np.minimum(np.floor(c * nb).astype(np.int64), lb)
-            base = idx * nb
-            end = fe.copy()
-            # Does the whole rest of the strand fit in one segment?
-            rest = suffix[base + b0] * (fe - c) ** 2 <= bud
-            # Otherwise extend bin by bin while the segment to the bin's far edge fits.
-            todo = np.flatnonzero(~rest)
-            e = b0[todo] - 1
-            amax = np.zeros(len(todo))
-            live = np.arange(len(todo))
-            stop = lb[todo] - 1
-            while live.size:
-                t = todo[live]
-                cand = e[live] + 1
-                m = np.maximum(amax[live], a_flat[base[t] + cand])
-                ok = m * ((cand + 1) / nb - c[t]) ** 2 <= bud[t]
-                e[live[ok]] = cand[ok]
-                amax[live[ok]] = m[ok]
-                live = live[ok & (cand < stop[live])]
-            t = todo
-            nxt = np.minimum(e + 1, lb[t])
-            m = np.maximum(amax, a_flat[base[t] + nxt])
-            with np.errstate(divide="ignore"):
-                reach = c[t] + np.sqrt(bud[t] / m)
-            low = np.where(e >= b0[t], (e + 1) / nb, c[t])
-            end[t] = np.minimum(np.minimum(np.maximum(reach, low), (nxt + 1) / nb), fe[t])
-            step = np.full(s, np.nan)
-            step[idx] = end
-            rows.append(step)
-            cur[idx] = end
-            active[idx] = end < fe
-        grid = np.stack(rows, axis=1)
-        capped = active | hopeless
-        _merge_sliver_tips(grid, ~capped & (f > 0), suffix, nb, last_bin, budget)
-        if capped.any():
-            k = np.arange(max_cylinders + 1)
-            if grid.shape[1] < max_cylinders + 1:
-                grid = np.concatenate([grid, np.full((s, max_cylinders + 1 - grid.shape[1]), np.nan)], axis=1)
-            grid[capped] = np.nan
-            grid[capped, :max_cylinders + 1] = f[capped, None] * (k / max_cylinders)
-        zero = f <= 0
-        if zero.any():  # a strand of no length: one cylinder of no length
-            grid[zero, 1] = 0.0
-        valid = ~np.isnan(grid)
-        sig_parts.append(grid[valid])
-        count_parts.append(valid.sum(axis=1).astype(np.int64))
-        cap_parts.append(capped)
-        need_parts.append(need)
-    return (np.concatenate(sig_parts), np.concatenate(count_parts), np.concatenate(cap_parts),
-            np.concatenate(need_parts))
+    # A (NB, S): the blend of the guides' bounds, bin-major (one contiguous row per bin), in
+    # float32 (half the memory traffic of the work over strands x bins; a bound off by a few
+    # parts in 10^7 is nothing beside its 5 % margin, interpolate._CURVATURE_SAFETY).
+    f32 = np.float32
+    key = np.take(bins_t, g[:, 0], axis=1)
+    a = key * w[:, 0].astype(f32)
+    term = np.empty_like(a)
+    for k in (1, 2):
+        np.take(bins_t, g[:, k], axis=1, out=term)
+        term *= w[:, k].astype(f32)
+        a += term
+    if mix is not None:
+        # Clump: + c·(the wisp key's bound - the blend's) where the key bends more, and
+        # |c''| times the root gap (adaptive_sigma).
+        c, c2, gap = mix
+        np.subtract(key, a, out=key)
+        np.maximum(key, f32(0.0), out=key)
+        key *= c.astype(f32)[:, None]
+        a += key
+        if c2 is not None:
+            a += (c2[:, None] * gap[None, :]).astype(f32)
+    last_bin = np.clip(np.ceil(f * nb).astype(np.int64) - 1, 0, nb - 1)
+    # Bins past the tip do not count: the largest bound up to the last bin.
+    _running(np.maximum, a, key)
+    # The tables' lerp moves each point by up to (the strand's largest bound)·step²/8.
+    budget = np.maximum(8.0 * tolerance - key[last_bin, lanes] * step2, 1e-300)
+    # Lower bound on the count: a segment that fits has ∫ sqrt(A / 8tol) <= 1 over it, so a
+    # strand with more than max_cylinders of that integral cannot fit: cap it right away.
+    np.sqrt(a, out=key)
+    _running(np.add, key, term)
+    whole = np.where(last_bin > 0, term[np.maximum(last_bin - 1, 0), lanes], 0.0)
+    need = (whole / nb + key[last_bin, lanes] * (f - last_bin / nb)) / np.sqrt(budget)
+    h_bin = term
+    with np.errstate(divide="ignore", over="ignore"):
+        # A straight bin's step is unbounded; a finite stand-in keeps 0·h a number.
+        np.divide(budget.astype(f32), a, out=h_bin)
+    np.sqrt(h_bin, out=h_bin)
+    np.minimum(h_bin, f32(1e30), out=h_bin)
+    del key
+    # Strands by last bin: they leave the sweep there.
+    order = np.argsort(last_bin, kind="stable")
+    leave = np.searchsorted(last_bin[order], np.arange(nb + 1))
+    active = (f > 0) & (need <= max_cylinders)
+    c = np.where(active, 0.0, np.inf)   # a strand out of the sweep: no segment of it ever ends
+    hm = np.full(s, np.inf)
+    count = np.zeros(s, np.int64)       # inner points placed so far
+    width = max_cylinders + 2           # root, max_cylinders - 1 inner points, tip; one spill column
+    grid = np.full((s, width), np.nan)
+    grid[:, 0] = 0.0
+    flat = grid.ravel()
+    reach, hi = np.empty(s), np.empty(s)
+    for b in range(nb):
+        np.minimum(hm, h_bin[b], out=hm)
+        np.add(c, hm, out=reach)
+        np.minimum(f, (b + 1.0) / nb, out=hi)
+        ends = np.flatnonzero(reach < hi)   # inf (out of the sweep) is never below
+        if ends.size:
+            h = h_bin[b, ends]
+            first = np.maximum(reach[ends], b / nb)
+            at = count[ends] + 1
+            flat[ends * width + np.minimum(at, width - 1)] = first
+            hm[ends] = h
+            # Steps of h from `first` until one reaches hi: the least k with first + k·h + h >= hi.
+            more = np.flatnonzero(first + h < hi[ends])
+            if more.size:
+                fm, hh, hm_ = first[more], h[more], hi[ends[more]]
+                k = np.maximum(np.ceil((hm_ - fm) / hh) - 1.0, 1.0)
+                k = np.where(fm + k * hh + hh >= hm_, k, k + 1.0)
+                k = np.where((k > 1) & (fm + (k - 1.0) * hh + hh >= hm_), k - 1.0, k)
+                km = np.minimum(k, max_cylinders).astype(np.int64)
+                i = np.arange(int(km.sum())) - np.repeat(np.cumsum(km) - km, km) + 1
+                rows = np.repeat(ends[more], km)
+                flat[rows * width + np.minimum(np.repeat(at[more], km) + i, width - 1)] = (
+                    np.repeat(fm, km) + i * np.repeat(hh, km))
+                at[more] += km
+                first[more] = fm + km * hh
+            count[ends] = at
+            c[ends] = first
+        gone = order[leave[b]:leave[b + 1]]
+        c[gone] = np.inf     # past its tip
+    capped = (f > 0) & (~active | (count + 1 > max_cylinders))
+    done = np.flatnonzero((f > 0) & ~capped)
+    grid[done, count[done] + 1] = f[done]
+    grid = grid[:, :max_cylinders + 1]
+    _merge_sliver_tips(grid, ~capped & (f > 0), a, nb, last_bin, budget)
+    if capped.any():
+        kk = np.arange(max_cylinders + 1)
+        grid[capped] = f[capped, None] * (kk / max_cylinders)
+    zero = f <= 0
+    if zero.any():  # a strand of no length: one cylinder of no length
+        grid[zero, 1] = 0.0
+    valid = ~np.isnan(grid)
+    return grid[valid], valid.sum(axis=1).astype(np.int64), capped, need
 
 
 def strand_attributes(seed, ids, counts, along, base_radius, base_color, params):
@@ -188,32 +269,67 @@ def strand_attributes(seed, ids, counts, along, base_radius, base_color, params)
     at fractions `along` of their length (0 at the root, 1 at the tip), so a profile is the
     same whatever the resolution: `along` is flat (P,), or (n,) shared by every strand when
     all counts are n (fixed resolution: the profiles are then made once and copied).
+    `along` may also be (sigma (P,), frac (S,)), the fractions σ / f_j made a range at a time.
     Radius: r(1 - s) ('linear', the thesis's r(1 - i/res)), r ('constant'), or constant up to
     taper_start then linear to 0 ('taper_from'). Colour: base + U(-1,1)·variation per strand
     and per point, clamped to [0, 1]. Alpha: 1 up to alpha_start, then linear to alpha_tip."""
     n_pts = int(counts.sum())
-    s = along.astype(np.float32)
     color = strand_colors(seed, ids, base_color, params)
     var_p = np.asarray(params.color_variation_point)
+    if isinstance(along, tuple):    # (sigma (P,), frac (S,)): along = σ / f_j, made per range
+        if not var_p.any():
+            return _flat_attributes(along, counts, base_radius, color, params)
+        along = along[0] / np.repeat(along[1], counts)
+    s = along.astype(np.float32)
     if along.shape != (n_pts,) and not var_p.any():
         out = (np.empty(n_pts, np.float32), np.empty((n_pts, 3), np.float32), np.empty(n_pts, np.float32))
         fill_strand_rows(*out, base_radius, color, radius_profile(s, params), alpha_profile(s, params))
         return out
     if along.shape != (n_pts,):
         s = np.tile(s, len(counts))
+    if not var_p.any():
+        return _flat_attributes(s, counts, base_radius, color, params)
     radius = np.repeat(base_radius.astype(np.float32), counts) * radius_profile(s, params)
     color = np.repeat(color, counts, axis=0)
-    if var_p.any():
-        strand = np.repeat(np.arange(len(counts)), counts)
-        offsets = np.zeros(len(counts), np.int64)
-        np.cumsum(counts[:-1], out=offsets[1:])
-        k = np.arange(n_pts) - offsets[strand]
-        sid = ids[strand]
-        u = np.stack([rng.uniform(seed, sid, rng.CH_COLOR_POINT + 3 * k + c) for c in range(3)], 1)
-        color += ((2.0 * u - 1.0) * var_p).astype(np.float32)
+    strand = np.repeat(np.arange(len(counts)), counts)
+    offsets = np.zeros(len(counts), np.int64)
+    np.cumsum(counts[:-1], out=offsets[1:])
+    k = np.arange(n_pts) - offsets[strand]
+    sid = ids[strand]
+    u = np.stack([rng.uniform(seed, sid, rng.CH_COLOR_POINT + 3 * k + c) for c in range(3)], 1)
+    color += ((2.0 * u - 1.0) * var_p).astype(np.float32)
     np.clip(color, 0.0, 1.0, out=color)
     alpha = alpha_profile(s, params)
     return radius, color, np.ones(n_pts, np.float32) if alpha is None else alpha
+
+
+def _flat_attributes(s, counts, base_radius, color, params, threads=None):
+    """strand_attributes without per-point colour variation, for strands of any counts at
+    fractions s (P,) float32, or (sigma (P,), frac (S,)) whose quotient they are: ranges of
+    strands on the worker threads, each writing its own rows (a colour channel at a time:
+    np.repeat of 12-byte rows is slow)."""
+    ends = np.cumsum(counts)
+    n_pts = int(ends[-1]) if len(ends) else 0
+    out = (np.empty(n_pts, np.float32), np.empty((n_pts, 3), np.float32), np.empty(n_pts, np.float32))
+    radius, rgb, alpha = out
+    base = base_radius.astype(np.float32)
+    clamped = np.clip(color, 0.0, 1.0)
+
+    def fill(lo, hi):
+        start, stop = (int(ends[lo - 1]) if lo else 0), int(ends[hi - 1])
+        n = counts[lo:hi]
+        if isinstance(s, tuple):
+            part = (s[0][start:stop] / np.repeat(s[1][lo:hi], n)).astype(np.float32)
+        else:
+            part = s[start:stop]
+        np.multiply(np.repeat(base[lo:hi], n), radius_profile(part, params), out=radius[start:stop])
+        for c in range(3):
+            rgb[start:stop, c] = np.repeat(clamped[lo:hi, c], n)
+        a = alpha_profile(part, params)
+        alpha[start:stop] = 1.0 if a is None else a
+    if len(counts):
+        parallel.run_jobs([partial(fill, lo, hi) for lo, hi in parallel.ranges(len(counts))], threads)
+    return out
 
 
 def strand_colors(seed, ids, base_color, params):
@@ -263,12 +379,12 @@ def fill_strand_rows(radius, color, alpha, base_radius, strand_color, radius_pro
 SLIVER = 1e-3   # of a bin: a last segment shorter than this is merged when the bound allows
 
 
-def _merge_sliver_tips(grid, rows, suffix, nb, last_bin, budget):
+def _merge_sliver_tips(grid, rows, a, nb, last_bin, budget):
     """In place: where a strand's trim fraction falls just past a bin edge, the greedy search
     stops at the edge and leaves a sliver of a last segment, whose end repeats its start to
     within float32 (renderers then drop or special-case it). The last two segments [a, b],
-    [b, c] become one when the bound holds over [a, c] (the largest curvature bound from a's
-    bin to the tip, `suffix`, times (c - a)² within `budget`); otherwise b moves to the middle
+    [b, c] become one when the bound holds over [a, c] (the largest curvature bound `a` (NB, S)
+    from a's bin to the last bin, times (c - a)² within `budget`); otherwise b moves to the middle
     of [a, c]: [a, b'] is a part of the accepted [a, b], and [b', c] has a quarter of
     (c - a)², which fits whenever [a, c] misses by less than 4x (the greedy segment before a
     sliver nearly always reaches the bound exactly, so it misses by a hair)."""
@@ -277,14 +393,19 @@ def _merge_sliver_tips(grid, rows, suffix, nb, last_bin, budget):
     if not r.size:
         return
     k = count[r] - 1
-    last, prev, prev2 = grid[r, k], grid[r, k - 1], grid[r, k - 2]
-    sliver = (last - prev) < SLIVER / nb
+    sliver = (grid[r, k] - grid[r, k - 1]) < SLIVER / nb
+    r, k = r[sliver], k[sliver]
+    if not r.size:
+        return
+    last, prev2 = grid[r, k], grid[r, k - 2]
     b0 = np.minimum(np.floor(prev2 * nb).astype(np.int64), last_bin[r])
-    miss = suffix[r * nb + b0] * (last - prev2) ** 2 / budget[r]
-    merge = sliver & (miss <= 1.0)
+    span = (np.arange(nb)[:, None] >= b0[None, :]) & (np.arange(nb)[:, None] <= last_bin[r][None, :])
+    suffix = np.where(span, a[:, r], 0.0).max(axis=0)
+    miss = suffix * (last - prev2) ** 2 / budget[r]
+    merge = miss <= 1.0
     grid[r[merge], k[merge] - 1] = last[merge]
     grid[r[merge], k[merge]] = np.nan
-    split = sliver & (miss > 1.0) & (miss <= 4.0)
+    split = (miss > 1.0) & (miss <= 4.0)
     grid[r[split], k[split] - 1] = 0.5 * (prev2[split] + last[split])
 
 

@@ -263,10 +263,10 @@ class _Grower:
         bins = None if p.resolution_mode == "fixed" else shaping_bound(np.stack([d["bound"] for d in kd]), rows, p)
         return {"radii": radii, "rows": rows, "key_roots": np.array([d["root"] for d in kd]), "bins": bins}
 
-    def _plan(self, context, g, w, frac, idx):
+    def _plan(self, context, roots, g, w, frac, idx):
         """(σ flat (P,) or None, counts (S,)) of one block of strands: equal steps at fixed
         resolution (σ made in the blend), else cylinders.adaptive_sigma's (noting per strand
-        what it met). g, w (3, n), frac (n,) and idx as for _grow."""
+        what it met). roots (3, n), g, w (3, n), frac (n,) and idx as for _grow."""
         p = self.params
         max_cyl = p.points_per_strand - 1
         if p.resolution_mode == "fixed":
@@ -275,7 +275,9 @@ class _Grower:
         base_radius = w[0] * radii[g[0]] + w[1] * radii[g[1]] + w[2] * radii[g[2]]
         asked = p.tolerance * (base_radius if p.tolerance_units == "radius" else np.ones(len(frac)))
         tol = np.maximum(asked, 1e-300)
-        res = adaptive_sigma(frac, g.T, w.T, context["bins"], tol, max_cyl, table_step=1.0 / (self._samples - 1))
+        clump = clump_arguments(p, g[0], roots, context["key_roots"])
+        res = adaptive_sigma(frac, g.T, w.T, context["bins"], tol, max_cyl, table_step=1.0 / (self._samples - 1),
+                             clump=clump)
         self._note_resolution(idx, res.met, tol, res.needed)
         return res.sigma, res.counts
 
@@ -288,7 +290,7 @@ class _Grower:
         p = self.params
         radii, rows = context["radii"], context["rows"]
         report(0.0, "growing strands")
-        sigma, counts = self._plan(context, g, w, frac, idx) if plan is None else plan
+        sigma, counts = self._plan(context, roots, g, w, frac, idx) if plan is None else plan
         del plan
         base_radius = w[0] * radii[g[0]] + w[1] * radii[g[1]] + w[2] * radii[g[2]]
         args = (roots, transforms, g, w.astype(np.float32))
@@ -302,7 +304,7 @@ class _Grower:
             attrs = attrs or done[0]
         else:
             pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma, threads=threads, clump=clump)
-            attrs = self._attributes(ids, counts, sigma / np.repeat(frac, counts), g, w, base_radius)
+            attrs = self._attributes(ids, counts, (sigma, frac), g, w, base_radius)
         del args, clump
         report(0.5, "frizz and curl")
         shape_strands(pts, counts, sigma, frac, transforms, g[0], ids, rows, p, threads)
@@ -484,7 +486,7 @@ class Generator(_Grower):
         for i in range(len(blocks)):
             self._report(0.2 + 0.15 * i / len(blocks), "placing the points")
             inputs, idx = block(i)
-            plans.append(self._plan(context, inputs[2], inputs[3], inputs[4], idx))
+            plans.append(self._plan(context, inputs[0], inputs[2], inputs[3], inputs[4], idx))
         counts = np.concatenate([c for _, c in plans])
         total = int(counts.sum())
         out = (np.empty((total, 3), np.float32), np.empty(total, np.float32), np.empty((total, 3), np.float32),
