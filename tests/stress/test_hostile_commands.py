@@ -129,11 +129,13 @@ def test_a_large_image_takes_the_memory_of_a_band(tuft, tmp_path):
 # ------------------------------------------------------------------ python -m groom generate
 
 @pytest.mark.parametrize("argv,match", [
-    (["--count", str(2 ** 62)], "count 4,611,686,018,427,387,904: needs about"),
-    (["--count", str(10 ** 9)], "GiB are available"),
+    (["--count", str(2 ** 62)], "count 4,611,686,018,427,387,904: --out"),
+    (["--count", str(10 ** 9)], "GiB of disk while it is written (96 points a strand at most, 32 bytes each) but"),
     (["--count", "0"], "must be at least 1"),
 ])
 def test_generate_refuses_a_count_that_cannot_work(tmp_path, argv, match, capsys):
+    """The command grows a block at a time into the file, so what cannot work is a file the
+    disk cannot take (10^9 strands of wavy: up to 4 TB), refused with its size before any work."""
     from groom.__main__ import main as groom_main
     out = tmp_path / "x.npz"
     assert groom_main(["generate", "--preset", "wavy", "--out", str(out)] + argv) == 2
