@@ -204,6 +204,7 @@ def _points_at(pts, g, roots, tips, arc, seg=None):
 # whole curls stay further apart (how many: the benchmark report's export section).
 CHORD_TOLERANCE = 5e-3
 CHORD_ITERATIONS = 80
+CHORD_POLISH_ITERATIONS = 40
 
 
 def chord_parameters(strands, n):
@@ -254,6 +255,96 @@ def chord_parameters(strands, n):
         marched, apart = _march_equal_chords(pts, g, roots[rest], tips[rest], n)
         better = apart < best_apart[rest]
         best[rest[better]] = marched[better]
+        best_apart[rest[better]] = apart[better]
+    rest = np.flatnonzero(np.isfinite(best_apart) & (best_apart > CHORD_TOLERANCE))
+    if len(rest) and n > 2:
+        best[rest] = _polish_equal_chords(pts, g, roots[rest], tips[rest], best[rest])
+    return best
+
+
+def _polish_equal_chords(pts, g, roots, tips, arc, iterations=CHORD_POLISH_ITERATIONS):
+    """Equal chords by damped Gauss-Newton (Levenberg-Marquardt) from the best try `arc`
+    (A, n), for the strands that scaling and marching left apart: where a tight curl makes
+    the marched vertex jump (the first point at chord c from the one before moves from one
+    turn of the curl to the next as c grows), the solution lies between two marches, on a
+    vertex that is not the first at that distance, and no choice of c alone reaches it.
+
+    Unknowns: the interior vertices' arc lengths s_1..s_{n-2} and the common chord c;
+    equations |P(s_{i+1}) - P(s_i)| - c = 0 for the n - 1 chords (s_0 = 0 and s_{n-1} =
+    length stay, so root and tip are kept exactly). The Jacobian is bidiagonal (chord
+    direction . tangent at each end) plus a column of -1. A step is taken only when it
+    keeps the vertices in order along the strand and lowers the sum of squared chord
+    deviations; else the damping grows. Each strand keeps its best try (by the largest chord
+    deviation) and leaves once within CHORD_TOLERANCE. Returns arc (A, n)."""
+    A, n = arc.shape
+    arc = np.array(arc, np.float64)
+    length = arc[:, -1].copy()
+    lam = np.full(A, 1e-3)
+    rows_i = np.arange(n - 1)
+
+    def evaluate(index, s):
+        a, f = _locate(g, roots[index], tips[index], s)
+        p0 = np.take(pts, a, axis=0).astype(np.float64)
+        d = np.take(pts, a + 1, axis=0).astype(np.float64) - p0
+        q = (p0 + d * f[:, None]).reshape(s.shape + (3,))
+        dl = np.linalg.norm(d, axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            tangent = np.where(dl[:, None] > 0, d / dl[:, None], 0.0).reshape(s.shape + (3,))
+        chord_v = np.diff(q, axis=1)
+        chord = np.linalg.norm(chord_v, axis=2)
+        return tangent, chord_v, chord
+
+    def deviation(chord):
+        mean = chord.mean(axis=1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.abs(chord / mean - 1.0).max(axis=1)
+
+    tangent, chord_v, chord = evaluate(np.arange(A), arc)
+    c = chord.mean(axis=1)
+    apart = deviation(chord)
+    best, best_apart = arc.copy(), apart.copy()
+    cost = ((chord - c[:, None]) ** 2).sum(axis=1)
+    todo = np.flatnonzero(apart > CHORD_TOLERANCE)
+    for _ in range(iterations):
+        if not len(todo):
+            break
+        t, cv, ch, cc = tangent[todo], chord_v[todo], chord[todo], c[todo]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            u = np.where(ch[..., None] > 0, cv / ch[..., None], 0.0)
+        # d chord_i / d s_{i+1} = u_i . T(s_{i+1}); d chord_i / d s_i = -u_i . T(s_i).
+        ahead = np.einsum("aik,aik->ai", u, t[:, 1:])
+        behind = -np.einsum("aik,aik->ai", u, t[:, :-1])
+        J = np.zeros((len(todo), n - 1, n - 1))
+        J[:, rows_i[:-1], rows_i[:-1]] = ahead[:, :-1]        # chord i, unknown s_{i+1}
+        J[:, rows_i[1:], rows_i[:-1]] = behind[:, 1:]          # chord i, unknown s_i
+        J[:, :, -1] = -1.0                                      # the common chord c
+        F = ch - cc[:, None]
+        JtJ = np.einsum("aki,akj->aij", J, J)
+        rhs = -np.einsum("aki,ak->ai", J, F)
+        diag = np.einsum("aii->ai", JtJ)
+        H = JtJ.copy()
+        H[:, rows_i, rows_i] += lam[todo, None] * (diag + 1e-12)
+        # H is positive definite unless a strand's Jacobian is zero; 1e-12 keeps it solvable.
+        step = np.linalg.solve(H, rhs[..., None])[..., 0]
+        trial = arc[todo].copy()
+        trial[:, 1:-1] += step[:, :-1]
+        trial_c = cc + step[:, -1]
+        ordered = (np.diff(trial, axis=1) > 0).all(axis=1) & (trial_c > 0) & np.isfinite(step).all(axis=1)
+        trial[~ordered] = arc[todo[~ordered]]
+        tt, tcv, tch = evaluate(todo, trial)
+        tcost = ((tch - trial_c[:, None]) ** 2).sum(axis=1)
+        good = ordered & (tcost < cost[todo])
+        k = todo[good]
+        arc[k], tangent[k], chord_v[k], chord[k] = trial[good], tt[good], tcv[good], tch[good]
+        c[k], cost[k] = trial_c[good], tcost[good]
+        lam[k] = np.maximum(lam[k] / 3.0, 1e-9)
+        lam[todo[~good]] *= 4.0
+        apart = deviation(chord[todo])
+        better = apart < best_apart[todo]
+        best[todo[better]] = arc[todo[better]]
+        best_apart[todo[better]] = apart[better]
+        todo = todo[(apart > CHORD_TOLERANCE) & (lam[todo] < 1e8)]
+    best[:, -1] = length
     return best
 
 
