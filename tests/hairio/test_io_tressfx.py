@@ -100,6 +100,34 @@ def test_equal_arc_steps_would_leave_curled_chords_far_apart():
     assert np.abs(chord / chord.mean(axis=1, keepdims=True) - 1).max() < 0.01
 
 
+@pytest.fixture(scope="module")
+def curly_groom():
+    """The curly preset on the default scalp, 3,000 strands of 32 points: tight curls where
+    marching chords of one length leaps a curl and lands a few percent apart."""
+    import groom
+    scalp = groom.default_scalp()
+    preset = groom.load_preset("curly")
+    params = preset.params.replace(count=3000, seed=0, resolution_mode="fixed", points_per_strand=32)
+    return groom.generate(scalp, preset.keys_on(scalp), params).strands
+
+
+@pytest.mark.parametrize("n", [4, 8, 16, 32, 64])
+def test_every_curly_strand_has_equal_chords_within_one_percent(curly_groom, n):
+    from hairio.formats.tressfx import CHORD_TOLERANCE, chord_parameters
+    s = curly_groom
+    r = resample_strands(s, n)
+    pts = r.points.reshape(-1, n, 3).astype(np.float64)
+    chord = np.linalg.norm(np.diff(pts, axis=1), axis=2)
+    apart = np.abs(chord / chord.mean(axis=1, keepdims=True) - 1).max(axis=1)
+    assert apart.max() < 0.01, (n, int((apart > 0.01).sum()), float(apart.max()))
+    # the writer's own aim, with room for the float32 points the file stores
+    assert apart.max() < CHORD_TOLERANCE + 1e-5
+    # root and tip are kept exactly; the vertices stay in order along the strand
+    np.testing.assert_array_equal(pts[:, 0], s.points[s.offsets])
+    np.testing.assert_array_equal(pts[:, -1], s.points[s.offsets + s.counts - 1])
+    assert (np.diff(chord_parameters(s, n), axis=1) > 0).all()
+
+
 def test_marching_places_equal_chords_across_a_corner():
     """A right-angled corner: the chord across it is shorter than its arc, and which chord
     crosses it changes as vertices move. Marching chords of one length (solved so the last
