@@ -279,7 +279,7 @@ def chord_parameters(strands, n):
         elif np.ndim(start) == 0:
             arc0 = (1 - start) * arc_lo + start * arc_hi
         else:
-            arc0 = best[rest] + start * (best[rest, -1:] / (n - 1))
+            arc0 = np.clip(best[rest] + start * (best[rest, -1:] / (n - 1)), 0.0, best[rest, -1:])
             arc0 = np.maximum.accumulate(arc0, axis=1)
         polished, apart = _polish_equal_chords(pts, g, roots[rest], tips[rest], arc0)
         better = apart < best_apart[rest]
