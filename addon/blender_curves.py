@@ -140,6 +140,17 @@ def _replace_datablock(old, counts):
     return new
 
 
+def drop_written_attributes(curves):
+    """Remove from the Curves datablock `curves` the attributes fill_curves writes (all but
+    the built-in position, which cannot go). For a copy that shares its arrays with the
+    original (transaction.replace_curves): a fill then writes them into fresh memory instead
+    of first copying each shared array it is about to overwrite."""
+    for name in ATTRIBUTES:
+        attr = curves.attributes.get(name)
+        if attr is not None and name != "position":
+            curves.attributes.remove(attr)
+
+
 def fill_curves(curves, strands, root_uv=None):
     """Replace the contents of the Curves datablock `curves` with `strands` (bulk writes);
     returns the datablock that holds them. root_uv: (S, 2) UVs of the roots on the surface's
