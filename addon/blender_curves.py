@@ -158,9 +158,10 @@ def _rgba(color, alpha):
 
 def drop_written_attributes(curves):
     """Remove from the Curves datablock `curves` the attributes fill_curves writes (all but
-    the built-in position, which cannot go). For a copy that shares its arrays with the
-    original (transaction.replace_curves): a fill then writes them into fresh memory instead
-    of first copying each shared array it is about to overwrite."""
+    the built-in position, which cannot go). For a datablock whose arrays are shared (with
+    the undo's copy, transaction.keep_curves, and the depsgraph's evaluated copy): a fill
+    then writes them into fresh memory instead of first copying each shared array it is
+    about to overwrite."""
     for name in ATTRIBUTES:
         attr = curves.attributes.get(name)
         if attr is not None and name != "position":

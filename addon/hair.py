@@ -75,8 +75,10 @@ def write_hair(scalp, strands, root_uv=None):
         if not new:
             tx.keep_settings(hair)
             tx.keep_transform(hair)
-            # The writes go to a copy of the datablock; the original is the rollback's.
-            blender_curves.drop_written_attributes(tx.replace_curves(hair))
+            tx.keep_curves(hair)
+            # Its arrays are shared now (with the backup, and with the depsgraph's evaluated
+            # copy): written in place, each would be copied first only to be overwritten.
+            blender_curves.drop_written_attributes(hair.data)
         hair = blender_curves.strands_to_curves(hair_name(scalp), strands, collection=collection,
                                                 parent=scalp, obj=hair, root_uv=root_uv)
         if new:

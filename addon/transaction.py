@@ -5,7 +5,7 @@ is removed and everything it changed is put back, so the file is exactly as it w
     with transaction() as tx:
         tx.keep_settings(scalp)     # its Key-Strand Hair settings come back
         tx.keep_transform(hair)     # its parent and matrices come back
-        curves = tx.replace_curves(hair)  # writes go to a copy; the original comes back
+        tx.keep_curves(hair)        # its Curves datablock comes back, as it was
         ... write ...
 
 An exception inside the block rolls back and propagates. The error policy is here too, one
@@ -93,34 +93,31 @@ class Transaction:
             obj.matrix_basis = basis
         self._undo.append(undo)
 
-    def replace_curves(self, obj):
-        """Give `obj` a copy of its Curves datablock to write into and return the copy; the
-        original, left untouched, is the backup, so nothing is copied for the undo.
+    def keep_curves(self, obj):
+        """Put back `obj`'s Curves datablock as it is now on rollback, even if it was filled
+        in place or replaced by another one meanwhile.
 
-        The copy costs no memory at first (Blender shares the arrays until one side writes;
-        a writer that drops an attribute before writing it gets fresh memory instead of a
-        copy of the shared array). Every user of the original uses the copy from now on. On
-        commit the original is removed and its name passes to the datablock `obj` then has
-        (the copy, or one that replaced it meanwhile); on rollback every user gets the
-        original back and the copy, made in the press, is removed."""
+        The copy costs no memory at first (Blender shares the arrays until one side writes);
+        on commit it is dropped. A writer that removes an attribute before writing it anew
+        (blender_curves.drop_written_attributes) gets fresh memory for it instead of a
+        copy of the shared array it is about to overwrite."""
         original = obj.data
         name, fake_user = original.name, original.use_fake_user
-        copy = original.copy()
-        copy.use_fake_user = fake_user
-        original.user_remap(copy)
+        backup = original.copy()
 
         def undo():
             current = obj.data
-            if current != original:
-                current.user_remap(original)
-            original.use_fake_user = fake_user
+            current.user_remap(backup)
+            if current.users == 0:
+                bpy.data.hair_curves.remove(current)
+            backup.name = name
+            backup.use_fake_user = fake_user
+            self._survivors.add(backup.session_uid)
 
         def drop():
-            bpy.data.hair_curves.remove(original)
-            obj.data.name = name
+            bpy.data.hair_curves.remove(backup)
         self._undo.append(undo)
         self._on_commit.append(drop)
-        return copy
 
     def undo(self, fn):
         """Run `fn` on rollback (before the datablocks made here are removed)."""

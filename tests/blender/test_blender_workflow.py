@@ -208,10 +208,10 @@ def test_generate_again_refills_the_same_hair_object(clean):
 
 @pytest.mark.parametrize("change", ["colour", "count"])
 def test_generate_again_keeps_what_the_artist_gave_the_hair_s_datablock(clean, change):
-    """Generate writes a new Curves datablock in place of the old one (the old one is the
-    undo's until the press succeeds): the artist's name, material, settings, custom
-    property, own attribute (its values too while the strand layout is unchanged) and every
-    user carry over, and no other Curves datablock is left behind."""
+    """Generate rewrites the hair's Curves datablock (keeping a copy for the undo until the
+    press succeeds, and in 4.2 replacing it on a new strand layout): the artist's name,
+    material, settings, custom property, own attribute (its values too while the strand
+    layout is unchanged) and every user carry over, and no other Curves datablock is left."""
     scalp = make_scalp()
     add_keys(scalp)
     scalp.keystrand_hair.count = 300
