@@ -8,7 +8,7 @@ moderngl load inside the operators.
 """
 import bpy
 
-from . import add_head, draw_tools, live, operators, panels, preview, properties
+from . import add_head, draw_tools, live, operators, panels, preview, progressive, properties
 
 classes = properties.CLASSES + operators.CLASSES + add_head.CLASSES + draw_tools.CLASSES + panels.CLASSES
 
@@ -18,6 +18,7 @@ def register():
         bpy.utils.register_class(cls)
     properties.register_properties()
     live.register_handlers()
+    progressive.register()
     draw_tools.register()
     bpy.types.TOPBAR_MT_file_export.append(operators.menu_export)
     bpy.types.VIEW3D_MT_add.append(add_head.menu_add)
@@ -28,6 +29,7 @@ def unregister():
     bpy.types.TOPBAR_MT_file_export.remove(operators.menu_export)
     draw_tools.unregister()
     live.unregister_handlers()
+    progressive.unregister()
     preview.close()
     properties.unregister_properties()
     for cls in reversed(classes):

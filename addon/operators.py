@@ -22,7 +22,7 @@ from bpy_extras.io_utils import ExportHelper
 
 from hairio.formats.registry import BY_NAME, FORMATS
 
-from . import blender_curves, head, preview, progress, scene_data
+from . import blender_curves, head, preview, progress, progressive, scene_data
 from .hair import existing_hair, generate, read_collider
 from .properties import dict_to_settings, groom_params
 from .scene_data import find_scalp
@@ -228,11 +228,15 @@ class HAIR_OT_render_preview(Operator):
                                    "(Ctrl+Numpad 0 on a camera)")
             return {'CANCELLED'}
         t0 = time.perf_counter()
-        pixels, t = preview.render(context.scene, hair, camera, scalp.keystrand_hair)
-        image = preview.write_image(pixels)
+        # The first image now; progressive.py refines it while nothing changes.
+        session = progressive.start(context, scalp, hair, camera)
+        image = bpy.data.images[preview.IMAGE_NAME]
         preview.show_image(context, image)
-        h, w = pixels.shape[:2]
-        self.report({'INFO'}, f"Rendered {w}x{h} in {time.perf_counter() - t0:.2f} s")
+        w, h = image.size
+        self.report({'INFO'}, f"Rendered {w}x{h} in {time.perf_counter() - t0:.2f} s"
+                              + ("" if bpy.app.background else "; refining while nothing changes"))
+        if session.note is not None:
+            self.report({'WARNING'}, session.note)
         return {'FINISHED'}
 
 

@@ -2,7 +2,7 @@
 """Panels: a "Hair" tab in the 3D Viewport sidebar (N) and in the Image Editor sidebar."""
 from bpy.types import Panel
 
-from . import draw_tools
+from . import draw_tools, progressive
 from .scene_data import find_scalp, key_objects
 from .transaction import background_errors
 
@@ -194,6 +194,9 @@ class IMAGE_PT_keystrand_hair_preview(_HairPanel, Panel):
         self.layout.label(text=scalp.name, icon='MESH_DATA')
         draw_render_settings(self.layout, scalp.keystrand_hair)
         self.layout.operator("hair.render_preview", icon='RENDER_STILL')
+        refining = progressive.status(scalp)
+        if refining is not None:
+            self.layout.label(text=refining, icon='TIME')
 
 
 CLASSES = (VIEW3D_PT_keystrand_hair, VIEW3D_PT_keystrand_hair_shape, VIEW3D_PT_keystrand_hair_look,

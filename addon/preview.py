@@ -8,18 +8,40 @@ KEYSTRAND_PREVIEW_IN_PROCESS environment variable ask for it. Strands are read a
 uploaded only when they changed: every write of the hair and every depsgraph update of a
 hair Curves datablock bumps its revision (see `bump`), so moving the camera re-renders
 without reading or re-uploading anything.
+
+Beside the hair the preview shows the scene's meshes as a render would (the scalp, its
+collider and the other visible meshes: scene_data.scene_meshes), opaque and shaded with
+their base colour, so the head hides the hair behind it and shadows fall on and from it.
+They are uploaded when their arrays changed; a scene of more than MESH_TRIANGLE_BUDGET
+triangles shows only the scalp and collider, and the operator says so.
+
+One image is one pass of the settings' samples; `render(..., sample_pass=k)` shifts every
+sample of pass k by the same sub-pixel offset (`pass_offset`, a low-discrepancy sequence
+over the pixel, or over one stratum of it with several samples), so the passes the
+progressive preview (progressive.py) averages are new samples of the pixel's area, not the
+same ones again.
 """
+import contextlib
+import hashlib
 import os
 import time
+from dataclasses import replace
 
 import numpy as np
 import bpy
 from hairio import InputError, Strands
 
-from . import blender_curves
+from . import blender_curves, hair_material, scene_data
 from .transaction import transaction
 
 IMAGE_NAME = "Hair Preview"
+# Triangles the preview draws at most beside the hair; past it, the scalp and collider only.
+# A million triangles take about a second to grid and upload on a CPU driver, and a scene
+# that big (a character, a set) is rarely what the hair preview is for.
+MESH_TRIANGLE_BUDGET = 1_000_000
+# The R2 sequence's steps (1/g, 1/g^2 for the plastic number g): the best-spread 2-D
+# low-discrepancy sequence for any number of points (Roberts 2018).
+_R2 = (0.7548776662466927, 0.5698402909980532)
 
 
 class RendererDied(Exception):
@@ -29,6 +51,7 @@ class RendererDied(Exception):
 _renderer = None
 _renderer_in_process = None
 _uploaded = None
+_uploaded_meshes = None
 _revisions = {}
 
 
@@ -37,7 +60,8 @@ def bump(curves):
     _revisions[curves.session_uid] = _revisions.get(curves.session_uid, 0) + 1
 
 
-def _upload_key(hair_obj):
+def upload_key(hair_obj):
+    """What decides the hair's upload: its Curves, their revision and the object's matrix."""
     m = np.array(hair_obj.matrix_world, np.float64)
     return (hair_obj.data.session_uid, _revisions.get(hair_obj.data.session_uid, 0), m.tobytes())
 
@@ -48,7 +72,7 @@ def in_process_requested(settings):
 
 def get_renderer(in_process):
     """The cached renderer of the requested kind, started on first use."""
-    global _renderer, _renderer_in_process, _uploaded
+    global _renderer, _renderer_in_process, _uploaded, _uploaded_meshes
     if _renderer is not None and _renderer_in_process == in_process:
         return _renderer
     close()
@@ -59,14 +83,14 @@ def get_renderer(in_process):
         from tracer.worker import WorkerClient
         _renderer = WorkerClient()
     _renderer_in_process = in_process
-    _uploaded = None
+    _uploaded = _uploaded_meshes = None
     return _renderer
 
 
 def close():
     """Stop the renderer (the worker process exits); the next render starts a new one."""
-    global _renderer, _renderer_in_process, _uploaded
-    renderer, _renderer, _renderer_in_process, _uploaded = _renderer, None, None, None
+    global _renderer, _renderer_in_process, _uploaded, _uploaded_meshes
+    renderer, _renderer, _renderer_in_process, _uploaded, _uploaded_meshes = _renderer, None, None, None, None
     if renderer is not None:
         closer = getattr(renderer, "close", None)
         if closer is not None:
@@ -99,8 +123,10 @@ def preview_size(scene, settings):
     return w, max(1, int(round(w * aspect)))
 
 
-def scene_lights(scene):
-    """The scene's sun and point lights as tracer.Light (at most 8), or () for none."""
+def scene_lights(scene, sun_strength=False):
+    """The scene's sun and point lights as tracer.Light (at most 8), or () for none.
+    `sun_strength`: suns at their Strength (irradiance, W/m², for the physically based
+    "chiang" shading, which then matches Cycles); else every light at intensity 1."""
     from tracer import Light
     from tracer.settings import MAX_LIGHTS
     lights = []
@@ -109,7 +135,8 @@ def scene_lights(scene):
             continue
         m = np.array(obj.matrix_world, np.float64)
         if obj.data.type == 'SUN':
-            lights.append(Light("directional", tuple(-m[:3, 2]), tuple(obj.data.color), 1.0))
+            strength = float(obj.data.energy) if sun_strength else 1.0
+            lights.append(Light("directional", tuple(-m[:3, 2]), tuple(obj.data.color), strength))
         else:
             lights.append(Light("point", tuple(m[:3, 3]), tuple(obj.data.color), 1.0))
         if len(lights) == MAX_LIGHTS:
@@ -117,13 +144,17 @@ def scene_lights(scene):
     return tuple(lights)
 
 
-def render_settings(scene, settings):
-    """tracer.RenderSettings from the scalp's preview settings."""
+def render_settings(scene, settings, hair_obj=None):
+    """tracer.RenderSettings from the scalp's preview settings (and, for the "chiang"
+    shading, the hair object's Principled Hair BSDF and the suns' strengths)."""
     from tracer import RenderSettings
     kwargs = dict(spp=int(settings.preview_samples), shadows=settings.preview_shadows,
                   shadow_mode=settings.preview_shadow_mode, layers=settings.preview_layers,
                   shading=settings.preview_shading, min_pixel_width=settings.preview_min_pixel_width)
-    lights = scene_lights(scene) if settings.preview_scene_lights else ()
+    physical = settings.preview_shading == "chiang"
+    if physical and hair_obj is not None:
+        kwargs.update(hair_material.principled_hair_settings(hair_obj))
+    lights = scene_lights(scene, sun_strength=physical) if settings.preview_scene_lights else ()
     if lights:
         kwargs["lights"] = lights
     return RenderSettings(**kwargs)
@@ -139,38 +170,134 @@ def world_strands(hair_obj):
     return Strands.from_arrays(points, s.counts, radius, s.color, s.alpha, s.wisp)
 
 
-def render(scene, hair_obj, camera_obj, settings):
+def scene_meshes(context, scalp):
+    """scene_data.SceneMeshes the preview of `scalp`'s hair shows (MESH_TRIANGLE_BUDGET)."""
+    return scene_data.scene_meshes(context.scene, context.view_layer, context.evaluated_depsgraph_get(),
+                                   scalp, MESH_TRIANGLE_BUDGET)
+
+
+def budget_note(meshes):
+    """What the operator says when the budget left meshes out, or None."""
+    if meshes is None or not meshes.skipped:
+        return None
+    return (f"The scene's meshes have {meshes.triangles + meshes.skipped:,} triangles, more than the preview's "
+            f"{MESH_TRIANGLE_BUDGET:,}: it shows the scalp and its collider only "
+            "(hide other meshes from renders to see them)")
+
+
+def _meshes_key(meshes):
+    """A digest of the meshes' arrays and colours: equal keys, nothing to upload."""
+    h = hashlib.sha1()
+    for vertices, triangles, rgb, name in meshes:
+        for a in (vertices, triangles, np.asarray(rgb, np.float64)):
+            h.update(np.ascontiguousarray(a).tobytes())
+        h.update(str((vertices.shape, triangles.shape, name)).encode())
+    return h.hexdigest()
+
+
+def pass_offset(k):
+    """Sub-pixel offset (x right, y down; each in [-0.5, 0.5)) of sample pass k: 0 for the
+    first pass, then the R2 sequence, so any number of passes covers the pixel evenly."""
+    if k == 0:
+        return 0.0, 0.0
+    return tuple(float((0.5 + k * a) % 1.0 - 0.5) for a in _R2)
+
+
+def _shifted(camera, k, spp_n):
+    """The camera of pass k. With n x n stratified samples a pass moves them by the offset
+    over one stratum (1/n of a pixel), so every sample stays near its own stratum and the
+    passes' mean keeps the pixel's footprint (shifted by whole pixels it would blur)."""
+    if k == 0:
+        return camera
+    ox, oy = (c / spp_n for c in pass_offset(k))
+    # shift_px moves the image centre: x as the samples' x, y up (the samples' y runs down).
+    return replace(camera, shift_px=np.asarray(camera.shift_px, np.float64) + (ox, -oy))
+
+
+def render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass=0):
     """Render the preview; returns ((H, W, 4) float32 linear RGBA, row 0 = top; timings).
-    Raises hairio.InputError for bad settings and RendererDied when the renderer failed
-    (it is then closed, so the next call starts a fresh one)."""
-    global _uploaded
+    meshes: scene_data.SceneMeshes shown beside the hair (None: the hair alone);
+    sample_pass: which pass of samples (see pass_offset). Raises hairio.InputError for bad
+    settings and RendererDied when the renderer failed (it is then closed, so the next call
+    starts a fresh one)."""
+    return begin_render(scene, hair_obj, camera_obj, settings, meshes, sample_pass).result()
+
+
+def begin_render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass=0, wait=True):
+    """As render, but returns a PendingImage. With wait=False and the renderer process, the
+    render runs while Blender goes on (uploads, rare, are still waited for); in process it
+    is done on return either way."""
+    global _uploaded, _uploaded_meshes
     t0 = time.perf_counter()
     size = preview_size(scene, settings)
-    camera = camera_for(scene, camera_obj, size)
-    rs = render_settings(scene, settings)
+    rs = render_settings(scene, settings, hair_obj)
     rs.check()
+    camera = _shifted(camera_for(scene, camera_obj, size), sample_pass, rs.spp_n)
+    mesh_list = [] if meshes is None else meshes.meshes
+    if meshes is not None and meshes.digest is None:
+        meshes.digest = _meshes_key(mesh_list)     # once per reading, not once per refinement pass
+    mesh_key = _meshes_key(mesh_list) if meshes is None else meshes.digest
     t1 = time.perf_counter()
-    try:
+    with _renderer_failures():
         renderer = get_renderer(in_process_requested(settings))
-        key = _upload_key(hair_obj)
+        key = upload_key(hair_obj)
         uploaded = False
         if key != _uploaded:
             renderer.set_strands(world_strands(hair_obj))
             _uploaded = key
             uploaded = True
+        if mesh_key != _uploaded_meshes:
+            # Forgotten first: a refused mesh leaves the renderer's meshes unknown.
+            _uploaded_meshes = None
+            renderer.set_meshes(mesh_list or None)
+            _uploaded_meshes = mesh_key
+            uploaded = True
         t2 = time.perf_counter()
+        timings = {"prepare_s": t1 - t0, "upload_s": t2 - t1, "uploaded": uploaded}
+        if not wait and hasattr(renderer, "render_begin"):
+            renderer.render_begin(camera, rs)
+            return PendingImage(size, timings, renderer=renderer)
+        t3 = time.perf_counter()
         image = renderer.render(camera, rs)
+        timings["render_s"] = time.perf_counter() - t3
+    return PendingImage(size, timings, image=image)
+
+
+@contextlib.contextmanager
+def _renderer_failures():
+    """InputError passes; any other failure of the renderer closes it and is RendererDied."""
+    try:
+        yield
     except InputError:
         raise
     except Exception as e:
         close()
         raise RendererDied(f"{type(e).__name__}: {e}") from e
-    t3 = time.perf_counter()
-    image = np.asarray(image, np.float32)
-    if image.shape != (size[1], size[0], 4):
-        close()
-        raise RendererDied(f"renderer returned an image of shape {image.shape}, expected {(size[1], size[0], 4)}")
-    return image, {"prepare_s": t1 - t0, "upload_s": t2 - t1, "render_s": t3 - t2, "uploaded": uploaded}
+
+
+class PendingImage:
+    """A preview image being drawn: ready() says, without waiting, whether result() has it;
+    result() -> ((H, W, 4) float32, timings), raising as render does."""
+
+    def __init__(self, size, timings, image=None, renderer=None):
+        self.size, self.timings = size, timings
+        self._image, self._renderer = image, renderer
+        self._t0 = time.perf_counter()
+
+    def ready(self):
+        return self._image is not None or self._renderer.render_ready()
+
+    def result(self):
+        if self._image is None:
+            with _renderer_failures():
+                self._image = self._renderer.render_end()
+        self.timings.setdefault("render_s", time.perf_counter() - self._t0)
+        image = np.asarray(self._image, np.float32)
+        w, h = self.size
+        if image.shape != (h, w, 4):
+            close()
+            raise RendererDied(f"renderer returned an image of shape {image.shape}, expected {(h, w, 4)}")
+        return image, self.timings
 
 
 def write_image(pixels):

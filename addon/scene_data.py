@@ -1,11 +1,14 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Blender objects -> the arrays groom takes, and key strand curve objects <-> groom.KeyStrand.
+"""Blender objects -> the arrays groom takes, and key strand curve objects <-> groom.KeyStrand;
+the scene's meshes as the preview's tracer takes them (`scene_meshes`).
 
-Everything is read in the scalp object's local space (the space groom works in and the
+Everything groom reads is in the scalp object's local space (the space groom works in and the
 generated hair is stored in): mesh arrays come out with `foreach_get`, key strands are
-carried into scalp space by one 4x4 matrix each.
+carried into scalp space by one 4x4 matrix each. The preview's meshes are in world space,
+where the preview puts the hair.
 """
 import contextlib
+from dataclasses import dataclass
 
 import numpy as np
 import bpy
@@ -106,6 +109,20 @@ def _mesh_geometry(mesh):
     triangles = np.empty(len(mesh.loop_triangles) * 3, np.int32)
     mesh.loop_triangles.foreach_get("vertices", triangles)
     return vertices.reshape(-1, 3), canonical_triangles(triangles)
+
+
+def _mesh_geometry_by_material(mesh):
+    """(vertices (V,3) float64, [(material slot, triangles (T,3) int64 in canonical_triangles'
+    order), ...] one entry per slot the faces use, slots ascending) of a mesh."""
+    mesh.calc_loop_triangles()
+    vertices = np.empty(len(mesh.vertices) * 3, np.float64)
+    mesh.vertices.foreach_get("co", vertices)
+    triangles = np.empty(len(mesh.loop_triangles) * 3, np.int32)
+    mesh.loop_triangles.foreach_get("vertices", triangles)
+    slot = np.empty(len(mesh.loop_triangles), np.int32)
+    mesh.loop_triangles.foreach_get("material_index", slot)
+    triangles = triangles.reshape(-1, 3)
+    return vertices.reshape(-1, 3), [(int(k), canonical_triangles(triangles[slot == k])) for k in np.unique(slot)]
 
 
 def read_scalp(obj, depsgraph=None):
@@ -303,3 +320,110 @@ def key_strand_to_object(scalp, key, name="Key Strand", collection=None):
         s.key_radius = float(key.root_radius)
     s.key_group = int(key.group)
     return obj
+
+
+# --- the scene's meshes for the preview ---------------------------------------------------
+# Cycles shades a mesh without a material with a grey diffuse of this albedo.
+NO_MATERIAL_RGB = (0.8, 0.8, 0.8)
+
+
+def material_base_color(material):
+    """The linear RGB a material shows in the preview: its Principled BSDF's Base Color
+    (the one feeding the output, or the first one), or its viewport display colour when it
+    has no node tree, no Principled BSDF or a Base Color driven by a texture or other node;
+    NO_MATERIAL_RGB for no material."""
+    if material is None:
+        return NO_MATERIAL_RGB
+    tree = material.node_tree
+    # Blender 5 always renders a material's nodes (use_nodes is deprecated there).
+    if tree is not None and bpy.app.version < (5, 0, 0) and not material.use_nodes:
+        tree = None
+    if tree is not None:
+        principled = [n for n in tree.nodes if n.type == 'BSDF_PRINCIPLED']
+        if principled:
+            socket = _surface_principled(tree, principled).inputs["Base Color"]
+            if not socket.is_linked:
+                return tuple(float(c) for c in socket.default_value[:3])
+    return tuple(float(c) for c in material.diffuse_color[:3])
+
+
+def _surface_principled(tree, principled):
+    """The Principled BSDF linked straight into the active Material Output's Surface, else
+    the first Principled BSDF of the tree."""
+    outputs = [n for n in tree.nodes if n.type == 'OUTPUT_MATERIAL']
+    active = [n for n in outputs if n.is_active_output] or outputs
+    for out in active:
+        surface = out.inputs.get("Surface")
+        if surface is not None and surface.is_linked:
+            node = surface.links[0].from_node
+            if node.type == 'BSDF_PRINCIPLED':
+                return node
+    return principled[0]
+
+
+def mesh_triangle_count(obj, depsgraph):
+    """Triangles of an object's evaluated mesh, counted without triangulating it: a face
+    of n corners makes n - 2 triangles."""
+    mesh = obj.evaluated_get(depsgraph).data
+    return len(mesh.loops) - 2 * len(mesh.polygons)
+
+
+def read_world_mesh(obj, depsgraph):
+    """The preview's meshes of one object: [(vertices (V,3) float64 in world space, triangles
+    (T,3) int64, rgb, name), ...], one per material slot its faces use (the evaluated mesh,
+    modifiers applied, carried by its evaluated matrix_world); [] without faces."""
+    evaluated = obj.evaluated_get(depsgraph)
+    m = _matrix(evaluated.matrix_world)
+    with _mesh_of(obj, depsgraph) as mesh:
+        vertices, groups = _mesh_geometry_by_material(mesh)
+    if not _is_identity(m):
+        vertices = vertices @ m[:3, :3].T + m[:3, 3]
+    slots = obj.material_slots
+    out = []
+    for k, triangles in groups:
+        material = slots[k].material if k < len(slots) else None
+        name = obj.name if len(groups) == 1 else f"{obj.name} ({material.name if material else 'no material'})"
+        out.append((vertices, triangles, material_base_color(material), name))
+    return out
+
+
+@dataclass
+class SceneMeshes:
+    """What the preview shows beside the hair: `meshes` as tracer.Renderer.set_meshes takes
+    them, `triangles` their count, `skipped` the triangles of the visible meshes left out
+    for the budget (0 when none were). The arrays are not changed once read."""
+    meshes: list
+    triangles: int
+    skipped: int = 0
+    digest: str = None      # the preview's digest of the arrays, made on first upload
+
+
+def preview_mesh_objects(scene, view_layer, scalp):
+    """(the scalp and its collider, the other meshes) that a render of the scene shows:
+    every mesh object not hidden from renders; the others must also be visible in the view
+    layer (the scalp and collider are shown even when hidden in the viewport, as while
+    drawing keys on a scalp whose head is hidden). Each list in a stable order, by name."""
+    own = [scalp]
+    collider = collider_object(scalp)
+    if collider is not scalp and collider.type == 'MESH':
+        own.append(collider)
+    own = [o for o in own if not o.hide_render]
+    others = sorted((o for o in scene.objects
+                     if o.type == 'MESH' and not o.hide_render and o not in own
+                     and o.visible_get(view_layer=view_layer)), key=lambda o: o.name)
+    return own, others
+
+
+def scene_meshes(scene, view_layer, depsgraph, scalp, budget):
+    """SceneMeshes of the scene for the preview: the scalp, its collider and the scene's other
+    visible meshes, with their world transforms and base colours; when all of them together
+    pass `budget` triangles, only the scalp and collider (and `skipped` says how many
+    triangles were left out)."""
+    own, others = preview_mesh_objects(scene, view_layer, scalp)
+    counts = {o.name: mesh_triangle_count(o, depsgraph) for o in own + others}
+    total = sum(counts.values())
+    chosen, skipped = own + others, 0
+    if total > budget:
+        chosen, skipped = own, sum(counts[o.name] for o in others)
+    meshes = [m for o in chosen for m in read_world_mesh(o, depsgraph)]
+    return SceneMeshes(meshes, sum(len(m[1]) for m in meshes), skipped)

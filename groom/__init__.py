@@ -21,15 +21,21 @@ default_collider(), the bundled head) and read what it did:
     result = generate(scalp, placement.keys, placement.params,
                       collider=Collider(head.vertices, head.triangles, name="head"))
     print(result.collision.warning() or f"{result.collision.strands_moved} strands moved out")
+
+A head too large to hold (ten million strands) grows a block at a time straight into its
+file, in the memory of one block:
+
+    summary = generate_to_npz("head.npz", scalp, placement.keys, placement.params.replace(count=10_000_000))
 """
 from .scalp import Scalp, default_head, default_scalp, load_obj
 from .keys import KeyStrand, place_key
 from .params import GroomParams
-from .generate import GroomResult, Generator, generate
+from .generate import BlockGenerator, GroomResult, Generator, generate, generate_to_npz
 from .head import HeadFrame, fit_head_frame
 from .collide import Collider, default_collider
 from .presets import Placement, Preset, list_presets, load_preset, save_preset
 
 __all__ = ["Scalp", "default_head", "default_scalp", "load_obj", "KeyStrand", "place_key", "GroomParams",
-           "GroomResult", "Generator", "generate", "HeadFrame", "fit_head_frame", "Collider", "default_collider",
+           "GroomResult", "Generator", "generate", "BlockGenerator", "generate_to_npz", "HeadFrame", "fit_head_frame",
+           "Collider", "default_collider",
            "Placement", "Preset", "list_presets", "load_preset", "save_preset"]

@@ -9,6 +9,9 @@
 Bad input exits 2 with a message naming it; no partial output file is ever written. Keys
 that cannot each find a root of their own on the scalp, and keys that pass through the
 collider, are named on stderr; so is the progress of work that takes more than a second.
+`generate` grows the strands a block at a time straight into the file
+(groom.generate.generate_to_npz), so its memory does not grow with --count; only a file the
+disk cannot take is refused (with the size it would need).
 """
 import argparse
 import os
@@ -98,15 +101,23 @@ class _Progress:
         self.start = time.perf_counter()
         self.shown = False
         self.last = None
+        self.stages = set()
+        self.last_line = self.start
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
 
     def __call__(self, fraction, stage):
-        if time.perf_counter() - self.start < PROGRESS_AFTER or stage == self.last:
-            return
-        self.last = stage
+        now = time.perf_counter()
         text = f"{100 * fraction:3.0f}% {stage}"
+        if now - self.start < PROGRESS_AFTER or text == self.last:
+            return
+        # A log gets a line for each new stage and at most one a second otherwise (the blocks
+        # of a large head repeat their stages); a terminal redraws its one line.
+        if not self.tty and stage in self.stages and now - self.last_line < PROGRESS_AFTER and fraction < 1:
+            return
+        self.last, self.last_line = text, now
+        self.stages.add(stage)
         if self.tty:
-            self.stream.write("\r" + text.ljust(48))
+            self.stream.write("\r" + text.ljust(56))
         else:
             self.stream.write(f"progress: {text}\n")
         self.stream.flush()
@@ -119,7 +130,7 @@ class _Progress:
 
 
 def generate_main(args):
-    from . import default_scalp, generate, load_obj, load_preset
+    from . import default_scalp, load_obj, load_preset
     if not args.out.lower().endswith(".npz"):
         raise InputError(f"--out {args.out!r}: the output must be a .npz file")
     from hairio.atomic import check_destination
@@ -129,6 +140,10 @@ def generate_main(args):
     if args.seed is not None and args.seed < 0:
         raise InputError(f"--seed {args.seed}: must be >= 0")
     preset = load_preset(args.preset)
+    changes = {k: v for k, v in (("count", args.count), ("seed", args.seed)) if v is not None}
+    from .generate import check_npz_room, generate_to_npz
+    # A file the disk cannot take is refused before the scalp, keys and collider are made.
+    check_npz_room(args.out, preset.params.replace(**changes), f"--out {args.out!r}")
     up, front = _head_axes(args, preset.params)
     scalp = load_obj(args.scalp) if args.scalp else default_scalp()
     collider = _collider(args)
@@ -137,29 +152,25 @@ def generate_main(args):
     warning = placement.warning()
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
-    changes = {k: v for k, v in (("count", args.count), ("seed", args.seed)) if v is not None}
     params = placement.params.replace(**changes) if changes else placement.params
     progress = _Progress()
+    # The key strands, guides and weights travel in the .npz, so `export` can hand them to an
+    # engine's simulation later.
     try:
-        result = generate(scalp, placement.keys, params, collider=collider, progress=progress)
+        result = generate_to_npz(args.out, scalp, placement.keys, params, collider=collider, progress=progress,
+                                 what=f"--out {args.out!r}")
+    except OSError as e:
+        raise InputError(f"--out {args.out!r}: cannot write it ({e})") from e
     finally:
         progress.close()
     elapsed = time.perf_counter() - start
     inside = result.collision.warning() if result.collision is not None else None
     if inside:
         print(f"warning: {inside}", file=sys.stderr)
-    from .generate import strands_with_guides
-    # The key strands, guides and weights travel in the .npz, so `export` can hand them to an
-    # engine's simulation later.
-    s = strands_with_guides(result, placement.keys, params)
-    try:
-        s.save_npz(args.out)
-    except OSError as e:
-        raise InputError(f"--out {args.out!r}: cannot write it ({e})") from e
     moved = ("" if result.collision is None else
              f", {result.collision.strands_moved} moved out of {result.collision.collider}")
-    print(f"{preset.name}: {s.num_strands} strands, {s.num_points} points, {s.num_segments} cylinders{moved} "
-          f"in {elapsed:.3f} s -> {args.out}")
+    print(f"{preset.name}: {result.num_strands} strands, {result.num_points} points, {result.num_segments} "
+          f"cylinders{moved} in {elapsed:.3f} s -> {args.out}")
     return 0
 
 

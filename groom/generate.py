@@ -5,9 +5,14 @@
 (roots, frames, random numbers) and, when keys change, recomputes only the strands whose
 wisp or neighbours use a changed key. Its result is bit-identical to a full regeneration
 because every per-strand computation is element-wise (see interpolate.py). For the same
-reason the work over strands can run in ranges on a pool of threads (parallel.py) without
-changing a number.
+reason the work over strands can run in ranges on a pool of threads (parallel.py), and the
+strands grow in blocks of BLOCK_STRANDS (so the per-point temporaries live for one block,
+not the whole head), without changing a number. `BlockGenerator` hands the blocks over one
+at a time and holds none of them, nor any per-root state: `generate_to_npz` writes a head
+of any size to a file in the memory of one block.
 """
+import os
+import shutil
 import warnings
 from dataclasses import dataclass
 from functools import partial
@@ -15,6 +20,9 @@ from functools import partial
 import numpy as np
 
 from hairio import InputError, Strands
+from hairio.atomic import check_destination
+from hairio.npyfile import NpzWriter
+from hairio.strands import GUIDE_NPZ_NAMES, NPZ_NAMES
 from hairio.validate import check_memory
 
 from .cylinders import (adaptive_sigma, alpha_profile, fill_strand_rows, radius_profile, strand_attributes,
@@ -28,7 +36,7 @@ from .params import GroomParams
 from .sampling import sample_roots
 from .scalp import Scalp
 from .parallel import MIN_SPLIT, ranges, run_jobs
-from .collide import StrandCollision
+from .collide import CollisionReport, CollisionStats, StrandCollision
 from .shaping import clump_arguments, shape_strands, shaping_bound
 from .wisps import check_groups, guide_weights_by_guide, root_groups_for
 
@@ -59,7 +67,7 @@ class ResolutionWarning(UserWarning):
     their cylinders (GroomResult.warning says how many, by how much, and what would do)."""
 
 
-def _check_inputs(scalp, keys, params):
+def _check_inputs(scalp, keys, params, in_memory=True):
     if not isinstance(scalp, Scalp):
         raise InputError(f"scalp: expected a groom.Scalp, got {type(scalp).__name__}")
     if not isinstance(params, GroomParams):
@@ -70,14 +78,30 @@ def _check_inputs(scalp, keys, params):
     for i, k in enumerate(keys):
         if not isinstance(k, KeyStrand):
             raise InputError(f"keys[{i}]: expected a groom.KeyStrand, got {type(k).__name__}")
-    check_memory(f"count {params.count:,}", params.count * params.points_per_strand * _BYTES_PER_POINT,
-                 f"grow fewer strands, or fewer points per strand (points_per_strand {params.points_per_strand})")
+    if in_memory:
+        check_memory(f"count {params.count:,}", params.count * params.points_per_strand * _BYTES_PER_POINT,
+                     f"grow fewer strands, or fewer points per strand (points_per_strand {params.points_per_strand}), "
+                     f"or write them to a file as they grow (python -m groom generate, groom.generate_to_npz), "
+                     f"which takes the memory of one block of {BLOCK_STRANDS:,} strands whatever the count")
     return keys
 
 
-# Peak memory while growing, per strand and point of points_per_strand (measured: 35-47
-# bytes at 50k-200k strands, adaptive and fixed resolution), with room for the caller's copy.
+# Peak memory while growing, per strand and point of points_per_strand, with room for the
+# caller's copy (measured: 39 bytes at 1M strands of wavy, 62 of its 96 points a strand; the
+# result itself takes 32 bytes a point, SPEC §0 arrays, and a copy of it as many again).
 _BYTES_PER_POINT = 64
+
+# Strands grown at a time. Each block's temporaries (curve parameters, per-point attributes
+# before they are joined, the collision's look-ups) take some 60 bytes a point, about 250 MB
+# for 65,536 strands of 62 points; smaller blocks cost more numpy calls for the same work.
+BLOCK_STRANDS = 1 << 16
+
+
+def _block_ranges(n, size):
+    """[(lo, hi), ...] covering 0..n in blocks of at most `size`, as equal as can be."""
+    parts = max(1, -(-n // max(int(size), 1)))
+    edges = [n * i // parts for i in range(parts + 1)]
+    return list(zip(edges[:-1], edges[1:]))
 
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
@@ -103,79 +127,69 @@ def _threads_for(n_strands):
     return 1 if n_strands < MIN_SPLIT else None
 
 
-class Generator:
-    """Incremental generator. `generate()` gives the full result; `update_keys({i: KeyStrand})`
-    replaces keys and returns the new result, recomputing only affected strands.
+def _root_state(scalp, p, samples, lo, hi, frac, uv, transforms):
+    """Length fraction, UV and transform B of roots lo..hi of `samples`, written into frac
+    (S,), uv (S, 2) (None: the scalp has none) and transforms (9, S) at lo..hi."""
+    ids, tri, bary = samples.ids[lo:hi], samples.tri[lo:hi], samples.bary[lo:hi]
+    frac[lo:hi] = length_fractions(p.seed, ids, p.min_length, p.max_length)
+    if uv is not None:
+        uv[lo:hi] = scalp.uv_at(tri, bary)
+    angles = tidiness_angles(p.seed, ids, p.tidiness, p.theta_max)
+    axes = frame_axes(scalp.normals_blend(tri, bary, p.normal_mode), p.up, p.front)
+    transforms[:, lo:hi] = strand_transforms(axes, angles, p.intelligence)
 
-    Per-strand arrays are kept component-major (one contiguous row per component), the
-    layout whole-array numpy code reads fastest; results are returned in the (S, 3) layout
-    of GroomResult."""
 
-    def __init__(self, scalp, keys, params, samples=None, collider=None, progress=None):
-        """samples: optional sampling.RootSamples to grow from instead of sampling
-        params.count roots (measurements place roots where they need them). collider: the
-        mesh the hair stays out of (collide.as_collider: a Collider, a Scalp or (vertices,
-        triangles)), or None. progress: None or a callable(fraction in [0, 1], stage text),
-        called from this thread as the work goes on (a progress bar for long runs)."""
-        self.progress = progress
-        self._report(0.0, "sampling roots")
-        self.keys = _check_inputs(scalp, keys, params)
-        self.scalp, self.params = scalp, params
-        p = params
-        if samples is None:
-            samples = sample_roots(scalp, p.count, p.seed, p.sampling_mode)
-        self.samples = samples
-        self._roots = np.ascontiguousarray(samples.points.T)
-        self._reach = float(np.abs(self._roots).max()) if self._roots.size else 0.0
-        self.root_groups = root_groups_for(scalp, samples.tri, samples.bary, samples.points, p)
-        n = len(samples.ids)
-        self.root_uv = None if scalp.uv is None else np.empty((n, 2))
-        self.frac = np.empty(n)
-        self.transforms = np.empty((9, n), np.float32)
-        # The per-root work and the guides of the first generate() (they need only the key
-        # roots), on the workers. The keys are resampled here afterwards, not meanwhile: a
-        # thread busy with many small numpy calls slowed the workers more than it saved.
-        assign_jobs, self._first_assignment = self._assign_jobs([k.root for k in self.keys],
-                                                                [k.group for k in self.keys])
-        per_root = [partial(self._per_root, lo, hi) for lo, hi in ranges(n)]
-        run_jobs(per_root + assign_jobs, _threads_for(n))
+def _resolution_shortfall(met, asked, needed):
+    """(strands whose tolerance the cylinder cap stopped, the worst met/asked among them, the
+    most cylinders one of them needs): what the resolution warning says, from per-strand
+    arrays; blocks' answers combine by sum, max, max."""
+    over = met > asked * (1 + 1e-9)
+    if not over.any():
+        return 0, 0.0, 0.0
+    return int(over.sum()), float((met[over] / asked[over]).max()), float(needed[over].max())
+
+
+def _combined_shortfall(a, b):
+    return a[0] + b[0], max(a[1], b[1]), max(a[2], b[2])
+
+
+def _resolution_message(p, shortfall, total):
+    """The resolution warning for `shortfall` (_resolution_shortfall) of `total` strands, or None."""
+    over, ratio, needed = shortfall
+    if not over:
+        return None
+    units = "root radii" if p.tolerance_units == "radius" else "scene units"
+    cap = p.points_per_strand - 1
+    got = (f"they got {cap} cylinders each, placed to stay within {ratio:.3g} times the tolerance at worst"
+           if np.isfinite(ratio) else f"they got {cap} equal steps, with no bound on their error")
+    loosen = f", or loosen the tolerance to {p.tolerance * ratio:.3g} {units}" if np.isfinite(ratio) else ""
+    return (f"adaptive resolution: {over:,} of {total:,} strands need more than the {cap} cylinders "
+            f"points_per_strand {p.points_per_strand} allows to stay within the tolerance {p.tolerance:g} {units}; "
+            f"{got}. To meet the tolerance raise points_per_strand to at least "
+            f"{int(np.ceil(needed)) + 1}{loosen}")
+
+
+class _Grower:
+    """What Generator and BlockGenerator share: the keys' tables and blend rows, the
+    collider, and the growing of a block of strands from their per-strand inputs."""
+
+    def _setup_keys(self, collider, n):
+        """The keys' tables and blend rows, and the collider (for n strands)."""
+        p = self.params
         self._key_data = self._prepare_keys(self.keys)
         self._samples = self._table_samples(self._key_data)
         self._set_rows(self._key_data, self._samples)
         self._exact_rows = None
-        self._resolution = None     # adaptive: (tolerance met, tolerance asked) per strand
+        self._resolution = None     # adaptive: (tolerance met, tolerance asked, cylinders needed) per strand
         self._collision = None
         if collider is not None and p.collision:
             self._report(0.15, "preparing the collider")
-            self._collision = StrandCollision(collider, scalp, p, n)
+            self._collision = StrandCollision(collider, self.scalp, p, n)
             self._collision.check_keys(self.keys, p)
-        self._result = None
-        self._cache = None
-        self.last_recomputed = 0  # strands recomputed by the last update_keys
 
     def _report(self, fraction, stage):
         if self.progress is not None:
             self.progress(float(fraction), stage)
-
-    def _axes(self, lo=0, hi=None):
-        """frames.frame_axes of roots lo..hi."""
-        p, s = self.params, self.samples
-        return frame_axes(self.scalp.normals_blend(s.tri[lo:hi], s.bary[lo:hi], p.normal_mode), p.up, p.front)
-
-    def _per_root(self, lo, hi):
-        """Length fraction, UV and transform B of roots lo..hi."""
-        p, s = self.params, self.samples
-        ids = s.ids[lo:hi]
-        self.frac[lo:hi] = length_fractions(p.seed, ids, p.min_length, p.max_length)
-        if self.root_uv is not None:
-            self.root_uv[lo:hi] = self.scalp.uv_at(s.tri[lo:hi], s.bary[lo:hi])
-        angles = tidiness_angles(p.seed, ids, p.tidiness, p.theta_max)
-        self.transforms[:, lo:hi] = strand_transforms(self._axes(lo, hi), angles, p.intelligence)
-
-    @property
-    def frames(self):
-        """Root frames (S,3,3), columns (main tangent, second tangent, normal)."""
-        return np.stack([a.T for a in self._axes()], axis=2)
 
     def _prepare_keys(self, keys):
         """Per key: its arc-length table (FINE_SAMPLES at adaptive resolution, for the
@@ -233,6 +247,159 @@ class Generator:
                 table = key_offsets([d["key"]], [d["frame"]], p.intelligence, samples)[0][0]
             d["rows"] = key_rows(table)
 
+    def _block_report(self, i, n, start=0.2):
+        """progress(fraction of block i of n, stage), mapped onto the growing's share (start-0.95)."""
+        def report(fraction, stage):
+            self._report(start + (0.95 - start) * (i + fraction) / n, stage)
+        return report
+
+    def _blend_context(self):
+        """What every block's blend reads: the keys' radii (K,), blend rows (K, M, 8) f32, roots
+        (K, 3) and, at adaptive resolution, curvature bins with the shaping's share."""
+        p, kd = self.params, self._key_data
+        radii = np.array([d["radius"] for d in kd], dtype=np.float64)
+        rows = np.stack([d["rows"] for d in kd])
+        _check_float32(self._reach, rows, radii)
+        bins = None if p.resolution_mode == "fixed" else shaping_bound(np.stack([d["bound"] for d in kd]), rows, p)
+        return {"radii": radii, "rows": rows, "key_roots": np.array([d["root"] for d in kd]), "bins": bins}
+
+    def _plan(self, context, roots, g, w, frac, idx):
+        """(σ flat (P,) or None, counts (S,)) of one block of strands: equal steps at fixed
+        resolution (σ made in the blend), else cylinders.adaptive_sigma's (noting per strand
+        what it met). roots (3, n), g, w (3, n), frac (n,) and idx as for _grow."""
+        p = self.params
+        max_cyl = p.points_per_strand - 1
+        if p.resolution_mode == "fixed":
+            return None, np.full(len(frac), max_cyl + 1, np.int64)
+        radii = context["radii"]
+        base_radius = w[0] * radii[g[0]] + w[1] * radii[g[1]] + w[2] * radii[g[2]]
+        asked = p.tolerance * (base_radius if p.tolerance_units == "radius" else np.ones(len(frac)))
+        tol = np.maximum(asked, 1e-300)
+        clump = clump_arguments(p, g[0], roots, context["key_roots"])
+        res = adaptive_sigma(frac, g.T, w.T, context["bins"], tol, max_cyl, table_step=1.0 / (self._samples - 1),
+                             clump=clump)
+        self._note_resolution(idx, res.met, tol, res.needed)
+        return res.sigma, res.counts
+
+    def _grow(self, context, roots, transforms, g, w, frac, ids, idx, report, plan=None):
+        """Points and attributes (points, counts, radius, colour, alpha) of one block of
+        strands from their per-strand inputs, component-major: roots (3, n), transforms (9,
+        n), guides g (3, n), weights w (3, n), length fractions and ids (n,); idx: where they
+        lie among the strands (a slice or indices), for the resolution and collision notes;
+        plan: their _plan, made here when None."""
+        p = self.params
+        radii, rows = context["radii"], context["rows"]
+        report(0.0, "growing strands")
+        sigma, counts = self._plan(context, roots, g, w, frac, idx) if plan is None else plan
+        del plan
+        base_radius = w[0] * radii[g[0]] + w[1] * radii[g[1]] + w[2] * radii[g[2]]
+        args = (roots, transforms, g, w.astype(np.float32))
+        threads = _threads_for(len(frac))
+        clump = clump_arguments(p, g[0], roots, context["key_roots"])
+        if sigma is None:
+            n = p.points_per_strand
+            along = np.arange(n) / (n - 1)
+            jobs, attrs = self._attribute_jobs(ids, counts, along, g, w, base_radius)
+            pts, done = evaluate_strands(*args, counts, rows, frac=frac, also=jobs, threads=threads, clump=clump)
+            attrs = attrs or done[0]
+        else:
+            pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma, threads=threads, clump=clump)
+            attrs = self._attributes(ids, counts, (sigma, frac), g, w, base_radius)
+        del args, clump
+        report(0.5, "frizz and curl")
+        shape_strands(pts, counts, sigma, frac, transforms, g[0], ids, rows, p, threads)
+        del sigma
+        if self._collision is not None:
+            report(0.6, "moving hair out of the collider")
+            pts = self._collision.apply(pts, counts, attrs[0], idx, threads)
+        return (pts, counts) + tuple(attrs)
+
+    def _attributes(self, ids, counts, along, g, w, base_radius):
+        """(radius, colour, alpha) per point (cylinders.strand_attributes) from the guides' colours."""
+        return strand_attributes(self.params.seed, ids, counts, along, base_radius, self._base_color(g, w),
+                                 self.params)
+
+    def _base_color(self, g, w):
+        """The guides' colours blended by the weights, (S,3) float64."""
+        colors = np.stack([d["color"] for d in self._key_data])
+        return np.stack([w[0] * colors[g[0], c] + w[1] * colors[g[1], c] + w[2] * colors[g[2], c]
+                         for c in range(3)], axis=1)
+
+    def _attribute_jobs(self, ids, counts, along, g, w, base_radius):
+        """(jobs, arrays) for strands that all have len(along) points: the jobs fill the
+        arrays (radius, colour, alpha) a range of strands each, to run beside the blend. With
+        per-point colour variation: one job returning the arrays, and arrays None."""
+        p, n = self.params, len(along)
+        if np.any(p.color_variation_point):
+            return [partial(self._attributes, ids, counts, along, g, w, base_radius)], None
+        s = along.astype(np.float32)
+        r_prof, a_prof = radius_profile(s, p), alpha_profile(s, p)
+        n_pts = len(ids) * n
+        out = (np.empty(n_pts, np.float32), np.empty((n_pts, 3), np.float32), np.empty(n_pts, np.float32))
+
+        def fill(lo, hi):
+            color = strand_colors(p.seed, ids[lo:hi], self._base_color(g[:, lo:hi], w[:, lo:hi]), p)
+            fill_strand_rows(*(a[lo * n:hi * n] for a in out), base_radius[lo:hi], color, r_prof, a_prof)
+        return [partial(fill, lo, hi) for lo, hi in ranges(len(ids))], out
+
+
+class Generator(_Grower):
+    """Incremental generator. `generate()` gives the full result; `update_keys({i: KeyStrand})`
+    replaces keys and returns the new result, recomputing only affected strands.
+
+    Per-strand arrays are kept component-major (one contiguous row per component), the
+    layout whole-array numpy code reads fastest; results are returned in the (S, 3) layout
+    of GroomResult."""
+
+    def __init__(self, scalp, keys, params, samples=None, collider=None, progress=None, block_strands=BLOCK_STRANDS):
+        """samples: optional sampling.RootSamples to grow from instead of sampling
+        params.count roots (measurements place roots where they need them). collider: the
+        mesh the hair stays out of (collide.as_collider: a Collider, a Scalp or (vertices,
+        triangles)), or None. progress: None or a callable(fraction in [0, 1], stage text),
+        called from this thread as the work goes on (a progress bar for long runs).
+        block_strands: strands grown at a time (the result does not depend on it)."""
+        self.progress = progress
+        self.block_strands = block_strands
+        self._report(0.0, "sampling roots")
+        self.keys = _check_inputs(scalp, keys, params)
+        self.scalp, self.params = scalp, params
+        p = params
+        if samples is None:
+            samples = sample_roots(scalp, p.count, p.seed, p.sampling_mode)
+        self.samples = samples
+        self._roots = np.ascontiguousarray(samples.points.T)
+        self._reach = float(np.abs(self._roots).max()) if self._roots.size else 0.0
+        self.root_groups = root_groups_for(scalp, samples.tri, samples.bary, samples.points, p)
+        n = len(samples.ids)
+        self.root_uv = None if scalp.uv is None else np.empty((n, 2))
+        self.frac = np.empty(n)
+        self.transforms = np.empty((9, n), np.float32)
+        # The per-root work and the guides of the first generate() (they need only the key
+        # roots), on the workers. The keys are resampled here afterwards, not meanwhile: a
+        # thread busy with many small numpy calls slowed the workers more than it saved.
+        assign_jobs, self._first_assignment = self._assign_jobs([k.root for k in self.keys],
+                                                                [k.group for k in self.keys])
+        per_root = [partial(self._per_root, lo, hi) for lo, hi in ranges(n)]
+        run_jobs(per_root + assign_jobs, _threads_for(n))
+        self._setup_keys(collider, n)
+        self._result = None
+        self._cache = None
+        self.last_recomputed = 0  # strands recomputed by the last update_keys
+
+    def _axes(self, lo=0, hi=None):
+        """frames.frame_axes of roots lo..hi."""
+        p, s = self.params, self.samples
+        return frame_axes(self.scalp.normals_blend(s.tri[lo:hi], s.bary[lo:hi], p.normal_mode), p.up, p.front)
+
+    def _per_root(self, lo, hi):
+        """Length fraction, UV and transform B of roots lo..hi."""
+        _root_state(self.scalp, self.params, self.samples, lo, hi, self.frac, self.root_uv, self.transforms)
+
+    @property
+    def frames(self):
+        """Root frames (S,3,3), columns (main tangent, second tangent, normal)."""
+        return np.stack([a.T for a in self._axes()], axis=2)
+
     def _assign(self):
         """Guides (3, S) int64 and weights (3, S) float64 of every root, in ranges of roots on
         the workers."""
@@ -287,59 +454,66 @@ class Generator:
 
     def _strands(self, sel, guides, weights):
         """Points and attributes of the strands `sel` (indices into the roots, in that order;
-        None: all of them). guides (3, S), weights (3, S) as from _assign."""
-        p, kd = self.params, self._key_data
-        if sel is not None and not len(sel):  # an update that touches no strand
+        None: all of them), grown a block of strands at a time into the arrays of the whole.
+        guides (3, S), weights (3, S) as from _assign."""
+        n = len(self.frac) if sel is None else len(sel)
+        if not n:  # an update that touches no strand
             return (np.zeros((0, 3), np.float32), np.zeros(0, np.int64), np.zeros(0, np.float32),
                     np.zeros((0, 3), np.float32), np.zeros(0, np.float32))
+        if self.params.resolution_mode != "fixed":
+            # Per strand for the warning: fresh arrays for a full run; an update changes a copy
+            # (an array handed out before stays as it was).
+            self._resolution = (tuple(np.empty(len(self.frac)) for _ in range(3)) if sel is None or
+                                self._resolution is None else tuple(old.copy() for old in self._resolution))
+        context = self._blend_context()
+        blocks = _block_ranges(n, self.block_strands)
 
-        def pick(x):
-            return x if sel is None else x[..., sel]
-        g, w = pick(guides), pick(weights)
-        frac, ids = pick(self.frac), pick(self.samples.ids)
-        radii = np.array([d["radius"] for d in kd], dtype=np.float64)
-        base_radius = w[0] * radii[g[0]] + w[1] * radii[g[1]] + w[2] * radii[g[2]]
-        rows = np.stack([d["rows"] for d in kd])
-        _check_float32(self._reach, rows, radii)
-        args = (pick(self._roots), pick(self.transforms), g, w.astype(np.float32))
-        max_cyl = p.points_per_strand - 1
-        self._report(0.2, "growing strands")
-        clump = clump_arguments(p, g[0], args[0], np.array([d["root"] for d in kd]))
-        if p.resolution_mode == "fixed":
-            counts = np.full(len(frac), max_cyl + 1, np.int64)
-            along = np.arange(max_cyl + 1) / max_cyl
-            jobs, attrs = self._attribute_jobs(ids, counts, along, g, w, base_radius)
-            pts, done = evaluate_strands(*args, counts, rows, frac=frac, also=jobs, threads=_threads_for(len(frac)),
-                                         clump=clump)
-            attrs = attrs or done[0]
-            sigma = None
-        else:
-            asked = p.tolerance * (base_radius if p.tolerance_units == "radius" else np.ones(len(frac)))
-            tol = np.maximum(asked, 1e-300)
-            bins = shaping_bound(np.stack([d["bound"] for d in kd]), rows, p)
-            res = adaptive_sigma(frac, g.T, w.T, bins, tol, max_cyl, table_step=1.0 / (self._samples - 1), clump=clump)
-            sigma, counts = res.sigma, res.counts
-            self._note_resolution(sel, res.met, tol, res.needed)
-            pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma, threads=_threads_for(len(frac)), clump=clump)
-            attrs = self._attributes(ids, counts, (sigma, frac), g, w, base_radius)
-        threads = _threads_for(len(frac))
-        self._report(0.6, "frizz and curl")
-        shape_strands(pts, counts, sigma, frac, args[1], g[0], ids, rows, p, threads)
+        def block(i):
+            """(per-strand inputs of block i as _grow takes them, its idx)."""
+            lo, hi = blocks[i]
+            idx = slice(lo, hi) if sel is None else sel[lo:hi]
+            return [x[..., idx] for x in (self._roots, self.transforms, guides, weights, self.frac,
+                                          self.samples.ids)], idx
+        if len(blocks) == 1:
+            inputs, idx = block(0)
+            grown = self._grow(context, *inputs, idx, self._block_report(0, 1))
+            self._report(0.95, "writing strands")
+            return grown
+        # Each block's curve parameters first (they hold 8 bytes a point), so the arrays of
+        # the whole result are made once and each block's points written into them; the
+        # blocks' own arrays then come and go one at a time.
+        plans = []
+        for i in range(len(blocks)):
+            self._report(0.2 + 0.15 * i / len(blocks), "placing the points")
+            inputs, idx = block(i)
+            plans.append(self._plan(context, inputs[0], inputs[2], inputs[3], inputs[4], idx))
+        counts = np.concatenate([c for _, c in plans])
+        total = int(counts.sum())
+        out = (np.empty((total, 3), np.float32), np.empty(total, np.float32), np.empty((total, 3), np.float32),
+               np.empty(total, np.float32))
+        stats, at = CollisionStats(), 0
+        for i in range(len(blocks)):
+            inputs, idx = block(i)
+            plan, plans[i] = plans[i], None
+            grown = self._grow(context, *inputs, idx, self._block_report(i, len(blocks), 0.35), plan)
+            del plan
+            rows = slice(at, at + len(grown[0]))
+            for whole, part in zip(out, grown[:1] + grown[2:]):
+                whole[rows] = part
+            at = rows.stop
+            del grown
+            if self._collision is not None:
+                stats.add(self._collision.last)
         if self._collision is not None:
-            self._report(0.7, "moving hair out of the collider")
-            pts = self._collision.apply(pts, counts, attrs[0], sel, threads)
+            self._collision.last = stats
         self._report(0.95, "writing strands")
-        return (pts, counts) + tuple(attrs)
+        return out[0], counts, out[1], out[2], out[3]
 
-    def _note_resolution(self, sel, met, asked, needed):
+    def _note_resolution(self, idx, met, asked, needed):
         """Keeps per strand the tolerance its polyline is bound to, the one asked and the
-        cylinders a bound says it needs (strands `sel`; None: all), for the warning."""
-        if sel is None or self._resolution is None:
-            self._resolution = (met, asked, needed)
-            return
-        self._resolution = tuple(old.copy() for old in self._resolution)
+        cylinders a bound says it needs (strands `idx`), for the warning."""
         for old, new in zip(self._resolution, (met, asked, needed)):
-            old[sel] = new
+            old[idx] = new
 
     @property
     def tolerance_met(self):
@@ -352,49 +526,7 @@ class Generator:
         """What the adaptive resolution of the current strands could not meet, or None."""
         if self._resolution is None:
             return None
-        met, asked, needed = self._resolution
-        over = met > asked * (1 + 1e-9)
-        if not over.any():
-            return None
-        p = self.params
-        units = "root radii" if p.tolerance_units == "radius" else "scene units"
-        ratio = float((met[over] / asked[over]).max())
-        cap = p.points_per_strand - 1
-        got = (f"they got {cap} cylinders each, placed to stay within {ratio:.3g} times the tolerance at worst"
-               if np.isfinite(ratio) else f"they got {cap} equal steps, with no bound on their error")
-        loosen = f", or loosen the tolerance to {p.tolerance * ratio:.3g} {units}" if np.isfinite(ratio) else ""
-        return (f"adaptive resolution: {int(over.sum()):,} of {len(met):,} strands need more than the {cap} cylinders "
-                f"points_per_strand {p.points_per_strand} allows to stay within the tolerance {p.tolerance:g} {units}; "
-                f"{got}. To meet the tolerance raise points_per_strand to at least "
-                f"{int(np.ceil(needed[over].max())) + 1}{loosen}")
-
-    def _attributes(self, ids, counts, along, g, w, base_radius):
-        """(radius, colour, alpha) per point (cylinders.strand_attributes) from the guides' colours."""
-        return strand_attributes(self.params.seed, ids, counts, along, base_radius, self._base_color(g, w),
-                                 self.params)
-
-    def _base_color(self, g, w):
-        """The guides' colours blended by the weights, (S,3) float64."""
-        colors = np.stack([d["color"] for d in self._key_data])
-        return np.stack([w[0] * colors[g[0], c] + w[1] * colors[g[1], c] + w[2] * colors[g[2], c]
-                         for c in range(3)], axis=1)
-
-    def _attribute_jobs(self, ids, counts, along, g, w, base_radius):
-        """(jobs, arrays) for strands that all have len(along) points: the jobs fill the
-        arrays (radius, colour, alpha) a range of strands each, to run beside the blend. With
-        per-point colour variation: one job returning the arrays, and arrays None."""
-        p, n = self.params, len(along)
-        if np.any(p.color_variation_point):
-            return [partial(self._attributes, ids, counts, along, g, w, base_radius)], None
-        s = along.astype(np.float32)
-        r_prof, a_prof = radius_profile(s, p), alpha_profile(s, p)
-        n_pts = len(ids) * n
-        out = (np.empty(n_pts, np.float32), np.empty((n_pts, 3), np.float32), np.empty(n_pts, np.float32))
-
-        def fill(lo, hi):
-            color = strand_colors(p.seed, ids[lo:hi], self._base_color(g[:, lo:hi], w[:, lo:hi]), p)
-            fill_strand_rows(*(a[lo * n:hi * n] for a in out), base_radius[lo:hi], color, r_prof, a_prof)
-        return [partial(fill, lo, hi) for lo, hi in ranges(len(ids))], out
+        return _resolution_message(self.params, _resolution_shortfall(*self._resolution), len(self._resolution[0]))
 
     def _build(self, guides, weights, parts):
         pts, counts, radius, color, alpha = parts
@@ -541,14 +673,228 @@ def strands_with_guides(result, keys, params=None, points_per_key=32):
     UVs: what the .npz, .abc and .usd files carry so an engine's simulation drives every
     strand through the same keys and weights."""
     from hairio import Guides
-    from .keys import arc_length_tables
     params = params or GroomParams()
     keys = list(keys.values()) if isinstance(keys, dict) else list(keys)
+    guides = Guides.from_arrays(_key_strands(keys, params, points_per_key), result.guides, result.guide_weights,
+                                [k.group for k in keys])
+    return result.strands.with_guides(guides, result.root_uv)
+
+
+def _key_strands(keys, params, points_per_key):
+    """The key strands as a hairio.Strands of `points_per_key` equal arc-length steps each,
+    with their radius and colour."""
+    from .keys import arc_length_tables
     n = max(2, int(points_per_key))
     tables = arc_length_tables(keys, n)
     points = np.concatenate([k.points[0] + table for k, (table, _) in zip(keys, tables)])
     radius = np.repeat([params.radius if k.root_radius is None else k.root_radius for k in keys], n)
     color = np.repeat([params.color if k.color is None else k.color for k in keys], n, axis=0)
-    key_strands = Strands.from_arrays(points, np.full(len(keys), n, np.int32), radius, color)
-    guides = Guides.from_arrays(key_strands, result.guides, result.guide_weights, [k.group for k in keys])
-    return result.strands.with_guides(guides, result.root_uv)
+    return Strands.from_arrays(points, np.full(len(keys), n, np.int32), radius, color)
+
+
+@dataclass(frozen=True, eq=False)
+class GroomBlock:
+    """Strands lo..hi of a head grown a block at a time (BlockGenerator.blocks): points (P,3)
+    f32, counts (n,) int64, radius (P,) f32, color (P,3) f32, alpha (P,) f32 as in
+    hairio.Strands; guides (3, n) int64 (main key first) and weights (3, n) float64 as
+    Generator keeps them; root_uv (n, 2) float64 or None."""
+    lo: int
+    hi: int
+    points: np.ndarray
+    counts: np.ndarray
+    radius: np.ndarray
+    color: np.ndarray
+    alpha: np.ndarray
+    guides: np.ndarray
+    weights: np.ndarray
+    root_uv: np.ndarray = None
+
+    def arrays(self):
+        """This block's rows of the .npz arrays that have a row per strand or point, in the
+        dtypes strands_with_guides(...).save_npz writes."""
+        out = {"points": self.points, "counts": self.counts.astype(np.int32), "radius": self.radius,
+               "color": self.color, "alpha": self.alpha, "wisp": self.guides[0].astype(np.int32),
+               "guides": np.ascontiguousarray(self.guides.T, dtype=np.int32),
+               "guide_weights": np.ascontiguousarray(self.weights.T, dtype=np.float32)}
+        if self.root_uv is not None:
+            out["root_uv"] = self.root_uv.astype(np.float32)
+        return out
+
+
+@dataclass(frozen=True)
+class GroomSummary:
+    """What a run a block at a time made: strands and points in all, collision (a
+    collide.CollisionReport, or None without a collider) and the resolution warning (or None)."""
+    num_strands: int
+    num_points: int
+    collision: CollisionReport = None
+    warning: str = None
+
+    @property
+    def num_segments(self):
+        return self.num_points - self.num_strands
+
+
+# Memory of a run a block at a time, per point of a block (points_per_strand each): the
+# block's arrays and temporaries (measured on wavy at 65,536 strands a block: 647 MiB peak
+# RSS for 1M strands, 1057 MiB for 10M, of which some 190 MiB the interpreter and numpy).
+_BLOCK_BYTES_PER_POINT = 96
+
+
+class BlockGenerator(_Grower):
+    """The strands of Generator(scalp, keys, params, collider=...).generate(), grown and
+    handed over a block of strands at a time (`blocks()`), holding no block after handing
+    it over and no per-root state of the whole head: the roots, frames, wisps and weights of
+    each block are made with it, from each root's own random stream. Memory therefore stays
+    that of one block whatever the count (ten million strands take what one million do);
+    the blocks joined are bit-identical to the one-shot result."""
+
+    def __init__(self, scalp, keys, params, collider=None, progress=None, block_strands=BLOCK_STRANDS):
+        self.progress = progress
+        self.block_strands = max(1, int(block_strands))
+        self._report(0.0, "sampling roots")
+        self.keys = _check_inputs(scalp, keys, params, in_memory=False)
+        self.scalp, self.params = scalp, params
+        p = params
+        block = min(p.count, self.block_strands)
+        check_memory(f"count {p.count:,} grown in blocks of {block:,} strands",
+                     block * p.points_per_strand * _BLOCK_BYTES_PER_POINT + p.count,
+                     f"lower points_per_strand ({p.points_per_strand}) or the block size")
+        # Every root lies in a triangle of the scalp, so its corners bound how far the roots
+        # reach (the float32 check; the one-shot Generator takes the roots' own).
+        self._reach = float(np.abs(scalp.vertices[scalp.triangles]).max())
+        self._check_root_groups()
+        self._setup_keys(collider, p.count)
+        self._shortfall = (0, 0.0, 0.0)
+        self.summary = None
+
+    def _check_root_groups(self):
+        """wisps.check_groups for every root before any work (roots sampled a block at a
+        time when the scalp or a parting gives them groups; otherwise all are group 0)."""
+        p, scalp = self.params, self.scalp
+        key_groups = np.array([k.group for k in self.keys], np.int32)
+        if scalp.groups is None and p.parting is None:
+            check_groups(np.zeros(1, np.int32), key_groups)
+            return
+        found = set()
+        for lo, hi in _block_ranges(p.count, self.block_strands):
+            s = sample_roots(scalp, p.count, p.seed, p.sampling_mode, lo, hi)
+            found.update(np.unique(root_groups_for(scalp, s.tri, s.bary, s.points, p)).tolist())
+        check_groups(np.array(sorted(found), np.int32), key_groups)
+
+    def _note_resolution(self, idx, met, asked, needed):
+        self._shortfall = _combined_shortfall(self._shortfall, _resolution_shortfall(met, asked, needed))
+
+    def blocks(self):
+        """Yields a GroomBlock per block of strands, in order. Once all are taken, `summary`
+        (a GroomSummary) says what the run made, and a ResolutionWarning is issued when the
+        resolution fell short (as Generator does)."""
+        p, scalp, n = self.params, self.scalp, self.params.count
+        context = self._blend_context()
+        key_roots = np.array([k.root for k in self.keys], dtype=np.float64)
+        key_groups = np.array([k.group for k in self.keys], np.int32)
+        blocks = _block_ranges(n, self.block_strands)
+        stats, points = CollisionStats(), 0
+        self._shortfall = (0, 0.0, 0.0)
+        for i, (lo, hi) in enumerate(blocks):
+            report = self._block_report(i, len(blocks))
+            report(0.0, "sampling roots")
+            s = sample_roots(scalp, n, p.seed, p.sampling_mode, lo, hi)
+            m = hi - lo
+            frac, transforms = np.empty(m), np.empty((9, m), np.float32)
+            uv = None if scalp.uv is None else np.empty((m, 2))
+            groups = root_groups_for(scalp, s.tri, s.bary, s.points, p)
+            guides, weights = np.empty((3, m), np.int64), np.empty((3, m))
+
+            def assign(a, b):
+                g, w = guide_weights_by_guide(s.points[a:b], key_roots, p.neighbour_mode, p.n_influence, groups[a:b],
+                                              key_groups, check=False)
+                guides[:, a:b], weights[:, a:b] = g, w
+            parts = ranges(m)
+            run_jobs([partial(_root_state, scalp, p, s, a, b, frac, uv, transforms) for a, b in parts]
+                     + [partial(assign, a, b) for a, b in parts], _threads_for(m))
+            roots, ids = np.ascontiguousarray(s.points.T), s.ids
+            del s, groups
+            grown = self._grow(context, roots, transforms, guides, weights, frac, ids, slice(lo, hi), report)
+            del roots, transforms, frac, ids
+            if self._collision is not None:
+                stats.add(self._collision.last)
+            points += len(grown[0])
+            yield GroomBlock(lo, hi, *grown, guides, weights, uv)
+            # The consumer has the block now: nothing of it stays here while the next grows.
+            del grown, guides, weights, uv
+        collision = None
+        if self._collision is not None:
+            self._collision.last = stats
+            collision = self._collision.report()
+        warning = _resolution_message(p, self._shortfall, n)
+        self.summary = GroomSummary(n, points, collision, warning)
+        self._report(1.0, "done")
+        if warning:
+            warnings.warn(warning, ResolutionWarning, stacklevel=2)
+
+
+def npz_names(scalp):
+    """The arrays generate_to_npz writes (those of strands_with_guides(...).arrays(), in order)."""
+    return list(NPZ_NAMES) + [n for n in GUIDE_NPZ_NAMES if n != "root_uv" or scalp.uv is not None]
+
+
+def npz_bytes_bound(params, spill_bytes=None):
+    """Disk a run of generate_to_npz may take at most while it writes: the archive with
+    points_per_strand points a strand (32 bytes a point, 40 a strand), plus, when the blocks
+    spill to temporary files (more than `spill_bytes`), its largest array (the points, 12
+    bytes a point) once more."""
+    spill_bytes = NpzWriter.SPILL_BYTES if spill_bytes is None else spill_bytes
+    n, pps = params.count, params.points_per_strand
+    archive = n * pps * 32 + n * 48 + (1 << 20)
+    return archive + (n * pps * 12 if archive > spill_bytes else 0)
+
+
+def check_npz_room(path, params, what=None, spill_bytes=None):
+    """InputError, naming `what` (default: the path), when `path` cannot be written or its
+    disk has less room than npz_bytes_bound(params): what generate_to_npz checks before any
+    work (a caller may check it sooner, before its own preparations)."""
+    what = what or os.fspath(path)
+    check_destination(path, what)
+    folder = os.path.dirname(os.path.abspath(os.fspath(path)))
+    need, free = npz_bytes_bound(params, spill_bytes), shutil.disk_usage(folder).free
+    if need > free:
+        raise InputError(f"count {params.count:,}: {what} takes up to {need / 2**30:,.2f} GiB of disk while it is "
+                         f"written ({params.points_per_strand} points a strand at most, 32 bytes each) but "
+                         f"{folder!r} has {free / 2**30:,.2f} GiB free; grow fewer strands or fewer points per "
+                         f"strand, or write it elsewhere")
+
+
+def generate_to_npz(path, scalp, keys, params=None, collider=None, progress=None, block_strands=BLOCK_STRANDS,
+                    spill_bytes=None, points_per_key=32, what=None):
+    """Grow the strands a block at a time (BlockGenerator) straight into the .npz at `path`:
+    the arrays strands_with_guides(generate(...), keys, params).save_npz(path) writes, equal
+    element for element, with memory of one block whatever the count (the blocks go to
+    temporary files beside `path` once they take more than `spill_bytes`; hairio.npyfile.
+    NpzWriter). Refused before any work, by an InputError naming `what` (default: the
+    path), when the folder cannot take the file or has less room than npz_bytes_bound.
+    progress: as Generator's. Returns a GroomSummary. All or nothing: an error leaves no file."""
+    params = params or GroomParams()
+    check_npz_room(path, params, what, spill_bytes)
+
+    def growing(fraction, stage):
+        if progress is not None and stage != "done":   # done once the file is
+            progress(0.9 * fraction, stage)
+    gen = BlockGenerator(scalp, keys, params, collider=collider, progress=growing, block_strands=block_strands)
+    key_strands = _key_strands(gen.keys, params, points_per_key)
+    names = npz_names(scalp)
+    kwargs = {} if spill_bytes is None else {"spill_bytes": spill_bytes}
+    with NpzWriter(path, names, **kwargs) as writer:
+        for name, array in (("key_points", key_strands.points), ("key_counts", key_strands.counts),
+                            ("key_radius", key_strands.radius), ("key_color", key_strands.color),
+                            ("key_group", np.array([k.group for k in gen.keys]).astype(np.int32))):
+            writer.append(name, array)
+        for block in gen.blocks():
+            for name, array in block.arrays().items():
+                writer.append(name, array)
+            del block, array
+        label = f"writing {os.path.basename(os.fspath(path))}"
+        writer.commit(None if progress is None else lambda f: progress(0.9 + 0.1 * f, label))
+    if progress is not None:
+        progress(1.0, "done")
+    return gen.summary

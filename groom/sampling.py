@@ -58,16 +58,23 @@ def allocate_counts(weights, m):
     return counts
 
 
-def sample_roots(scalp, m, seed=0, mode="uniform"):
-    """Exactly m roots on the scalp. Returns RootSamples sorted by triangle."""
+def sample_roots(scalp, m, seed=0, mode="uniform", lo=0, hi=None):
+    """Exactly m roots on the scalp. Returns RootSamples sorted by triangle. lo, hi: only
+    roots lo..hi of those m, the very same numbers (each root's triangle follows from the
+    counts, its place from its own random stream), for a head grown a block at a time."""
     if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 1:
         raise InputError(f"count: expected an integer >= 1, got {m!r}")
     if mode not in SAMPLING_MODES:
         raise InputError(f"sampling_mode: expected one of {SAMPLING_MODES}, got {mode!r}")
     counts = allocate_counts(triangle_weights(scalp), int(m))
-    tri = np.repeat(np.arange(scalp.num_triangles, dtype=np.int64), counts)
-    ids = np.arange(int(m), dtype=np.int64)
-    points, bary = np.empty((int(m), 3)), np.empty((int(m), 3))
+    hi = int(m) if hi is None else int(hi)
+    ids = np.arange(int(lo), hi, dtype=np.int64)
+    if lo == 0 and hi == int(m):
+        tri = np.repeat(np.arange(scalp.num_triangles, dtype=np.int64), counts)
+    else:   # the triangle root i falls in: the same as the repeat's entry i
+        tri = np.searchsorted(np.cumsum(counts), ids, side="right").astype(np.int64)
+    n = len(ids)
+    points, bary = np.empty((n, 3)), np.empty((n, 3))
 
     def place(lo, hi):
         u = rng.uniform(seed, ids[lo:hi], rng.CH_TRIANGLE_A)
@@ -76,5 +83,5 @@ def sample_roots(scalp, m, seed=0, mode="uniform"):
         corners = [a * b, a * (1.0 - b), 1.0 - a]
         bary[lo:hi] = np.stack(corners, axis=1)
         points[lo:hi] = scalp.corner_blend(scalp.vertices, tri[lo:hi], corners).T
-    run_jobs([partial(place, lo, hi) for lo, hi in ranges(int(m))])
+    run_jobs([partial(place, lo, hi) for lo, hi in ranges(n)])
     return RootSamples(points, tri, bary, ids)

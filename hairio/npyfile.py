@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""numpy's .npy arrays and .npz archives read from files anyone may have written.
+"""numpy's .npy arrays and .npz archives read from files anyone may have written, and
+.npz archives written an array block at a time (NpzWriter).
 
 np.load believes a .npy header: a 1 MB archive whose header claims a (10^9, 3) array makes
 numpy allocate 11 GiB before it finds the data missing, and a damaged zip raises
@@ -16,11 +17,13 @@ import lzma
 import math
 import os
 import struct
+import tempfile
 import zipfile
 import zlib
 
 import numpy as np
 
+from .atomic import atomic_write
 from .validate import InputError
 
 MAX_EXPANSION = 32
@@ -112,3 +115,126 @@ def read_npz(path, names, required=()):
             return out
     except _ZIP_ERRORS as e:
         raise InputError(f"{path}: cannot read as .npz ({type(e).__name__}: {e}); re-export it") from None
+
+
+class NpzWriter:
+    """An .npz in numpy.savez's layout (one uncompressed NAME.npy member per array, in the
+    order of `names`) written an array block at a time, for arrays too large to hold at
+    once: a head of ten million strands grown block by block.
+
+    append(name, rows) adds rows to an array (dtype and trailing shape set by its first
+    block); commit() writes the archive atomically (hairio.atomic: all or nothing). The
+    blocks stay in memory until they take `spill_bytes` in all; from then on each array's
+    blocks go to a temporary file of its own beside `path` (a zip member cannot grow while
+    another does, and a .npy header holds the final shape), copied into its member by
+    commit() and removed as soon as it is copied. Memory: at most spill_bytes of blocks and
+    a copy buffer. Disk while committing: the archive plus, at most, all arrays once and the
+    largest twice. A writer left without commit() (an error, or discard()) leaves no file.
+    """
+
+    COPY_BYTES = 1 << 22
+    SPILL_BYTES = 128 << 20
+
+    def __init__(self, path, names, spill_bytes=SPILL_BYTES):
+        self.path = os.fspath(path)
+        self.names = list(names)
+        self.spill_bytes = spill_bytes
+        self._kind = {}      # name -> (dtype, trailing shape)
+        self._rows = dict.fromkeys(self.names, 0)
+        self._held = {name: [] for name in self.names}
+        self._files = {}     # name -> (open temporary file, its path), once spilled
+        self._held_bytes = 0
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.discard()
+
+    @property
+    def spilled(self):
+        return bool(self._files)
+
+    def append(self, name, rows):
+        """Add `rows` (an array of at least one dimension) to the array `name`."""
+        rows = np.ascontiguousarray(rows)
+        kind = (rows.dtype, rows.shape[1:])
+        if self._kind.setdefault(name, kind) != kind:
+            raise ValueError(f"NpzWriter: {name} is {self._kind[name]}, a block of {kind} cannot join it")
+        self._rows[name] += len(rows)
+        if name in self._files:
+            self._files[name][0].write(rows.data)
+            return
+        self._held[name].append(rows)
+        self._held_bytes += rows.nbytes
+        if self._held_bytes > self.spill_bytes:
+            self._spill()
+
+    def _spill(self):
+        folder = os.path.dirname(os.path.abspath(self.path))
+        for name in self.names:
+            if name not in self._files:
+                fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=f"-{name}.part", dir=folder)
+                self._files[name] = (os.fdopen(fd, "w+b"), tmp)
+            for block in self._held[name]:
+                self._files[name][0].write(block.data)
+            self._held[name] = []
+        self._held_bytes = 0
+
+    def nbytes(self, name):
+        dtype, tail = self._kind[name]
+        return self._rows[name] * math.prod(tail) * dtype.itemsize
+
+    def commit(self, progress=None):
+        """Write the archive at `path` (atomically) and remove the temporary files.
+        progress: None or a callable(fraction of the bytes written)."""
+        missing = [n for n in self.names if n not in self._kind]
+        if missing:
+            raise ValueError(f"NpzWriter: no data for {missing}")
+        total = max(1, sum(self.nbytes(n) for n in self.names))
+        done = 0
+        try:
+            with atomic_write(self.path) as f, zipfile.ZipFile(f, "w", zipfile.ZIP_STORED, allowZip64=True) as z:
+                for name in self.names:
+                    dtype, tail = self._kind[name]
+                    header = {"descr": np.lib.format.dtype_to_descr(dtype), "fortran_order": False,
+                              "shape": (self._rows[name],) + tail}
+                    with z.open(name + ".npy", "w", force_zip64=True) as member:
+                        np.lib.format.write_array_header_1_0(member, header)
+                        if name in self._files:
+                            src, tmp = self._files.pop(name)
+                            src.seek(0)
+                            while True:
+                                chunk = src.read(self.COPY_BYTES)
+                                if not chunk:
+                                    break
+                                member.write(chunk)
+                                done += len(chunk)
+                                if progress is not None:
+                                    progress(done / total)
+                            _remove(src, tmp)
+                        else:
+                            for block in self._held[name]:
+                                member.write(block.data)
+                                done += block.nbytes
+                            self._held[name] = []
+                            if progress is not None:
+                                progress(done / total)
+        finally:
+            self.discard()
+
+    def discard(self):
+        """Drop everything held and remove the temporary files (no archive is written)."""
+        for f, tmp in self._files.values():
+            _remove(f, tmp)
+        self._files = {}
+        self._held = {name: [] for name in self.names}
+        self._held_bytes = 0
+
+
+def _remove(f, path):
+    f.close()
+    try:
+        os.unlink(path)
+    except FileNotFoundError:
+        pass

@@ -12,10 +12,11 @@ reference tracer of the same model. numpy + moderngl + hairio only.
 
 Images are linear, premultiplied RGBA with row 0 at the top. Modules: layout (the constants
 and buffer layouts both builds and every shader share), cylinders (strands to cut
-cylinders), grid (uniform grid, CSR lists, the frame both builds use), camera
+cylinders), grid (uniform grid, CSR lists, the frame both builds use), bvh (the BVH over
+cylinder pieces, Renderer(accel="bvh")), camera
 (Blender-exact projection), settings (lights, render settings), shading (the registry of
 shading models), renderer and the modules it delegates to (gl_state, scene_buffers,
-strand_upload, scene_grid, draw; shaders/ for the GLSL), stats, gl_context (which backend
+strand_upload, scene_grid, scene_bvh, draw; shaders/ for the GLSL), stats, gl_context (which backend
 makes the context, where raw GL entry points come from), reference (float64 CPU tracer,
 split as the shaders are), png, worker (out-of-process renderer), scenes (synthetic strands
 for tests and benchmarks), __main__ (python -m tracer render). docs/ARCHITECTURE.md maps

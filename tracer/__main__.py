@@ -19,6 +19,8 @@ import numpy as np
 
 from hairio import InputError
 
+from .settings import ACCELS, DEFAULT_ACCEL
+
 # Samples are placed in float32 pixel coordinates of the whole image: below 16384 they
 # round to within 1/2048 of a pixel (a 32nd of the finest stratum, 64 per side at MAX_SPP);
 # each doubling of the size doubles that error.
@@ -165,9 +167,18 @@ def render_png(renderer, camera, settings, out, tile_pixels=TILE_PIXELS, tile_si
     return spent[0]
 
 
+HAIR_SLIDERS = (("--melanin", "hair_melanin", "melanin 0..1"),
+                ("--melanin-redness", "hair_melanin_redness", "pheomelanin share of the melanin, 0..1"),
+                ("--roughness", "hair_roughness", "longitudinal roughness 0..1"),
+                ("--radial-roughness", "hair_radial_roughness", "azimuthal roughness 0..1"),
+                ("--coat", "hair_coat", "lowers the surface reflection's roughness, 0..1"),
+                ("--ior", "hair_ior", "index of refraction 1..3"),
+                ("--cuticle-tilt", "hair_cuticle_tilt", "cuticle tilt in degrees, -90..90"))
+
+
 def build_parser():
     from hairio.formats.up_axis import UP_CHOICES
-    from .settings import MAX_SPP, RenderSettings
+    from .settings import HAIR_COLORS, MAX_SPP, RenderSettings
     from .shading import DEFAULT_SHADING, SHADING_MODELS
     parser = argparse.ArgumentParser(prog="python -m tracer", description="Render strands with the GPU ray tracer.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -199,6 +210,17 @@ def build_parser():
     r.add_argument("--shading", choices=[m.name for m in SHADING_MODELS], default=DEFAULT_SHADING,
                    help="shading model: " + "; ".join(f"{m.name}: {m.description}" for m in SHADING_MODELS)
                         + " (default %(default)s)")
+    # The "chiang" model's sliders (RenderSettings.hair_*, Cycles' Principled Hair names).
+    defaults = RenderSettings()
+    r.add_argument("--hair-color", choices=HAIR_COLORS, default=defaults.hair_color,
+                   help="what a strand's colour means to the chiang model: strand = the hair's colour (Cycles' "
+                        "Direct Coloring), melanin = a tint over --melanin (default %(default)s)")
+    for flag, field, what in HAIR_SLIDERS:
+        r.add_argument(flag, type=float, dest=field, metavar="X", default=getattr(defaults, field),
+                       help=f"chiang model: {what} (default %(default)s)")
+    r.add_argument("--accel", choices=ACCELS, default=DEFAULT_ACCEL,
+                   help="what rays walk: the uniform grid or the BVH over cylinders; same image "
+                        "(default %(default)s)")
     r.add_argument("--camera", default="auto",
                    help="auto (frame the strands' and meshes' bounds from the front) or EYE:TARGET:FOV as "
                         "x,y,z:tx,ty,tz:degrees, e.g. 0,-3,1:0,0,1:40 (default %(default)s)")
@@ -227,7 +249,8 @@ def main(argv=None):
         from .settings import RenderSettings
         settings = RenderSettings(spp=args.spp, shadows=args.shadows, layers=args.layers,
                                   shading=args.shading, min_pixel_width=args.min_pixel_width,
-                                  background=(0.0, 0.0, 0.0, 0.0))
+                                  background=(0.0, 0.0, 0.0, 0.0), hair_color=args.hair_color,
+                                  **{field: getattr(args, field) for _, field, _ in HAIR_SLIDERS})
         settings.check()
         from hairio.formats.up_axis import file_frame
         from hairio.formats.axes import unconvert_points
@@ -244,7 +267,7 @@ def main(argv=None):
         meshes = read_meshes(args.mesh, args.mesh_color, to_our_frame)
         t1 = time.perf_counter()
         from .renderer import Renderer
-        renderer = Renderer()
+        renderer = Renderer(accel=args.accel)
         try:
             renderer.set_strands(strands)
         except InputError as e:     # strands the tracer cannot resolve: name the file they came from
@@ -264,7 +287,10 @@ def main(argv=None):
     print(f"read {t1 - t0:.3f} s: {strands.num_strands} strands, {st['num_cylinders']} cylinders"
           + (f", {st['num_triangles']} mesh triangles" if st["num_triangles"] else ""))
     print(f"upload {st['upload_s']:.3f} s (cylinders {st['cylinders_s']:.3f} s)")
-    print(f"grid build {st['grid_s']:.3f} s: {st['grid_dims']} cells, {st['grid_refs']} references")
+    if args.accel == "grid":
+        print(f"grid build {st['grid_s']:.3f} s: {st['grid_dims']} cells, {st['grid_refs']} references")
+    else:
+        print(f"BVH build {st['accel_s']:.3f} s: {st['bvh_pieces']} pieces, {st['bvh_entries']} nodes and leaves")
     print(f"render {render_s:.3f} s at {size[0]}x{size[1]}, {args.spp} spp"
           + (", minimum pixel width" if settings.min_pixel_width else ""))
     print(f"wrote {args.out}")

@@ -12,6 +12,7 @@ from hairio.validate import check_memory
 from . import layout
 from .gl_buffers import set_samplers
 from .gpu_build import set_uniforms
+from .grid import Grid
 from .mesh_upload import MESH_BUFFERS
 from .shader_source import shader_source
 from .shading import shading_model
@@ -19,8 +20,8 @@ from .shading import shading_model
 # Host memory of one render: the framebuffer (a driver like llvmpipe keeps it in host memory),
 # its read-back bytes and the flipped image, RGBA float32 each.
 RENDER_COPIES = 3
-# The trace program's buffers, on texture units 0, 1, 2, and with meshes 3, 4, 5.
-TRACE_BUFFERS = ("tex_cyl", "tex_idx", "tex_cell")
+# The trace program's buffers per accelerator, on texture units 0, 1, 2, and with meshes 3, 4, 5.
+TRACE_BUFFERS = {"grid": ("tex_cyl", "tex_idx", "tex_cell"), "bvh": ("tex_cyl", "tex_node", "tex_order")}
 
 _VERTEX = """#version 330 core
 void main() {   // one triangle that covers the screen; the scissor picks the pixels
@@ -30,13 +31,13 @@ void main() {   // one triangle that covers the screen; the scissor picks the pi
 """
 
 
-def trace_files(settings, meshes=False):
+def trace_files(settings, meshes=False, accel="grid"):
     """The trace program's files in dependency order (tracer/shaders/trace_scene.glsl lists
-    them): the scene, the shape, the accelerator interface and the grid that implements it,
-    with `meshes` the triangles and their grid, the shading model of `settings`, the
-    tracer's main."""
+    them): the scene, the shape, the accelerator interface and the structure that implements
+    it (`accel`: "grid" or "bvh"), with `meshes` the triangles and their grid, the shading
+    model of `settings`, the tracer's main."""
     mesh_files = ["shapes_triangle.glsl", "accel_mesh_grid.glsl"] if meshes else []
-    return (["trace_scene.glsl", "shapes_cylinder.glsl", "accel.glsl", "accel_grid.glsl"] + mesh_files
+    return (["trace_scene.glsl", "shapes_cylinder.glsl", "accel.glsl", f"accel_{accel}.glsl"] + mesh_files
             + [shading_model(settings.shading).glsl, "trace_main.glsl"])
 
 
@@ -48,10 +49,10 @@ class Drawer:
         self._programs = {}
         self._fbos = {}
 
-    def program(self, settings, camera, layers, meshes=False):
+    def program(self, settings, camera, layers, meshes=False, accel="grid"):
         key = (layers, settings.shadows and (1 if settings.shadow_mode == "hard" else 2),
                settings.shading, len(settings.lights), settings.spp_n, settings.min_pixel_width,
-               camera.type, settings.count, bool(meshes), layout.glsl_header())
+               camera.type, settings.count, bool(meshes), layout.glsl_header(), accel)
         prog = self._programs.get(key)
         if prog is None:
             defines = {
@@ -65,8 +66,9 @@ class Drawer:
                 "MESHES": int(bool(meshes)),
             }
             program = self.ctx.program(vertex_shader=_VERTEX,
-                                       fragment_shader=shader_source(330, trace_files(settings, meshes), defines))
-            set_samplers(program, **{name: unit for unit, name in enumerate(TRACE_BUFFERS + MESH_BUFFERS)})
+                                       fragment_shader=shader_source(330, trace_files(settings, meshes, accel),
+                                                                     defines))
+            set_samplers(program, **{name: unit for unit, name in enumerate(TRACE_BUFFERS[accel] + MESH_BUFFERS)})
             prog = (program, self.ctx.vertex_array(program, []))
             self._programs[key] = prog
         return prog
@@ -110,10 +112,11 @@ class Drawer:
         check_memory(f"camera size {w}x{h}", (RENDER_COPIES + settings.count) * w * h * 16,
                      "render a smaller image, or in tiles (python -m tracer render writes any size band by band)")
 
-    def draw(self, buffers, grid, camera, settings, layers, box, mesh_grid=None, mesh_offset=0.0):
+    def draw(self, buffers, structure, camera, settings, layers, box, mesh_grid=None, mesh_offset=0.0):
         """The image (H, W, 4) float32, row 0 = top, and the summed work counters (4,):
-        pixels in `box` (x0, y0, x1, y1; None: none) traced, the rest background. With
-        `mesh_grid` the meshes uploaded with it are traced too."""
+        pixels in `box` (x0, y0, x1, y1; None: none) traced, the rest background.
+        `structure`: the scene's Grid, or its BVH (tracer/bvh.py). With `mesh_grid` the
+        meshes uploaded with it are traced too."""
         import moderngl
         w, h = camera.size
         fbo = self.framebuffer(w, h, settings.count)
@@ -123,9 +126,16 @@ class Drawer:
         counts = np.zeros(4)
         if box is not None:
             meshes = mesh_grid is not None
-            prog, vao = self.program(settings, camera, layers, meshes)
-            buffers.bind(TRACE_BUFFERS + (MESH_BUFFERS if meshes else ()))
-            _set_uniforms(prog, grid, camera, settings)
+            accel = "grid" if isinstance(structure, Grid) else "bvh"
+            prog, vao = self.program(settings, camera, layers, meshes, accel)
+            buffers.bind(TRACE_BUFFERS[accel] + (MESH_BUFFERS if meshes else ()))
+            if accel == "grid":
+                set_uniforms(prog, grid_lo=tuple(float(x) for x in structure.lo),
+                             cell_size=tuple(float(x) for x in structure.cell_size),
+                             dims=tuple(int(x) for x in structure.dims))
+            else:
+                set_uniforms(prog, bvh_entries=int(buffers.stats.bvh_entries))
+            _set_uniforms(prog, camera, settings)
             if meshes:
                 set_uniforms(prog, mesh_lo=tuple(float(x) for x in mesh_grid.lo),
                              mesh_cell_size=tuple(float(x) for x in mesh_grid.cell_size),
@@ -176,11 +186,8 @@ def screen_bounds(lo, hi, camera):
     return x0, y0, x1, y1
 
 
-def _set_uniforms(prog, g, camera, settings):
-    set_uniforms(prog, grid_lo=tuple(float(x) for x in g.lo),
-                 cell_size=tuple(float(x) for x in g.cell_size),
-                 dims=tuple(int(x) for x in g.dims),
-                 cam_pos=tuple(float(x) for x in camera.position),
+def _set_uniforms(prog, camera, settings):
+    set_uniforms(prog, cam_pos=tuple(float(x) for x in camera.position),
                  cam_rot=tuple(float(x) for x in camera.rotation.T.ravel()),
                  pixel_size=float(camera.pixel_size),
                  centre_px=tuple(float(x) for x in camera.centre_px),
@@ -194,3 +201,4 @@ def _set_uniforms(prog, g, camera, settings):
     set_uniforms(prog, background=settings.premultiplied_background(),
                  material=(settings.ambient, settings.diffuse, settings.specular, settings.shininess),
                  mpw_cap=float(settings.min_pixel_width_cap), t_eps=float(settings.transmittance_eps))
+    set_uniforms(prog, **shading_model(settings.shading).uniforms(settings))

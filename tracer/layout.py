@@ -57,6 +57,19 @@ IDX_SLACK = 2
 # (EMPTY_BLOCK: the whole BLOCK³ block of this cell is empty), y = list length.
 EMPTY_BLOCK = -1
 
+# --- BVH (tracer/bvh.py, shaders/accel_bvh.glsl) ---------------------------------------------
+# Pieces per leaf at most; a leaf's code in the walk's texels is first << LEAF_BITS | count.
+LEAF_MAX = 4
+LEAF_BITS = 3
+# A piece's code in tex_order's y: k | K << PIECE_BITS (piece k of K of its cylinder's axis).
+PIECE_BITS = 8
+MAX_PIECES = 8
+# RGBA32I texels per entry (node or leaf) of the walk: (lo, skip) (hi, leaf code or BVH_NODE).
+WALK_TEXELS = 2
+BVH_NODE = -1
+# Slots of the primary rays' near-first walk's stack (kept in registers; shaders/accel_bvh.glsl).
+BVH_SHORT_STACK = 16
+
 # --- Compute passes (GL 4.3) -----------------------------------------------------------------
 GROUP = 64                  # local_size_x of the build shaders
 MAX_VISITS = 60000          # loop steps one invocation may take (llvmpipe stops at 65,535)
@@ -84,6 +97,8 @@ def glsl_header():
         "TRI_EDGE_EPS": float(TRI_EDGE_EPS),
         "MAX_DIM": MAX_DIM, "MAX_CELLS": MAX_CELLS, "BLOCK": BLOCK, "IDX_SLACK": IDX_SLACK,
         "EMPTY_BLOCK": EMPTY_BLOCK,
+        "LEAF_MAX": LEAF_MAX, "LEAF_BITS": LEAF_BITS, "PIECE_BITS": PIECE_BITS, "MAX_PIECES": MAX_PIECES,
+        "WALK_TEXELS": WALK_TEXELS, "BVH_NODE": BVH_NODE, "BVH_SHORT_STACK": BVH_SHORT_STACK,
         "GROUP": GROUP, "MAX_VISITS": MAX_VISITS, "MAX_REPEATS": MAX_REPEATS,
     }
     lines = ["// Generated from tracer/layout.py when the program is made: edit the numbers there."]
@@ -127,3 +142,13 @@ def cell_table(start, count, in_full_block):
     cells[:, 0] = np.where(in_full_block, start, EMPTY_BLOCK)
     cells[:, 1] = count
     return cells
+
+
+def leaf_code(first, count):
+    """A leaf's code in the walk's texels: its first slot of tex_order and its piece count."""
+    return (np.asarray(first, np.int64) << LEAF_BITS) | count
+
+
+def piece_code(k, K):
+    """Piece k of K of a cylinder's axis, as tex_order's y holds it."""
+    return np.asarray(k, np.int64) | (np.asarray(K, np.int64) << PIECE_BITS)

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """8-bit sRGB PNG from linear premultiplied RGBA, with numpy and zlib only."""
+import pathlib
 import struct
 import zlib
 
@@ -76,3 +77,30 @@ def write_png_bands(path, width, height, bands):
         if rows != height:
             raise ValueError(f"bands hold {rows} rows; the image has {height}")
         f.write(_chunk(b"IDAT", z.flush()) + _chunk(b"IEND", b""))
+
+
+def read_png_rgba8(path):
+    """The (H, W, 4) uint8 pixels of a PNG this module wrote (8-bit RGBA, filter 0 rows),
+    for tests and tools that check what was written; any other PNG is refused."""
+    data = pathlib.Path(path).read_bytes()
+    if data[:8] != b"\x89PNG\r\n\x1a\n":
+        raise ValueError(f"{path}: not a PNG file")
+    pos, idat, size = 8, [], None
+    while pos + 8 <= len(data):
+        (n,) = struct.unpack(">I", data[pos:pos + 4])
+        kind, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + n]
+        if kind == b"IHDR":
+            w, h, depth, colour = struct.unpack(">IIBB", body[:10])
+            if (depth, colour) != (8, 6):
+                raise ValueError(f"{path}: {depth}-bit colour type {colour}; expected 8-bit RGBA")
+            size = (h, w)
+        elif kind == b"IDAT":
+            idat.append(body)
+        pos += 12 + n
+    if size is None:
+        raise ValueError(f"{path}: no IHDR chunk")
+    h, w = size
+    raw = np.frombuffer(zlib.decompress(b"".join(idat)), np.uint8).reshape(h, 1 + 4 * w)
+    if raw[:, 0].any():
+        raise ValueError(f"{path}: filtered rows; this reader takes filter 0 only")
+    return raw[:, 1:].reshape(h, w, 4)

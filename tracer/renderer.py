@@ -4,8 +4,9 @@ scene data in buffer textures (tracer/scene_buffers.py), one fragment shader tha
 every pixel (tracer/draw.py).
 
 `Renderer` only says what happens in which order; each job has its module: the two upload
-paths (tracer/strand_upload.py), the grid (tracer/scene_grid.py), meshes (tracer/meshes.py,
-tracer/mesh_upload.py), drawing (tracer/draw.py).
+paths (tracer/strand_upload.py), the acceleration structure (the grid, tracer/scene_grid.py,
+or the BVH, tracer/scene_bvh.py), meshes (tracer/meshes.py, tracer/mesh_upload.py), drawing
+(tracer/draw.py).
 Only `set_strands`/`update_strands` upload; a render with a new camera, light or setting
 sends uniforms and nothing else (`stats.bytes_uploaded` proves it).
 """
@@ -23,8 +24,9 @@ from .gpu_build import compute_available
 from .meshes import mesh_set
 from .mesh_upload import upload_meshes
 from .scene_buffers import SceneBuffers
+from .scene_bvh import build_scene_bvh, bvh_bounds
 from .scene_grid import build_scene_grid, grid_indices
-from .settings import GRID_WIDEN_CAP, RenderSettings
+from .settings import ACCELS, DEFAULT_ACCEL, GRID_WIDEN_CAP, RenderSettings
 from .stats import RenderStats
 from .strand_upload import GpuUpload, NumpyUpload, Scene, select_strands
 
@@ -35,20 +37,25 @@ class Renderer:
     """GPU tracer of one scene at a time; `stats` (tracer.stats.RenderStats) says what it
     did."""
 
-    def __init__(self, max_buffer_texels=None, build="auto"):
+    def __init__(self, max_buffer_texels=None, build="auto", accel=DEFAULT_ACCEL):
         """`max_buffer_texels`: the most texels one buffer texture may hold (default: the
         driver's GL_MAX_TEXTURE_BUFFER_SIZE, 2^27 on llvmpipe and current desktop GPUs, i.e.
         33 M cylinders or 134 M grid references); scenes past it get an InputError.
         `build`: where cylinders and grid are made — "gpu" (compute shaders, GL 4.3+),
-        "numpy", or "auto" (the GPU where the driver has compute shaders)."""
+        "numpy", or "auto" (the GPU where the driver has compute shaders).
+        `accel`: what rays walk — "grid" (tracer/grid.py) or "bvh" (tracer/bvh.py, built in
+        numpy whatever the build)."""
         self.ctx = shared_context()
+        if accel not in ACCELS:
+            raise InputError(f"accel: expected one of {', '.join(ACCELS)}, got {accel!r}")
+        self.accel = accel
         if build not in BUILDS:
             raise InputError(f"build: expected one of {', '.join(BUILDS)}, got {build!r}")
         if build == "gpu" and not compute_available(self.ctx):
             raise InputError(f"build: 'gpu' needs compute shaders (OpenGL 4.3); this driver offers "
                              f"{self.ctx.info['GL_VERSION']}; use 'numpy' or 'auto'")
         self.build = "numpy" if build == "numpy" or not compute_available(self.ctx) else "gpu"
-        self.stats = RenderStats(gl_backend=context_backend())
+        self.stats = RenderStats(gl_backend=context_backend(), accel=accel)
         self.buffers = SceneBuffers(self.ctx, max_buffer_texels or self.ctx.info["GL_MAX_TEXTURE_BUFFER_SIZE"],
                                     self.stats)
         self.scene = Scene()
@@ -74,6 +81,10 @@ class Renderer:
     @property
     def grid(self):
         return self.scene.grid
+
+    @property
+    def bvh(self):
+        return self.scene.bvh
 
     @property
     def all_opaque(self):
@@ -156,17 +167,35 @@ class Renderer:
         upload = self._upload if scene.num_cylinders else NumpyUpload(self.buffers)
         try:
             cylinders_s, upload_s = upload.update(scene, ids, strands, sub)
-            self._finish_upload(plan_s + cylinders_s, upload_s)
+            self._finish_upload(plan_s + cylinders_s, upload_s, refit=True)
         except Exception:
             scene.forget()
             raise
 
-    def _finish_upload(self, cylinders_s, upload_s, bounds=None):
-        """Builds the grid after an upload and records the upload's stats."""
-        grid_upload_s = build_scene_grid(self.scene, self.buffers, self.build == "gpu", bounds)
+    def _finish_upload(self, cylinders_s, upload_s, bounds=None, refit=False):
+        """Builds the acceleration structure after an upload (`refit`: the cylinders moved
+        but kept their ids, so a BVH keeps its tree) and records the upload's stats."""
+        grid_upload_s = self._build_structure(bounds, refit)
         self.stats.cylinders_s = cylinders_s
         self.stats.upload_s = upload_s + grid_upload_s
         self.stats.num_cylinders = self.scene.num_cylinders
+
+    def _build_structure(self, bounds=None, refit=False):
+        """The grid or the BVH of the scene, built and uploaded; the seconds uploading."""
+        if self.accel == "grid":
+            self.scene.bvh = None
+            upload_s = build_scene_grid(self.scene, self.buffers, self.build == "gpu", bounds)
+            g = self.scene.grid
+            self.stats.accel_s = self.stats.grid_s
+            self.stats.accel_bytes = 4 * self.stats.grid_refs + 8 * g.num_cells
+            return upload_s
+        self.scene.grid = None
+        return build_scene_bvh(self.scene, self.buffers, refit)
+
+    @property
+    def structure(self):
+        """The scene's grid or BVH, whichever `accel` asked for."""
+        return self.scene.grid if self.accel == "grid" else self.scene.bvh
 
     # --- rendering ----------------------------------------------------------------------
     def effective_layers(self, settings):
@@ -176,10 +205,14 @@ class Renderer:
         return settings.layers
 
     def screen_bounds(self, camera):
-        """Pixel rectangle (x0, y0, x1, y1), y from the top, that the strands' grid box and
-        the meshes' box can cover; None when nothing can be seen."""
-        boxes = [(g.lo, g.hi) for g, there in ((self.scene.grid, self.scene.num_cylinders),
-                                              (self.mesh_grid, self.meshes is not None)) if there]
+        """Pixel rectangle (x0, y0, x1, y1), y from the top, that the strands' structure box
+        (grid or BVH) and the meshes' box can cover; None when nothing can be seen."""
+        strands_box = None
+        if self.scene.num_cylinders:
+            strands_box = ((self.scene.grid.lo, self.scene.grid.hi) if self.accel == "grid"
+                           else bvh_bounds(self.scene.bvh))
+        boxes = [b for b in (strands_box, (self.mesh_grid.lo, self.mesh_grid.hi) if self.meshes is not None
+                             else None) if b is not None]
         if not boxes:
             return None
         return screen_bounds(np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0), camera)
@@ -194,11 +227,11 @@ class Renderer:
         t0 = time.perf_counter()
         if settings.min_pixel_width and self.scene.grid_pad < GRID_WIDEN_CAP:
             self.scene.grid_pad = GRID_WIDEN_CAP
-            build_scene_grid(self.scene, self.buffers, self.build == "gpu")
+            self._build_structure(refit=True)      # a BVH keeps its tree: wider boxes only
             self.stats.grid_rebuilds += 1
         box = self.screen_bounds(camera)
         layers = self.effective_layers(settings)
-        img, counts = self._drawer.draw(self.buffers, self.scene.grid, camera, settings, layers, box, self.mesh_grid,
+        img, counts = self._drawer.draw(self.buffers, self.structure, camera, settings, layers, box, self.mesh_grid,
                                         0.0 if self.meshes is None else self.meshes.shadow_offset())
         st = self.stats
         st.render_s = time.perf_counter() - t0

@@ -6,9 +6,11 @@ import numpy as np
 
 from hairio import InputError
 
+from . import hair_bsdf as hb
 from .shading import DEFAULT_SHADING, shading_model
 
 MAX_LIGHTS = 8
+HAIR_COLORS = ("strand", "melanin")      # what a strand's colour means to the "chiang" model
 # Samples are summed in float32 (additive blending): the sum of n samples can be off by up
 # to n * 2^-24 of the pixel's value. 4096 keeps that below 0.025 %, a sixteenth of an 8-bit
 # step; far past it more samples make the image worse, not better (10^6: up to 6 %).
@@ -64,6 +66,16 @@ class RenderSettings:
     transmittance_eps: float = 1e-3   # stop compositing (and shadow products) below this
     tile: int = 512                   # pixels per side of one draw call (GPU watchdogs)
     count: bool = False               # write per-pixel work counters into Renderer.stats
+    # The "chiang" model's sliders, named and defaulted as Cycles' Principled Hair BSDF
+    # (tracer/hair_bsdf.py); hair_color says what a strand's colour means (shading/chiang.py).
+    hair_color: str = "strand"        # "strand": the hair's colour; "melanin": a tint over the melanin
+    hair_melanin: float = hb.DEFAULT_MELANIN
+    hair_melanin_redness: float = hb.DEFAULT_MELANIN_REDNESS
+    hair_roughness: float = hb.DEFAULT_ROUGHNESS
+    hair_radial_roughness: float = hb.DEFAULT_RADIAL_ROUGHNESS
+    hair_coat: float = hb.DEFAULT_COAT
+    hair_ior: float = hb.DEFAULT_IOR
+    hair_cuticle_tilt: float = float(np.degrees(hb.DEFAULT_OFFSET))   # degrees
 
     @property
     def spp_n(self):
@@ -91,11 +103,34 @@ class RenderSettings:
             raise InputError(f"background: {self.background}; expected four finite numbers (RGBA)")
         if self.tile < 16:
             raise InputError(f"tile: {self.tile}; use >= 16 pixels")
+        self._check_hair()
+
+    def _check_hair(self):
+        if self.hair_color not in HAIR_COLORS:
+            raise InputError(f"hair_color: {self.hair_color!r}; use one of {', '.join(map(repr, HAIR_COLORS))}")
+        for name in ("hair_melanin", "hair_melanin_redness", "hair_roughness", "hair_radial_roughness",
+                     "hair_coat"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and 0.0 <= value <= 1.0):
+                raise InputError(f"{name}: {value}; use 0..1 (as Cycles' Principled Hair BSDF)")
+        if not (np.isfinite(self.hair_ior) and 1.0 <= self.hair_ior <= 3.0):
+            raise InputError(f"hair_ior: {self.hair_ior}; use 1..3 (hair keratin: 1.55)")
+        if not (np.isfinite(self.hair_cuticle_tilt) and -90.0 <= self.hair_cuticle_tilt <= 90.0):
+            raise InputError(f"hair_cuticle_tilt: {self.hair_cuticle_tilt}; use -90..90 degrees (hair: 2 to 4)")
 
     def premultiplied_background(self):
         r, g, b, a = (float(x) for x in self.background)
         return (r * a, g * a, b * a, a)
 
+
+# What rays walk (Renderer(accel=...)): the thesis's uniform grid (tracer/grid.py) or a BVH
+# over cylinder pieces (tracer/bvh.py). Same hits, same image (the tests render both). The
+# default is the one that measured faster on the benchmark scenes (benchmarks/sections/accel.py,
+# llvmpipe, 512², CPU time): the grid; the BVH took 1.27x its time on the real straight.hair,
+# 1.5x on 1,000 and 10,000 wavy strands and 1.17x on 100,000 (1.0-1.6x over three runs on a
+# shared machine), with 2-5x fewer cylinder tests per ray, and builds in numpy 1-3.4x slower.
+ACCELS = ("grid", "bvh")
+DEFAULT_ACCEL = "grid"
 
 # The grid lists every cylinder with its radius times this factor, so minimum pixel width can
 # widen a radius up to it without hits falling outside the cells the cylinder is listed in.

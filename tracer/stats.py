@@ -10,7 +10,10 @@ class RenderStats:
     either: only set_strands/update_strands upload), renders, grid_rebuilds. Of the last
     set_strands/update_strands: cylinders_s, upload_s, grid_s, num_cylinders and the grid's
     grid_build ("gpu" or "numpy"), grid_dims, grid_refs, cylinders_per_full_cell,
-    full_cell_fraction. Of the last set_meshes: num_triangles, mesh_s. Of the last render: render_s, layers_max (layers the shader was
+    full_cell_fraction, or the BVH's accel_s (build or refit), bvh_refit, bvh_entries (nodes
+    and leaves), bvh_pieces; accel ("grid" or "bvh") and accel_bytes (the structure's
+    buffers; for the grid its lists and cell table). Of the last set_meshes: num_triangles,
+    mesh_s. Of the last render: render_s, layers_max (layers the shader was
     compiled for), screen_box and traversed_pixels (the projected bounds that were traced),
     and with RenderSettings(count=True) the counters shadow_rays, layers_traced,
     cells_visited, cylinder_tests (summed over samples). gl_backend: the shared context's
@@ -32,6 +35,12 @@ class RenderStats:
     grid_refs: Optional[int] = None
     cylinders_per_full_cell: Optional[float] = None
     full_cell_fraction: Optional[float] = None
+    accel: str = ""
+    accel_s: Optional[float] = None
+    accel_bytes: Optional[int] = None
+    bvh_refit: Optional[bool] = None
+    bvh_entries: Optional[int] = None
+    bvh_pieces: Optional[int] = None
     layers_max: Optional[int] = None
     screen_box: Optional[tuple] = None
     traversed_pixels: Optional[int] = None

@@ -32,14 +32,16 @@ UPLOAD_CHUNK = 1024
 class Scene:
     """What the renderer holds of its strands: the strands, the CylinderPlan they were made
     from, the cylinders (made on first use by the GPU build, which never needs them on the
-    host), their count (None: no scene), whether every alpha is 1, and the grid with the
-    pad its capsules were listed with."""
+    host), their count (None: no scene), whether every alpha is 1, and the acceleration
+    structure (the grid or the BVH, tracer/bvh.py) with the pad its capsules were bounded
+    with."""
     strands: Optional[Strands] = None
     plan: Optional[CylinderPlan] = None
     cylinders_: Optional[Cylinders] = None
     num_cylinders: Optional[int] = None
     all_opaque: bool = True
     grid: Optional[Grid] = None
+    bvh: Optional[object] = None
     # The grid lists cylinders with their true radius until a render asks for minimum
     # pixel width; then it is rebuilt once with radii widened by GRID_WIDEN_CAP and kept.
     grid_pad: float = 1.0
@@ -51,7 +53,7 @@ class Scene:
         return self.cylinders_
 
     def forget(self):
-        self.strands = self.grid = self.plan = self.cylinders_ = self.num_cylinders = None
+        self.strands = self.grid = self.bvh = self.plan = self.cylinders_ = self.num_cylinders = None
 
     def set_plan(self, strands, plan):
         self.strands, self.plan, self.num_cylinders = strands, plan, len(plan)

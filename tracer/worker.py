@@ -132,6 +132,7 @@ class WorkerClient:
         self._answers = None
         self._strands = None
         self._meshes = None
+        self._pending = None       # the command whose answer render_end still collects
 
     # --- process management -----------------------------------------------------------
     def _start(self):
@@ -168,6 +169,7 @@ class WorkerClient:
 
     def _kill(self):
         proc, self._proc = self._proc, None
+        self._pending = None       # its answer died with it
         if proc is not None and proc.poll() is None:
             proc.kill()
             try:
@@ -176,6 +178,19 @@ class WorkerClient:
                 pass
 
     def _call(self, command, *args, timeout=None):
+        self._send(command, args, timeout)
+        return self._receive(command, timeout)
+
+    def _send(self, command, args, timeout):
+        """Write a request, starting the worker (and giving it its scene) when there is none;
+        an answer still owed for a render_begin is collected and dropped first, so every
+        answer goes to the request it belongs to."""
+        if self._pending is not None:
+            pending, self._pending = self._pending, None
+            try:
+                self._receive(pending, timeout)
+            except Exception:
+                pass   # the request that follows meets the same failure, and reports it
         if self._proc is not None and self._proc.poll() is not None:
             code = self._proc.returncode
             self._kill()
@@ -188,21 +203,30 @@ class WorkerClient:
                 self._exchange("set_strands", (self._strands,), timeout)
             if command not in ("set_meshes", "quit") and self._meshes is not None:
                 self._exchange("set_meshes", (self._meshes,), timeout)
-        return self._exchange(command, args, timeout)
+        try:
+            write_message(self._proc.stdin, (command, args))
+        except (BrokenPipeError, OSError) as e:
+            self._kill()
+            raise WorkerError(f"tracer worker died before {command!r} ({e}); "
+                              f"its last words: {''.join(self._stderr[-5:]).strip()!r}") from None
 
     def _exchange(self, command, args, timeout):
         try:
             write_message(self._proc.stdin, (command, args))
+        except (BrokenPipeError, OSError) as e:
+            self._kill()
+            raise WorkerError(f"tracer worker died before {command!r} ({e}); "
+                              f"its last words: {''.join(self._stderr[-5:]).strip()!r}") from None
+        return self._receive(command, timeout)
+
+    def _receive(self, command, timeout):
+        try:
             answer = self._answers.get(timeout=self.timeout if timeout is None else timeout)
         except queue.Empty:
             self._kill()
             raise WorkerError(f"tracer worker: no answer to {command!r} within "
                               f"{self.timeout if timeout is None else timeout:.0f} s; it was stopped "
                               "and will restart on the next call") from None
-        except (BrokenPipeError, OSError) as e:
-            self._kill()
-            raise WorkerError(f"tracer worker died before {command!r} ({e}); "
-                              f"its last words: {''.join(self._stderr[-5:]).strip()!r}") from None
         if answer[0] == "ok":
             return answer[1]
         if answer[0] == "dead":
@@ -232,6 +256,26 @@ class WorkerClient:
 
     def render(self, camera, settings=None):
         return self._call("render", camera, settings)
+
+    # --- a render the caller does not wait for (the add-on's progressive preview) --------
+    def render_begin(self, camera, settings=None):
+        """Send a render and return at once: the caller stays free while the worker draws.
+        render_ready() says when the image has come, render_end() returns it (or raises what
+        render would). Any other call first collects the image and drops it."""
+        self._send("render", (camera, settings), None)
+        self._pending = "render"
+
+    def render_ready(self):
+        """True once the render sent by render_begin has an answer (or the worker died)."""
+        return self._pending is None or self._answers is None or not self._answers.empty() \
+            or self._proc is None or self._proc.poll() is not None
+
+    def render_end(self, timeout=None):
+        """The image of the render sent by render_begin (waiting for it when not ready)."""
+        if self._pending is None:
+            raise WorkerError("tracer worker: render_end without a render_begin")
+        self._pending = None
+        return self._receive("render", timeout)
 
     @property
     def stats(self):

@@ -12,12 +12,16 @@ SECTIONS = [
     ("rendering", "Rendering: time against image error"),
     ("anchors", "Anchors: the tracer against Blender Cycles"),
     ("scaling", "Scaling: strand count, image size, hair length, cost model"),
+    ("accel", "Acceleration structures: BVH against uniform grid"),
     ("skips", "Skips: on and off, with proof the output is unchanged"),
     ("stress", "Stress: SPEC §9 cases and randomised scenes"),
     ("gpu", "GPU"),
     ("integration", "Extension and export figures (issues 4 and 5)"),
     ("export", "Export of a groom with guides, per format (issue 17)"),
     ("versions", "Blender versions: Generate and Render Preview in each Blender of the matrix"),
+    ("preview_defaults", "Preview defaults: no dust at the default settings"),
+    ("contact_sheet", "Contact sheet: each preset with the head, Cycles beside the preview"),
+    ("hair_shading", "Hair shading: the preview's fibre model against Cycles' Principled Hair (Chiang)"),
 ]
 
 

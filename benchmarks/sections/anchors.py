@@ -99,7 +99,7 @@ def _predicted(sc, spp, cfg):
 
 def _tracer_job(sec, cfg, tracer, sc, spp):
     r = sc.renderer
-    rs = settings(spp=spp, layers=LAYERS)
+    rs = settings(spp=spp, layers=LAYERS, shading="kajiya-kay")
     guess = _predicted(sc, spp, cfg)
     # first render + re-render, each (runs + 1) times
     if guess is not None and 2 * guess * (cfg.runs + 1) > left(sec):

@@ -80,7 +80,7 @@ def run(sec, cfg):
     camera = tracer_camera(view_matrix(*strands.bounds(), size), size)
     renderer = tracer.Renderer()
     renderer.set_strands(strands)
-    base = dict(spp=1, shadows=True, layers=4)
+    base = dict(spp=1, shadows=True, layers=4, shading="kajiya-kay")
     sec.text(__doc__.split("\n\n", 1)[1].strip())
     sec.settings(preset="wavy", strands=strands.num_strands, cylinders=strands.num_segments,
                  image=f"{size[0]}x{size[1]}", alpha_start=0.5, alpha_tip=0.2, shading="kajiya-kay",
@@ -101,6 +101,7 @@ def _gpu_vs_reference(sec, cfg, tracer, renderer, strands, camera, acc, xy, base
     variants = [
         ("Kajiya-Kay, hard shadows, 4 layers", {}),
         ("Phong", {"shading": "phong"}),
+        ("Principled hair (Chiang)", {"shading": "chiang"}),
         ("transmittance shadows", {"shadow_mode": "transmittance"}),
         ("shadows off", {"shadows": False}),
         ("minimum pixel width", {"min_pixel_width": True}),

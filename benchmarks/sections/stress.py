@@ -127,3 +127,38 @@ def _hostile_input(sec, cfg):
     outcome = collections.Counter(r["kind"] for r in records)
     sec.summary.append(f"hostile input: {len(records)} tried, {dict(outcome)}")
     sec.data["hostile"] = dict(outcome)
+    _large_counts(sec)
+
+
+def _large_counts(sec):
+    """Counts past memory: the command grows and writes a block of strands at a time, so it
+    refuses only a file the disk cannot take (asked here), before any work."""
+    import contextlib
+    import io
+    import json
+    import os
+    import tempfile
+    from benchmarks.stream_run import result_path
+    from groom.__main__ import main
+    rows = []
+    for count in (10 ** 9, 2 ** 62):
+        err = io.StringIO()
+        with tempfile.TemporaryDirectory() as folder, contextlib.redirect_stderr(err):
+            t0 = time.perf_counter()
+            code = main(["generate", "--preset", "wavy", "--count", str(count), "--out", os.path.join(folder, "h.npz")])
+            dt = time.perf_counter() - t0
+            left_behind = os.listdir(folder)
+        rows.append([f"{count:,}", f"exit {code}", f"{dt * 1e3:.0f} ms", str(left_behind) if left_behind else "none",
+                     err.getvalue().strip().replace("|", "/")[:240]])
+    try:
+        with open(result_path(10_000_000)) as f:
+            r = json.load(f)
+        rows.insert(0, ["10,000,000", "exit 0", f"{r['time']:.0f} s", f".npz of {r['file_bytes'] / 1e9:.1f} GB",
+                        f"peak RSS {r['peak_rss_mb']:.0f} MiB (§1, python -m benchmarks.stream_run, "
+                        f"{r['measured']['date_utc']})"])
+    except (OSError, ValueError):
+        pass
+    sec.table(["python -m groom generate --count", "outcome", "time", "file left", "message"], rows,
+              caption="Strand counts past what memory holds: grown and written a block of strands at a time, "
+                      "refused up front only when the disk cannot take the file (the bound in the message).")
+    sec.summary.append("--count " + "; ".join(f"{r[0]}: {r[1]}" for r in rows))

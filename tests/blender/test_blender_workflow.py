@@ -391,6 +391,9 @@ def test_render_preview_fills_the_image_with_the_tracer_s_pixels(clean):
                                  sensor_fit=cam.data.sensor_fit)
     renderer = Renderer()
     renderer.set_strands(strands)
+    # The scalp renders (it has no material: Cycles' default grey) and hides the hair behind it.
+    m = np.array(scalp.matrix_world, np.float64)
+    renderer.set_meshes([(surface.vertices @ m[:3, :3].T + m[:3, 3], surface.triangles, (0.8, 0.8, 0.8))])
     expected = renderer.render(camera, RenderSettings())
     assert expected[..., 3].max() > 0.5, "the test camera does not see the hair"
     np.testing.assert_allclose(got, expected, atol=1e-5)

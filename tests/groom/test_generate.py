@@ -342,3 +342,31 @@ def test_adaptive_strands_end_without_a_sliver_segment(scalp):
     inside[np.cumsum(s.counts)[:-1] - 1] = False          # steps from one strand to the next
     length = np.sqrt((seg[inside] ** 2).sum(axis=1))
     assert length.min() > 1e-6
+
+
+@pytest.mark.parametrize("resolution", ["adaptive", "fixed"])
+def test_growing_in_blocks_changes_no_number(scalp, resolution):
+    """Blocks of 200 strands against one block, on the wavy preset with
+    its clump and collision: every array, the resolution notes, the collision's report and an
+    incremental update spanning blocks."""
+    from groom import default_collider, load_preset
+    placement = load_preset("wavy").place_keys(scalp)
+    params = placement.params.replace(count=3000, seed=4, resolution_mode=resolution,
+                                      points_per_strand=96 if resolution == "adaptive" else 24,
+                                      color_variation_point=(0.02, 0.02, 0.02))
+    keys = list(placement.keys)
+    one = Generator(scalp, keys, params, collider=default_collider(), block_strands=10_000)
+    blocks = Generator(scalp, keys, params, collider=default_collider(), block_strands=200)
+    a, b = one.generate(), blocks.generate()
+    _same(a, b)
+    assert a.collision.strands_moved == b.collision.strands_moved > 0
+    assert a.collision.last == b.collision.last
+    if resolution == "adaptive":
+        for x, y in zip(one._resolution, blocks._resolution):
+            np.testing.assert_array_equal(x, y)
+    k = keys[3]
+    reshaped = KeyStrand(k.points * [1.0, 1.0, 1.0] + np.linspace(0, 0.01, len(k.points))[:, None] * [1, 0, 0],
+                         kind=k.kind, color=k.color, root_radius=k.root_radius, group=k.group)
+    a, b = one.update_keys({3: reshaped}), blocks.update_keys({3: reshaped})
+    assert blocks.last_recomputed > 200
+    _same(a, b)

@@ -1,11 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """`python -m tracer render --min-pixel-width`: hair thinner than a pixel shows as strands
 rather than dust, with the coverage it has; the option's default is RenderSettings'."""
-import struct
-import zlib
-
-import numpy as np
-
 from tracer import RenderSettings
 from tracer.__main__ import build_parser, main
 
@@ -13,18 +8,8 @@ from tracer_scenes import curls
 
 
 def _alpha(path):
-    data = path.read_bytes()
-    pos, idat = 8, b""
-    while pos < len(data):
-        (n,) = struct.unpack(">I", data[pos:pos + 4])
-        kind, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + n]
-        if kind == b"IHDR":
-            w, h = struct.unpack(">II", body[:8])
-        elif kind == b"IDAT":
-            idat += body
-        pos += 12 + n
-    raw = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(h, 1 + 4 * w)
-    return raw[:, 1:].reshape(h, w, 4)[..., 3] / 255.0
+    from tracer.png import read_png_rgba8
+    return read_png_rgba8(path)[..., 3] / 255.0
 
 
 def test_the_default_is_render_settings_default():

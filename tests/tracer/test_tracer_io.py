@@ -99,6 +99,12 @@ def _root():
     return os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
+def _kill(client):
+    """Kill the worker and wait until it is gone (no guessed sleep)."""
+    os.kill(client.pid, signal.SIGKILL)
+    client._proc.wait(timeout=60)
+
+
 def test_worker_renders_keeps_the_scene_and_restarts_after_a_crash():
     s = curls(6, 6)
     cam = Camera.look_at((0, -2.5, 0.5), (0, 0, 0.5), size=(24, 24))
@@ -111,8 +117,7 @@ def test_worker_renders_keeps_the_scene_and_restarts_after_a_crash():
         assert client.stats.bytes_uploaded == sent          # the scene stayed uploaded
         with pytest.raises(InputError):
             client.render(cam, RenderSettings(spp=2))           # bad input comes back as InputError
-        os.kill(client.pid, signal.SIGKILL)
-        time.sleep(0.2)
+        _kill(client)
         with pytest.raises(WorkerError):
             client.render(cam, RenderSettings())
         np.testing.assert_array_equal(client.render(cam, RenderSettings()), first)   # fresh worker, same scene
@@ -191,8 +196,40 @@ def test_worker_draws_meshes_and_keeps_them_across_a_restart():
             client.set_meshes([(np.eye(3), np.zeros((0, 3), int), (1, 1, 1))])     # refused before it travels
         client.set_meshes(meshes)
         np.testing.assert_allclose(client.render(cam, RenderSettings()), want, atol=1e-6)
-        os.kill(client.pid, signal.SIGKILL)
-        time.sleep(0.2)
+        _kill(client)
         with pytest.raises(WorkerError):
             client.render(cam, RenderSettings())
         np.testing.assert_allclose(client.render(cam, RenderSettings()), want, atol=1e-6)   # meshes re-sent
+
+
+def test_worker_renders_while_the_caller_goes_on_and_answers_stay_in_order():
+    s = curls(6, 6)
+    cam = Camera.look_at((0, -2.5, 0.5), (0, 0, 0.5), size=(24, 24))
+    moved = cam.moved(position=(0.3, -2.5, 0.6))
+    with WorkerClient(python=sys.executable, extra_sys_path=(_root(),), timeout=60) as client:
+        client.set_strands(s)
+        want, want_moved = client.render(cam, RenderSettings()), client.render(moved, RenderSettings())
+        client.render_begin(cam, RenderSettings())        # returns before the image is drawn
+        deadline = time.monotonic() + 60
+        while not client.render_ready() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        np.testing.assert_array_equal(client.render_end(), want)
+        # A call made while a render is owed gets its own answer, not the owed image.
+        client.render_begin(cam, RenderSettings())
+        np.testing.assert_array_equal(client.render(moved, RenderSettings()), want_moved)
+        with pytest.raises(WorkerError, match="without a render_begin"):
+            client.render_end()
+        # Bad input comes back from render_end as it would from render.
+        client.render_begin(cam, RenderSettings(spp=2))
+        with pytest.raises(InputError):
+            client.render_end()
+        # The worker dies mid-render: render_ready says so and render_end raises.
+        client.render_begin(cam, RenderSettings(spp=64))
+        os.kill(client.pid, signal.SIGKILL)
+        deadline = time.monotonic() + 10
+        while not client.render_ready() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert client.render_ready()
+        with pytest.raises(WorkerError):
+            client.render_end()
+        np.testing.assert_array_equal(client.render(cam, RenderSettings()), want)   # fresh worker, same scene

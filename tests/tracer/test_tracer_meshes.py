@@ -44,8 +44,9 @@ def test_a_sphere_in_front_of_a_strand_hides_it(meshed):
     strand = make_strands([[[-0.6, 0, 0], [0, 0, 0.02], [0.6, 0, 0]]], radius=0.03)
     sphere = uv_sphere((0, -0.4, 0), 0.15)
     cam = Camera.look_at((0, -2.5, 0), (0, 0, 0), size=(64, 32), fov_deg=30)
-    # No highlight: hair then shows its colour times a grey level, as the mesh does.
-    settings = RenderSettings(shadows=True, lights=(SUN,), specular=0.0)
+    # Kajiya-Kay without highlight: hair then shows its colour times a grey level, as the
+    # mesh does (the physically based default adds a white surface reflection).
+    settings = RenderSettings(shadows=True, lights=(SUN,), specular=0.0, shading="kajiya-kay")
     img, ref = _matches_reference(meshed, strand, [(*sphere, (0.2, 0.4, 0.9))], cam, settings)
     centre = img[15, 32]
     # The sphere's centre pixel shows the sphere's colour times its lighting, nothing of the hair.
@@ -85,7 +86,8 @@ def test_a_plane_shadows_strands(meshed):
     tuft = curls(16, 8, radius=0.015)
     roof = plane(1.3, 0.3, centre=(-0.3, 0.0))      # over the left half of the tuft
     cam = Camera.look_at((0, -2.6, 0.5), (0, 0, 0.5), size=(64, 48), fov_deg=40)
-    settings = RenderSettings(shadows=True, lights=(Light(vector=(0.0, 0.0, -1.0)),))
+    # Kajiya-Kay: lit hair is well above the ambient level and brown (the levels below).
+    settings = RenderSettings(shadows=True, lights=(Light(vector=(0.0, 0.0, -1.0)),), shading="kajiya-kay")
     img, ref = _matches_reference(meshed, tuft, [(*roof, GREY)], cam, settings)
     hair = (img[..., 3] > 0.99) & (img[..., 0] > 1.5 * img[..., 2])       # the brown pixels (the roof is grey)
     ambient_only = np.isclose(img[..., 0], 0.7 * settings.ambient, atol=2e-3)

@@ -17,10 +17,13 @@ def test_real_file_renders_with_plausible_coverage(renderer, shared_data, name):
     strands = Strands.from_arrays(strands.points, strands.counts, radius=np.full(strands.num_points,
                                   float(np.linalg.norm(hi - lo)) / 3000), color=strands.color)
     renderer.set_strands(strands)
-    img = renderer.render(Camera.frame_bounds(lo, hi, (64, 64)), RenderSettings(shadows=True, min_pixel_width=True, min_pixel_width_cap=8.0))
+    settings = RenderSettings(shadows=True, min_pixel_width=True, min_pixel_width_cap=8.0)
+    img = renderer.render(Camera.frame_bounds(lo, hi, (64, 64)), settings)
     assert np.all(np.isfinite(img))
     coverage = float(np.mean(img[..., 3] > 0))
     # framed to the bounding sphere: hair fills part of the frame, never none or all of it
     assert 0.02 < coverage < 0.9, coverage
     lit = img[..., :3][img[..., 3] > 0]
-    assert lit.max() > 0.05     # shaded, not black
+    # Shaded, not black: lit beyond what the ambient term alone can give (physically based
+    # dark-brown hair under the default unit sun is dark, so no fixed brightness is asked).
+    assert lit.max() > settings.ambient * strands.color.max()

@@ -92,20 +92,8 @@ def test_render_png_tiles_at_4_spp_write_the_whole_image(renderer, tmp_path):
 
 
 def _decode(path):
-    import struct
-    import zlib
-    data = path.read_bytes()
-    pos, idat = 8, b""
-    while pos < len(data):
-        (n,) = struct.unpack(">I", data[pos:pos + 4])
-        kind, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + n]
-        if kind == b"IHDR":
-            w, h = struct.unpack(">II", body[:8])
-        elif kind == b"IDAT":
-            idat += body
-        pos += 12 + n
-    raw = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(h, 1 + 4 * w)
-    return raw[:, 1:].reshape(h, w, 4)
+    from tracer.png import read_png_rgba8
+    return read_png_rgba8(path)
 
 
 # ------------------------------------------------------------------ the command's stated limits

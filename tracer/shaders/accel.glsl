@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 // The accelerator interface: all trace_main.glsl asks of an acceleration structure. An
-// accelerator (accel_grid.glsl; a BVH would be another file) implements two functions and
+// accelerator (accel_grid.glsl, accel_bvh.glsl) implements two functions and
 // uses the hit list below:
 //
 //   void accel_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_const)
@@ -22,6 +22,12 @@
 // With COUNT it adds to counter.z the cells (or nodes) it visits and to counter.w the
 // cylinders it tests. Its buffers and uniforms are its own (the host binds them:
 // tracer/draw.py TRACE_BUFFERS).
+
+// Axis zero components get a tiny same-sign stand-in so 1/d stays finite (no inf - inf).
+vec3 safe_inverse(vec3 d) {
+    vec3 s = mix(vec3(1.0), sign(d), notEqual(d, vec3(0.0)));
+    return 1.0 / (s * max(abs(d), vec3(1e-30)));
+}
 
 // The nearest LAYERS hits of the ray being traced, sorted by (distance, id); empty slots
 // are (BIG, NO_ID). Globals, read and written with constant indices only: llvmpipe then

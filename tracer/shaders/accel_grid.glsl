@@ -121,12 +121,6 @@ bool enter_grid(vec3 o, vec3 inv, inout float t0, inout float t1) {
     return t0 <= t1;
 }
 
-// Axis zero components get a tiny same-sign stand-in so 1/d stays finite (no inf - inf).
-vec3 safe_inverse(vec3 d) {
-    vec3 s = mix(vec3(1.0), sign(d), notEqual(d, vec3(0.0)));
-    return 1.0 / (s * max(abs(d), vec3(1e-30)));
-}
-
 // Cells come in ray order, so once the hit list is settled after a full cell, no later
 // cell can change it.
 void accel_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_const) {

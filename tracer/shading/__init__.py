@@ -14,17 +14,20 @@ A model is two functions of the same shape, one per side:
 * float64, in tracer/shading/<module>.py: `shade_light(s, L, settings)` on (n,) arrays
   of the same fields (tracer.shading.Surface), returning (n, 3).
 
+A model with settings of its own gives `uniforms(settings)`: the uniforms its GLSL reads
+(name -> value), set on every draw.
+
 The ambient term, the lights, their colours and the shadows are the tracer's (the same for
 every model).
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
 from hairio import InputError
 
-from . import kajiya_kay, phong
+from . import chiang, kajiya_kay, phong
 
 
 @dataclass(frozen=True)
@@ -45,9 +48,13 @@ class ShadingModel:
     glsl: str               # file in tracer/shaders defining shade_light
     reference: Callable     # float64 shade_light(surface, L, settings) -> (n, 3)
     needs_normal: bool      # whether shade_light reads s.N (the references skip it otherwise)
+    uniforms: Callable = field(default=lambda settings: {})   # settings -> {uniform: value}
 
 
 SHADING_MODELS = (
+    ShadingModel("chiang", "Principled hair (Chiang)",
+                 "Physically based fibre scattering, the model of Cycles' Principled Hair BSDF (Chiang)",
+                 "shading_chiang.glsl", chiang.shade_light, needs_normal=True, uniforms=chiang.uniforms),
     ShadingModel("kajiya-kay", "Kajiya-Kay", "The classic hair shading, with a highlight along the strand",
                  "shading_kajiya_kay.glsl", kajiya_kay.shade_light, needs_normal=False),
     ShadingModel("phong", "Phong", "Plastic-like shading, as in the thesis",

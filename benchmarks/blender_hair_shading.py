@@ -1,0 +1,167 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Cycles' Principled Hair BSDF (Chiang model) on given strands, direct light only: the
+yardstick of the preview's hair shading (section hair_shading).
+
+Set-up, chosen so Cycles computes exactly what the preview computes: round "3D curves"; one
+sun of angle 0 (a delta light: hard shadows, irradiance = its strength in W/m^2 along its
+direction); max bounces 0 (camera ray, then the sun sampled at the hit: direct light only);
+the world black with strength 0; a box pixel filter of width 1 (the preview's stratified
+pixel samples); no denoiser, no adaptive sampling, no clamping, no glossy filter; the result
+read as linear Rec.709 floats from an OpenEXR file (view transform Standard, exposure 0, so
+nothing between the film and the file). Opaque black film, so each pixel is the hair's
+radiance times its coverage: the preview's premultiplied RGB over a transparent background.
+
+Only this module imports bpy, lazily, so the section reports "not measured" where Blender is
+missing.
+"""
+import os
+import tempfile
+import time
+
+import numpy as np
+
+
+def _bpy():
+    import bpy
+    return bpy
+
+
+def _matrix(m):
+    import mathutils
+    return mathutils.Matrix(np.asarray(m, np.float64).tolist())
+
+
+def _hair_object(strands):
+    bpy = _bpy()
+    curves = bpy.data.hair_curves.new("hair")
+    curves.add_curves(np.asarray(strands.counts, np.int64).tolist())
+    curves.set_types(type='POLY')
+    curves.position_data.foreach_set("vector", np.ascontiguousarray(strands.points, np.float32).ravel())
+    attr = curves.attributes.get("radius") or curves.attributes.new("radius", 'FLOAT', 'POINT')
+    attr.data.foreach_set("value", np.ascontiguousarray(strands.radius, np.float32))
+    # Not named "color": Cycles does not hand that name to shader nodes on hair curves.
+    rgba = np.ones((strands.num_points, 4), np.float32)
+    rgba[:, :3] = strands.color
+    col = curves.attributes.new("strand_rgba", 'FLOAT_COLOR', 'POINT')
+    col.data.foreach_set("color", rgba.ravel())
+    obj = bpy.data.objects.new("hair", curves)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def _material(hair):
+    """Principled Hair (Chiang). hair: dict with parametrization "melanin" (melanin,
+    melanin_redness; the strand colour as Tint) or "color" (the strand colour, Direct
+    Coloring), and roughness, radial_roughness, coat, ior, offset (radians)."""
+    bpy = _bpy()
+    mat = bpy.data.materials.new("hair")
+    if hasattr(mat, "use_nodes") and not mat.use_nodes:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    bsdf = nt.nodes.new("ShaderNodeBsdfHairPrincipled")
+    bsdf.model = 'CHIANG'
+    attr = nt.nodes.new("ShaderNodeAttribute")
+    attr.attribute_name = "strand_rgba"
+    if hair["parametrization"] == "color":
+        bsdf.parametrization = 'COLOR'
+        nt.links.new(attr.outputs["Color"], bsdf.inputs["Color"])
+    else:
+        bsdf.parametrization = 'MELANIN'
+        bsdf.inputs["Melanin"].default_value = hair["melanin"]
+        bsdf.inputs["Melanin Redness"].default_value = hair["melanin_redness"]
+        nt.links.new(attr.outputs["Color"], bsdf.inputs["Tint"])
+    bsdf.inputs["Roughness"].default_value = hair["roughness"]
+    bsdf.inputs["Radial Roughness"].default_value = hair["radial_roughness"]
+    bsdf.inputs["Coat"].default_value = hair["coat"]
+    bsdf.inputs["IOR"].default_value = hair["ior"]
+    bsdf.inputs["Offset"].default_value = hair["offset"]
+    for name in ("Random Roughness", "Random Color"):    # "Random Color" exists for melanin only
+        if name in bsdf.inputs:
+            bsdf.inputs[name].default_value = 0.0
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def render_cycles(strands, camera_matrix, size, sun_direction, sun_strength, hair, samples,
+                  lens=50.0, sensor_width=36.0, threads=None, seed=1):
+    """(H, W, 3) float64 linear RGB, row 0 = top, and the render's wall time in seconds."""
+    bpy = _bpy()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    obj = _hair_object(strands)
+    obj.data.materials.append(_material(hair))
+
+    cam = bpy.data.cameras.new("camera")
+    cam.lens, cam.sensor_width, cam.sensor_fit = float(lens), float(sensor_width), 'AUTO'
+    cam.clip_start, cam.clip_end = 1e-3, 1e4
+    cam_obj = bpy.data.objects.new("camera", cam)
+    sc.collection.objects.link(cam_obj)
+    cam_obj.matrix_world = _matrix(camera_matrix)
+    sc.camera = cam_obj
+
+    sun = bpy.data.lights.new("sun", 'SUN')
+    sun.energy = float(sun_strength)
+    sun.angle = 0.0
+    sun_obj = bpy.data.objects.new("sun", sun)
+    sc.collection.objects.link(sun_obj)
+    # A sun shines along its local -Z.
+    d = np.asarray(sun_direction, np.float64)
+    d /= np.linalg.norm(d)
+    z = -d
+    x = np.cross((0.0, 0.0, 1.0), z) if abs(z[2]) < 0.99 else np.array([1.0, 0.0, 0.0])
+    x /= np.linalg.norm(x)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2] = x, np.cross(z, x), z
+    sun_obj.matrix_world = _matrix(m)
+
+    world = bpy.data.worlds.new("black")
+    sc.world = world
+    if hasattr(world, "use_nodes") and not world.use_nodes:
+        world.use_nodes = True
+    bg = world.node_tree.nodes.get("Background")
+    if bg is not None:
+        bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+        bg.inputs["Strength"].default_value = 0.0
+
+    sc.render.engine = 'CYCLES'
+    sc.cycles.device = 'CPU'
+    sc.render.threads_mode = 'FIXED'
+    sc.render.threads = int(threads or os.cpu_count())
+    sc.render.resolution_x, sc.render.resolution_y = int(size[0]), int(size[1])
+    sc.render.resolution_percentage = 100
+    sc.render.film_transparent = False
+    sc.cycles.samples = int(samples)
+    sc.cycles.use_denoising = False
+    sc.cycles.use_adaptive_sampling = False
+    sc.cycles.max_bounces = 0
+    sc.cycles.transparent_max_bounces = 0
+    sc.cycles.sample_clamp_direct = 0.0
+    sc.cycles.sample_clamp_indirect = 0.0
+    sc.cycles.blur_glossy = 0.0
+    sc.cycles.pixel_filter_type = 'BOX'
+    sc.cycles.filter_width = 1.0
+    sc.cycles.seed = int(seed)
+    sc.cycles_curves.shape = 'THICK'
+    sc.view_settings.view_transform = 'Standard'
+    sc.view_settings.look = 'None'
+    sc.view_settings.exposure = 0.0
+    sc.view_settings.gamma = 1.0
+    settings = sc.render.image_settings
+    settings.file_format = 'OPEN_EXR'
+    settings.color_depth = '32'
+    settings.color_mode = 'RGB'
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "cycles.exr")
+        sc.render.filepath = path
+        t0 = time.perf_counter()
+        bpy.ops.render.render(write_still=True)
+        seconds = time.perf_counter() - t0
+        img = bpy.data.images.load(path)
+        w, h = img.size
+        px = np.empty(w * h * 4, np.float32)
+        img.pixels.foreach_get(px)
+        bpy.data.images.remove(img)
+    # Blender's images start at the bottom row.
+    return px.reshape(h, w, 4)[::-1, :, :3].astype(np.float64), seconds

@@ -1,0 +1,119 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Preview defaults (issue 14, "no dust at the defaults"): the default render settings against
+a 64-sample stratified reference, beside the 16-sample figure they must reach and the
+candidate ways there, each with its time and its ratio to the default's time (the goal: the
+16-sample error in at most twice the default's time).
+
+Scenes: the `wavy` preset at its own strand count on the bundled scalp, and the real
+`Ratboy_mohawk.tfx` (Y up, turned Z up), each framed by the benchmark camera at 512² and
+1920×1080. Error: RMSE of linear premultiplied RGBA over the pixels where either image has
+any hair (alpha > 0), so dust (hair broken into dots) and haze both count. At 1920×1080 the
+default's time is given for the whole frame; errors and the times they are compared with
+come from the frame's middle 480×270 (Camera.window: the same pixels, samples and all).
+Times: the median of the harness's runs for the one-sample settings; the many-sample
+renders, a single run.
+
+Run alone: `python -m benchmarks --full --only preview_defaults` (15-30 minutes on 2 cores,
+most of it the 64-sample references of `wavy`; the quick run's time limit stops it before
+`wavy`).
+"""
+import os
+
+import numpy as np
+
+from benchmarks.harness import NotMeasured, fmt_num, fmt_time, measure, once
+from benchmarks.scenes import DATA, groom_scene, tracer_api, tracer_camera, view_matrix
+from benchmarks.sections import left
+
+REF_SPP = 64
+TARGET_SPP = 16
+WINDOW = (480, 270)             # the middle of a 1920x1080 frame whose errors are measured
+WINDOW_PIXELS = 512 * 512       # images larger than this are measured on WINDOW
+MOHAWK_VIEW = np.array([0.0, 1.0, -0.2])       # from the front, a little above (the mohawk faces -Y once Z up)
+# (label, RenderSettings fields over the defaults)
+CANDIDATES = (
+    ("min pixel width (cap 4, the default cap)", {"min_pixel_width": True}),
+    ("min pixel width, cap 8", {"min_pixel_width": True, "min_pixel_width_cap": 8.0}),
+    ("4 spp (stratified)", {"spp": 4}),
+)
+
+
+def hair_rmse(image, reference):
+    """RMSE of RGBA over the pixels where either image has any hair."""
+    a, b = np.asarray(image, np.float64), np.asarray(reference, np.float64)
+    mask = (a[..., 3] > 0) | (b[..., 3] > 0)
+    return float(np.sqrt(np.mean((a - b)[mask] ** 2))) if mask.any() else float("nan")
+
+
+def _scenes(cfg):
+    path = os.path.join(DATA, "Ratboy_mohawk.tfx")
+    if not os.path.exists(path):
+        raise NotMeasured(f"{path} is missing (put ../shared/data beside the checkout or set HAIR_DATA)")
+
+    def mohawk():
+        from hairio.formats import read_strands
+        from hairio.formats.up_axis import strands_to_z_up
+        return strands_to_z_up(read_strands(path), path)
+    yield "Ratboy_mohawk.tfx", mohawk, MOHAWK_VIEW
+    yield "wavy", lambda: groom_scene("wavy", _preset_count())[3].strands, np.array([0.55, -1.0, -0.4])
+
+
+def _preset_count():
+    from benchmarks.scenes import load_preset
+    return load_preset("wavy").params.count
+
+
+def run(sec, cfg):
+    tracer = tracer_api()
+    sec.text(__doc__.strip())
+    sizes = [(512, 512), (1920, 1080)]
+    rows, summary = [], []
+    for name, make, direction in _scenes(cfg):
+        strands = make()
+        renderer = tracer.Renderer()
+        renderer.set_strands(strands)
+        for size in sizes:
+            where = f"{size[0]}×{size[1]}"
+            if left(sec) < 0:
+                rows.append([name, where, "not measured: the section's time ran out", "", "", ""])
+                continue
+            full_frame = tracer_camera(view_matrix(*strands.bounds(), size, direction=direction), size)
+            camera = full_frame
+            if size[0] * size[1] > WINDOW_PIXELS:
+                # The default's time of the whole frame is the figure asked for; the errors and
+                # the candidates' times come from its middle (the same pixels and samples as in
+                # the whole image: Camera.window), where the 64-sample reference stays affordable.
+                full, _ = measure(lambda: renderer.render(full_frame, tracer.RenderSettings()), runs=cfg.runs)
+                rows.append([name, where, "today's default (1 spp), whole frame", str(full), "", ""])
+                w, h = WINDOW
+                camera = full_frame.window((size[0] - w) // 2, (size[1] - h) // 2, w, h)
+                where = f"{where}, middle {w}×{h}"
+            t_ref, ref = once(lambda: renderer.render(camera, tracer.RenderSettings(spp=REF_SPP)))
+            base, img = measure(lambda: renderer.render(camera, tracer.RenderSettings()), runs=cfg.runs)
+            e_base = hair_rmse(img, ref)
+            t16, img16 = once(lambda: renderer.render(camera, tracer.RenderSettings(spp=TARGET_SPP)))
+            e16 = hair_rmse(img16, ref)
+            rows.append([name, where, "today's default (1 spp)", str(base), "1.00", fmt_num(e_base)])
+            rows.append([name, where, f"{TARGET_SPP} spp (the error to reach)", fmt_time(t16) + " (1 run)",
+                         f"{t16 / base.median:.2f}", fmt_num(e16)])
+            met = []
+            for label, change in CANDIDATES:
+                rs = tracer.RenderSettings(**change)
+                if rs.spp > 1:
+                    t, im = once(lambda: renderer.render(camera, rs))
+                    cell = fmt_time(t) + " (1 run)"
+                else:
+                    timing, im = measure(lambda: renderer.render(camera, rs), runs=cfg.runs)
+                    t, cell = timing.median, str(timing)
+                e = hair_rmse(im, ref)
+                ok = e <= e16 and t <= 2.0 * base.median
+                met.append(ok)
+                rows.append([name, where, label + (" ✓" if ok else ""), cell, f"{t / base.median:.2f}", fmt_num(e)])
+            sec.data[f"{name} {where}"] = {"default_s": base.median, "default_rmse": e_base, "rmse_16": e16,
+                                           "ref_s": t_ref}
+            summary.append(f"{name} {where}: default {fmt_num(e_base)} RMSE in {base}, 16 spp {fmt_num(e16)}; "
+                           f"{sum(met)} of {len(met)} candidates meet both goals")
+    sec.table(["scene", "image", "settings", "time (median)", "× default time", f"RMSE vs {REF_SPP} spp"], rows,
+              caption="Default preview settings and the candidates (✓: the 16-sample error in at most twice "
+                      "the default's time)")
+    sec.summary.extend(summary)

@@ -1,0 +1,138 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Both acceleration structures (Renderer accel="grid" | "bvh") give the same image: they
+find the same hits with the same hit test, so pixels agree to float32 rounding (a
+transmittance shadow may multiply its factors in another order). The BVH also keeps the
+renderer's upload rules: a camera move sends nothing, a strand edit refits the tree and
+sends only the changed part of it."""
+import numpy as np
+import pytest
+
+from hairio import InputError
+from tracer import Camera, Light, Renderer, RenderSettings
+
+from test_tracer_vs_reference import assert_matches_reference
+from tracer_scenes import curls, make_strands
+
+
+@pytest.fixture(scope="module")
+def pair(renderer):
+    """(grid renderer, BVH renderer), both with the build of the session's `renderer`."""
+    return Renderer(build=renderer.build, accel="grid"), Renderer(build=renderer.build, accel="bvh")
+
+
+def _render_both(pair, strands, camera, settings):
+    imgs = []
+    for r in pair:
+        r.set_strands(strands)
+        imgs.append(r.render(camera, settings))
+    return imgs
+
+
+CAM = Camera.look_at((1.8, -1.6, 0.9), (0, 0, 0.5), fov_deg=40, size=(64, 64))
+CASES = {
+    "opaque, hard shadows": (curls(30, 10), RenderSettings(shadows=True)),
+    "alpha layers, transmittance": (curls(30, 10, alpha=0.5), RenderSettings(layers=4, shadow_mode="transmittance")),
+    "alpha, hard, 4 spp, two lights": (curls(30, 10, alpha=0.6), RenderSettings(
+        spp=4, layers=3, lights=(Light(), Light("point", (1.0, -1.0, 2.0), intensity=0.5)))),
+    "min pixel width, phong": (curls(30, 10, radius=0.002), RenderSettings(min_pixel_width=True, shading="phong")),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_bvh_and_grid_give_the_same_image(pair, case):
+    strands, settings = CASES[case]
+    grid, bvh = _render_both(pair, strands, CAM, settings)
+    assert (grid[..., 3] > 0).mean() > 0.05, "scene not in view: the test would prove nothing"
+    assert np.abs(grid - bvh).max() <= 1e-6
+
+
+def test_bvh_and_grid_agree_with_an_orthographic_camera_from_below(pair):
+    cam = Camera.look_at((0.1, 0.05, -2.0), (0, 0, 0.5), fov_deg=30, size=(48, 48), type="ORTHO", ortho_scale=1.4)
+    grid, bvh = _render_both(pair, curls(20, 8, alpha=0.7), cam, RenderSettings(layers=2))
+    assert (grid[..., 3] > 0).mean() > 0.05
+    assert np.abs(grid - bvh).max() <= 1e-6
+
+
+def test_bvh_matches_the_float64_reference(pair):
+    settings = RenderSettings(layers=4, shadow_mode="transmittance", count=True)
+    assert_matches_reference(pair[1], curls(25, 10, alpha=0.6), CAM, settings)
+    st = pair[1].stats
+    assert st.cells_visited > 0 and st.cylinder_tests > 0     # boxes and cylinders tested
+
+
+def test_camera_moves_upload_nothing_and_edits_refit_only_what_changed(pair):
+    r = pair[1]
+    strands = curls(2000, 10, seed=4)
+    r.set_strands(strands)
+    r.render(CAM)
+    before = r.stats.bytes_uploaded
+    r.render(Camera.look_at((-1.5, -1.9, 0.4), (0, 0, 0.4), fov_deg=50, size=(64, 64)))
+    assert r.stats.bytes_uploaded == before
+    # Move three strands: the tree is refitted, and only the chunks of it that changed go up
+    # (the nodes above the moved cylinders), with the moved cylinders' chunks.
+    pts = strands.points.copy()
+    ids = np.array([3, 770, 1500])
+    moved_pts = np.isin(np.repeat(np.arange(strands.num_strands), strands.counts), ids)
+    pts[moved_pts] += np.array([0.05, 0.02, -0.03])
+    edited = type(strands).from_arrays(pts, strands.counts, radius=strands.radius, color=strands.color,
+                                       alpha=strands.alpha)
+    before = r.stats.bytes_uploaded
+    r.update_strands(ids, edited)
+    sent = r.stats.bytes_uploaded - before
+    assert r.stats.bvh_refit and sent > 0
+    img = r.render(CAM)
+    fresh = Renderer(build=r.build, accel="bvh")
+    fresh.set_strands(edited)
+    assert np.abs(img - fresh.render(CAM)).max() <= 1e-6
+    assert sent < 0.5 * fresh.stats.bytes_uploaded
+
+
+def test_only_the_hair_box_is_traced_with_either_structure(pair):
+    s = make_strands([[(0, 0, 0), (0.1, 0, 0.3)], [(0.05, 0.02, 0), (0.12, 0.0, 0.25)]], radius=0.01)
+    cam = Camera.look_at((0, -3, 0.15), (0, 0, 0.15), fov_deg=40, size=(96, 96))
+    _render_both(pair, s, cam, RenderSettings())
+    grid_px, bvh_px = (r.stats.traversed_pixels for r in pair)
+    assert 0 < bvh_px <= grid_px < 96 * 96 // 4
+
+
+def test_unknown_accelerator_is_refused():
+    with pytest.raises(InputError, match="accel"):
+        Renderer(accel="octree")
+
+
+def test_command_line_renders_the_same_png_with_either_structure(tmp_path, capsys):
+    from tracer.__main__ import main
+    src = tmp_path / "tuft.npz"
+    curls(20, 8).save_npz(src)
+    pngs = {}
+    for accel in ("grid", "bvh"):
+        out = tmp_path / f"{accel}.png"
+        assert main(["render", str(src), "--out", str(out), "--size", "40x32", "--accel", accel]) == 0
+        pngs[accel] = out.read_bytes()
+    assert "BVH build" in capsys.readouterr().out
+    assert pngs["grid"] == pngs["bvh"]
+
+
+def test_a_short_stack_that_overflows_loses_no_hit(renderer, monkeypatch):
+    """With one slot the near-first walk overflows on nearly every ray and falls back to the
+    walk in tree order: the image is still the grid's."""
+    from tracer import layout
+    strands, settings = CASES["alpha layers, transmittance"]
+    grid = Renderer(build=renderer.build, accel="grid")
+    grid.set_strands(strands)
+    want = grid.render(CAM, settings)
+    monkeypatch.setattr(layout, "BVH_SHORT_STACK", 1)
+    bvh = Renderer(build=renderer.build, accel="bvh")       # programs compiled with one slot
+    bvh.set_strands(strands)
+    assert np.abs(bvh.render(CAM, settings) - want).max() <= 1e-6
+    opaque, _ = CASES["opaque, hard shadows"]
+    grid.set_strands(opaque)
+    bvh.set_strands(opaque)
+    counted = RenderSettings(shadows=False, count=True)
+    assert np.abs(bvh.render(CAM, counted) - grid.render(CAM, counted)).max() <= 1e-6
+    boxes_one_slot = bvh.stats.cells_visited
+    monkeypatch.undo()
+    roomy = Renderer(build=renderer.build, accel="bvh")
+    roomy.set_strands(opaque)
+    roomy.render(CAM, counted)
+    assert boxes_one_slot > roomy.stats.cells_visited      # the fallback walk ran
