@@ -76,6 +76,9 @@ def write_hair(scalp, strands, root_uv=None):
             tx.keep_settings(hair)
             tx.keep_transform(hair)
             tx.keep_curves(hair)
+            # Its arrays are shared now (with the backup, and with the depsgraph's evaluated
+            # copy): written in place, each would be copied first only to be overwritten.
+            blender_curves.drop_written_attributes(hair.data)
         hair = blender_curves.strands_to_curves(hair_name(scalp), strands, collection=collection,
                                                 parent=scalp, obj=hair, root_uv=root_uv)
         if new:

@@ -98,7 +98,9 @@ class Transaction:
         in place or replaced by another one meanwhile.
 
         The copy costs no memory at first (Blender shares the arrays until one side writes);
-        on commit it is dropped."""
+        on commit it is dropped. A writer that removes an attribute before writing it anew
+        (blender_curves.drop_written_attributes) gets fresh memory for it instead of a
+        copy of the shared array it is about to overwrite."""
         original = obj.data
         name, fake_user = original.name, original.use_fake_user
         backup = original.copy()

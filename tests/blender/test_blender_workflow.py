@@ -206,6 +206,53 @@ def test_generate_again_refills_the_same_hair_object(clean):
     assert len([o for o in bpy.data.objects if o.type == 'CURVES']) == 1
 
 
+@pytest.mark.parametrize("change", ["colour", "count"])
+def test_generate_again_keeps_what_the_artist_gave_the_hair_s_datablock(clean, change):
+    """Generate rewrites the hair's Curves datablock (keeping a copy for the undo until the
+    press succeeds, and in 4.2 replacing it on a new strand layout): the artist's name,
+    material, settings, custom property, own attribute (its values too while the strand
+    layout is unchanged) and every user carry over, and no other Curves datablock is left."""
+    scalp = make_scalp()
+    add_keys(scalp)
+    scalp.keystrand_hair.count = 300
+    bpy.ops.hair.generate()
+    hair = scalp.keystrand_hair.hair_object
+    data = hair.data
+    data.name = "Artist's Hair"
+    material = bpy.data.materials.new("Artist's Material")
+    data.materials[0] = material
+    data.use_fake_user = True
+    data["artist_note"] = 7
+    mine = data.attributes.new("artist_mask", 'FLOAT', 'CURVE')
+    mask = np.linspace(0.0, 1.0, 300, dtype=np.float32)
+    mine.data.foreach_set("value", mask)
+    before = np.empty(len(data.points) * 4, np.float32)
+    data.attributes["strand_rgba"].data.foreach_get("color", before)
+    twin = bpy.data.objects.new("Twin", data)
+    bpy.context.scene.collection.objects.link(twin)
+    if change == "colour":
+        scalp.keystrand_hair.color = (0.9, 0.1, 0.1)
+    else:
+        scalp.keystrand_hair.count = 400
+    activate(scalp)
+    assert bpy.ops.hair.generate() == {'FINISHED'}
+    data = hair.data
+    assert twin.data == data and [c.name for c in bpy.data.hair_curves] == ["Artist's Hair"]
+    assert list(data.materials) == [material] and data.surface == scalp and data.use_fake_user
+    assert data["artist_note"] == 7 and data.users == 3  # two objects and the fake user
+    assert len(data.curves) == (300 if change == "colour" else 400)
+    if change == "colour":
+        rgba = np.empty(len(data.points) * 4, np.float32)
+        data.attributes["strand_rgba"].data.foreach_get("color", rgba)
+        assert not np.allclose(rgba, before)  # written, not the old datablock kept
+    mine = data.attributes.get("artist_mask")
+    assert mine is not None and mine.domain == 'CURVE' and mine.data_type == 'FLOAT'
+    if change == "colour":
+        back = np.empty(300, np.float32)
+        mine.data.foreach_get("value", back)
+        assert np.array_equal(back, mask)
+
+
 def test_the_settings_read_into_groom_are_exactly_groom_s_parameters(clean):
     """The add-on's list of model settings and GroomParams' fields are the same names: a
     parameter added to groom without a setting (or a setting groom does not know) fails."""
