@@ -21,7 +21,7 @@ import time
 import bpy
 from bpy.app.handlers import persistent
 
-from . import generator_cache, hair, preview, scene_data
+from . import app_handlers, generator_cache, hair, preview, scene_data
 from .generator_cache import forget, state_of, states
 from .properties import groom_params
 from .transaction import clear_background, forget_background, report_background
@@ -262,16 +262,12 @@ HANDLERS = ((bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
 
 
 def register_handlers():
-    for handlers, fn in HANDLERS:
-        if fn not in handlers:
-            handlers.append(fn)
+    app_handlers.add(HANDLERS)
 
 
 def unregister_handlers():
     global _timer_on
-    for handlers, fn in HANDLERS:
-        while fn in handlers:
-            handlers.remove(fn)
+    app_handlers.remove(HANDLERS)
     if bpy.app.timers.is_registered(_tick):
         bpy.app.timers.unregister(_tick)
     _timer_on = False

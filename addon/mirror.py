@@ -21,7 +21,7 @@ from bpy.app.handlers import persistent
 from bpy.props import PointerProperty
 from hairio import InputError
 
-from . import head, key_points, scene_data
+from . import app_handlers, head, key_points, scene_data
 from .transaction import clear_background, report_background
 
 TASK = "Mirror"
@@ -183,14 +183,10 @@ def register():
     bpy.types.Object.keystrand_mirror = PointerProperty(
         type=bpy.types.Object, name="Mirror Key",
         description="The key strand this one is kept the mirror image of (Symmetry)")
-    for handlers, fn in HANDLERS:
-        if fn not in handlers:
-            handlers.append(fn)
+    app_handlers.add(HANDLERS)
 
 
 def unregister():
-    for handlers, fn in HANDLERS:
-        while fn in handlers:
-            handlers.remove(fn)
+    app_handlers.remove(HANDLERS)
     on_load()
     del bpy.types.Object.keystrand_mirror

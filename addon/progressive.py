@@ -21,7 +21,7 @@ import bpy
 from bpy.app.handlers import persistent
 from hairio import InputError
 
-from . import preview, scene_data
+from . import app_handlers, preview, scene_data
 from .properties import RENDER_FIELDS
 from .transaction import clear_background, report_background, transaction
 
@@ -272,13 +272,9 @@ HANDLERS = ((bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
 
 
 def register():
-    for handlers, fn in HANDLERS:
-        if fn not in handlers:
-            handlers.append(fn)
+    app_handlers.add(HANDLERS)
 
 
 def unregister():
-    for handlers, fn in HANDLERS:
-        while fn in handlers:
-            handlers.remove(fn)
+    app_handlers.remove(HANDLERS)
     stop()

@@ -203,6 +203,9 @@ class WorkerClient:
                 self._exchange("set_strands", (self._strands,), timeout)
             if command not in ("set_meshes", "quit") and self._meshes is not None:
                 self._exchange("set_meshes", (self._meshes,), timeout)
+        self._write(command, args)
+
+    def _write(self, command, args):
         try:
             write_message(self._proc.stdin, (command, args))
         except (BrokenPipeError, OSError) as e:
@@ -211,12 +214,7 @@ class WorkerClient:
                               f"its last words: {''.join(self._stderr[-5:]).strip()!r}") from None
 
     def _exchange(self, command, args, timeout):
-        try:
-            write_message(self._proc.stdin, (command, args))
-        except (BrokenPipeError, OSError) as e:
-            self._kill()
-            raise WorkerError(f"tracer worker died before {command!r} ({e}); "
-                              f"its last words: {''.join(self._stderr[-5:]).strip()!r}") from None
+        self._write(command, args)
         return self._receive(command, timeout)
 
     def _receive(self, command, timeout):

@@ -232,6 +232,8 @@ def test_the_preview_starts_over_when_the_camera_a_setting_or_the_hair_changes(c
 
 
 def test_with_the_renderer_process_a_step_does_not_wait_for_the_pass(clean, monkeypatch):
+    import os
+    import signal
     import time
     preview = ext_module(clean, "preview")
     progressive = ext_module(clean, "progressive")
@@ -243,8 +245,15 @@ def test_with_the_renderer_process_a_step_does_not_wait_for_the_pass(clean, monk
         assert bpy.ops.hair.render_preview() == {'FINISHED'}
         session = progressive.current()
         assert type(preview.current_renderer()).__name__ == "WorkerClient"
-        # The pass is sent and the step returns before the process can have drawn it.
-        assert progressive.step() == "waiting" and session.passes == 1
+        # The pass is sent and the step returns without its image: the process is held
+        # stopped meanwhile, so it cannot have drawn it, however the two are scheduled (a
+        # step that waited for the image would not return).
+        worker = preview.current_renderer()
+        os.kill(worker.pid, signal.SIGSTOP)
+        try:
+            assert progressive.step() == "waiting" and session.passes == 1
+        finally:
+            os.kill(worker.pid, signal.SIGCONT)
         deadline = time.monotonic() + 60
         state = "waiting"
         while state == "waiting" and time.monotonic() < deadline:
@@ -255,7 +264,11 @@ def test_with_the_renderer_process_a_step_does_not_wait_for_the_pass(clean, monk
                                  sample_pass=k)[0] for k in (0, 1)]
         np.testing.assert_allclose(image_pixels(), (passes[0] + passes[1]) / 2, atol=1e-6)
         # A change while a pass is drawn: the owed image is dropped, the new first image shown.
-        assert progressive.step() == "waiting"
+        os.kill(worker.pid, signal.SIGSTOP)
+        try:
+            assert progressive.step() == "waiting"
+        finally:
+            os.kill(worker.pid, signal.SIGCONT)
         scene.camera.location.x += 0.02
         bpy.context.view_layer.update()
         state = progressive.step()
