@@ -49,7 +49,7 @@ def run(sec, cfg):
     row("shadows off (vs on)", t_on, t_off,
         f"shadow rays traced: {rays_off} (with shadows: {rays_on:,}); image vs float64 reference with shadows off: "
         f"IoU {100 * e['iou']:.1f} %, RMSE over the hair {fmt_num(e['rmse_hair'])}, {e['bad_pixels']} of "
-        f"{e['hair_pixels']} hair pixels off (rays grazing tips thinner than float32 resolves there)")
+        f"{e['hair_pixels']} hair pixels off")
 
     # 2. alpha 1: one layer
     t_on, img1 = measure(lambda: r.render(cam, base), runs=cfg.runs)
