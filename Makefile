@@ -14,14 +14,17 @@ setup:
 setup-blender: setup
 	@bash scripts/setup_blender.sh
 
-# Generate a preset hairstyle on the bundled scalp, render it with the tracer, export it.
+# Generate a preset hairstyle on the bundled scalp, render it with the bundled head in the
+# picture (the tracer's opaque meshes), export it.
 demo: setup
 	@mkdir -p $(OUT)
 	$(PY) -m groom generate --preset $(PRESET) --out $(OUT)/$(PRESET).npz
-	$(PY) -m tracer render $(OUT)/$(PRESET).npz --out $(OUT)/$(PRESET).png --size 512x512 --spp 4 --shadows
+	$(PY) -m groom head --out $(OUT)/head.obj
+	$(PY) -m tracer render $(OUT)/$(PRESET).npz --mesh $(OUT)/head.obj --mesh-color 0.62,0.45,0.36 \
+		--out $(OUT)/$(PRESET).png --size 512x512 --spp 4 --shadows
 	$(PY) -m groom export $(OUT)/$(PRESET).npz --format tfx --out $(OUT)/$(PRESET).tfx
 	$(PY) -m groom export $(OUT)/$(PRESET).npz --format hair --out $(OUT)/$(PRESET).hair
-	@echo "demo: wrote $(OUT)/$(PRESET).npz, .png, .tfx, .hair"
+	@echo "demo: wrote $(OUT)/$(PRESET).npz, .png (with the head), .tfx, .hair"
 
 # The whole suite: groom, hairio, tracer (headless EGL) and the extension under Blender 5.0;
 # the tracer again through GLX on a virtual X server (the tests start Xvfb); the extension's

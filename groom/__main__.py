@@ -5,6 +5,7 @@
                              [--collider MESH.obj | --collider none]
                              [--count N] [--seed S] --out FILE.npz
     python -m groom export ...   (see `python -m groom export --help`)
+    python -m groom head --out HEAD.obj   (the bundled head the bundled scalp lies on)
 
 Bad input exits 2 with a message naming it; no partial output file is ever written. Keys
 that cannot each find a root of their own on the scalp, and keys that pass through the
@@ -42,7 +43,22 @@ def _parser():
     g.add_argument("--out", required=True, help="output .npz file (SPEC §0 arrays, the key strands, guides and weights)")
     sub.add_parser("export", help="convert strands between formats", add_help=False)
     sub.add_parser("list", help="list the bundled presets")
+    h = sub.add_parser("head", help="write the bundled head (the bundled scalp lies on it) as .obj, "
+                                    "e.g. for `python -m tracer render --mesh`")
+    h.add_argument("--out", required=True, help="output .obj file (metres, Z up, face toward -Y)")
     return p
+
+
+def head_main(args):
+    from hairio.atomic import check_destination
+    from hairio.obj import write_obj
+    from .scalp import default_head
+    check_destination(args.out, f"--out {args.out!r}")
+    head = default_head()
+    write_obj(args.out, head.vertices, head.triangles,
+              comment="The bundled head of keystrand hair (metres, Z up, face toward -Y).")
+    print(f"head: {len(head.vertices)} vertices, {len(head.triangles)} triangles -> {args.out}")
+    return 0
 
 
 # Options whose value may start with a minus sign ("--front -1,0,0"), which argparse would
@@ -198,6 +214,8 @@ def main(argv=None):
             from .presets import list_presets
             print("\n".join(list_presets()))
             return 0
+        if args.command == "head":
+            return head_main(args)
         return generate_main(args)
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)

@@ -90,3 +90,21 @@ def _index(text, count, what):
     if not 0 <= i < _MAX_INDEX:
         raise ValueError(f"{what} index {text} lies outside the file")
     return i
+
+
+def write_obj(path, vertices, triangles, comment=None):
+    """Write a triangle mesh as .obj (`v` lines at float32-exact precision, `f` lines counting
+    from 1), all or nothing: a failure leaves no file."""
+    from .atomic import atomic_write
+    vertices = np.asarray(vertices, np.float64)
+    triangles = np.asarray(triangles, np.int64)
+    if vertices.ndim != 2 or vertices.shape[1] != 3 or not np.isfinite(vertices).all():
+        raise InputError(f"{path}: vertices must be finite (V, 3); got shape {vertices.shape}")
+    if triangles.ndim != 2 or triangles.shape[1] != 3 or len(triangles) == 0 \
+            or triangles.min() < 0 or triangles.max() >= len(vertices):
+        raise InputError(f"{path}: triangles must be (F, 3) indices of the {len(vertices)} vertices")
+    lines = [] if comment is None else [f"# {line}" for line in comment.splitlines()]
+    lines += [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in vertices]
+    lines += [f"f {a} {b} {c}" for a, b, c in triangles + 1]
+    with atomic_write(path) as f:
+        f.write(("\n".join(lines) + "\n").encode("ascii"))

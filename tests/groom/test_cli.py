@@ -69,3 +69,24 @@ def test_export_subcommand_delegates_to_the_exporter(tmp_path):
     out = tmp_path / "h.hair"
     assert main(["export", str(npz), "--out", str(out)]) == 0
     assert out.stat().st_size > 0
+
+
+def test_head_writes_the_bundled_head_as_obj_that_reads_back_as_the_same_closed_mesh(tmp_path):
+    from groom import default_head
+    from hairio.obj import read_obj
+    out = tmp_path / "head.obj"
+    assert main(["head", "--out", str(out)]) == 0
+    vertices, triangles = read_obj(out)
+    head = default_head()
+    np.testing.assert_array_equal(triangles, head.triangles)
+    np.testing.assert_allclose(vertices, head.vertices, rtol=0, atol=1e-9)
+    # Closed: every edge is shared by exactly two triangles, so the tracer's head hides what is behind it.
+    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+    _, uses = np.unique(edges, axis=0, return_counts=True)
+    assert (uses == 2).all()
+
+
+def test_head_to_a_folder_exits_2_and_writes_nothing(tmp_path, capsys):
+    assert main(["head", "--out", str(tmp_path)]) == 2
+    assert "--out" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
