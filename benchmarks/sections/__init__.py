@@ -21,6 +21,7 @@ SECTIONS = [
     ("versions", "Blender versions: Generate and Render Preview in each Blender of the matrix"),
     ("preview_defaults", "Preview defaults: no dust at the default settings"),
     ("contact_sheet", "Contact sheet: each preset with the head, Cycles beside the preview"),
+    ("meshes", "Meshes in the preview: the cost of a head and a body"),
     ("hair_shading", "Hair shading: the preview's fibre model against Cycles' Principled Hair (Chiang)"),
 ]
 
