@@ -93,8 +93,8 @@ def _index(text, count, what):
 
 
 def write_obj(path, vertices, triangles, comment=None):
-    """Write a triangle mesh as .obj (`v` lines at float32-exact precision, `f` lines counting
-    from 1), all or nothing: a failure leaves no file."""
+    """Write a triangle mesh as .obj (`v` lines that read back to the same float64 values,
+    `f` lines counting from 1), all or nothing: a failure leaves no file."""
     from .atomic import atomic_write
     vertices = np.asarray(vertices, np.float64)
     triangles = np.asarray(triangles, np.int64)
@@ -104,7 +104,7 @@ def write_obj(path, vertices, triangles, comment=None):
             or triangles.min() < 0 or triangles.max() >= len(vertices):
         raise InputError(f"{path}: triangles must be (F, 3) indices of the {len(vertices)} vertices")
     lines = [] if comment is None else [f"# {line}" for line in comment.splitlines()]
-    lines += [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in vertices]
+    lines += [f"v {x!r} {y!r} {z!r}" for x, y, z in vertices.tolist()]
     lines += [f"f {a} {b} {c}" for a, b, c in triangles + 1]
     with atomic_write(path) as f:
         f.write(("\n".join(lines) + "\n").encode("ascii"))

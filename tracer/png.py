@@ -80,27 +80,35 @@ def write_png_bands(path, width, height, bands):
 
 
 def read_png_rgba8(path):
-    """The (H, W, 4) uint8 pixels of a PNG this module wrote (8-bit RGBA, filter 0 rows),
-    for tests and tools that check what was written; any other PNG is refused."""
-    data = pathlib.Path(path).read_bytes()
+    """The (H, W, 4) uint8 pixels of a PNG file this module wrote (decode_png_rgba8)."""
+    return decode_png_rgba8(pathlib.Path(path).read_bytes(), name=str(path))
+
+
+def decode_png_rgba8(data, name="PNG data"):
+    """The (H, W, 4) uint8 pixels of PNG bytes as this module writes them (8-bit RGBA, filter
+    0 rows), for tests and tools that check what was written; any other PNG, or a chunk whose
+    CRC does not match, is refused (ValueError naming `name`)."""
     if data[:8] != b"\x89PNG\r\n\x1a\n":
-        raise ValueError(f"{path}: not a PNG file")
+        raise ValueError(f"{name}: not a PNG file")
     pos, idat, size = 8, [], None
     while pos + 8 <= len(data):
         (n,) = struct.unpack(">I", data[pos:pos + 4])
         kind, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + n]
+        (crc,) = struct.unpack(">I", data[pos + 8 + n:pos + 12 + n])
+        if zlib.crc32(kind + body) & 0xFFFFFFFF != crc:
+            raise ValueError(f"{name}: the {kind!r} chunk's CRC does not match")
         if kind == b"IHDR":
             w, h, depth, colour = struct.unpack(">IIBB", body[:10])
             if (depth, colour) != (8, 6):
-                raise ValueError(f"{path}: {depth}-bit colour type {colour}; expected 8-bit RGBA")
+                raise ValueError(f"{name}: {depth}-bit colour type {colour}; expected 8-bit RGBA")
             size = (h, w)
         elif kind == b"IDAT":
             idat.append(body)
         pos += 12 + n
     if size is None:
-        raise ValueError(f"{path}: no IHDR chunk")
+        raise ValueError(f"{name}: no IHDR chunk")
     h, w = size
     raw = np.frombuffer(zlib.decompress(b"".join(idat)), np.uint8).reshape(h, 1 + 4 * w)
     if raw[:, 0].any():
-        raise ValueError(f"{path}: filtered rows; this reader takes filter 0 only")
+        raise ValueError(f"{name}: filtered rows; this reader takes filter 0 only")
     return raw[:, 1:].reshape(h, w, 4)

@@ -79,7 +79,7 @@ def test_head_writes_the_bundled_head_as_obj_that_reads_back_as_the_same_closed_
     vertices, triangles = read_obj(out)
     head = default_head()
     np.testing.assert_array_equal(triangles, head.triangles)
-    np.testing.assert_allclose(vertices, head.vertices, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(vertices, head.vertices)
     # Closed: every edge is shared by exactly two triangles, so the tracer's head hides what is behind it.
     edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
     _, uses = np.unique(edges, axis=0, return_counts=True)

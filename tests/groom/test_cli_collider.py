@@ -8,11 +8,7 @@ import groom.__main__ as cli
 from groom import default_collider, default_head
 from groom.__main__ import main
 from hairio import Strands
-
-
-def _write_obj(path, vertices, triangles):
-    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in vertices] + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in triangles]
-    path.write_text("\n".join(lines) + "\n")
+from hairio.obj import write_obj
 
 
 def _depths(points):
@@ -41,7 +37,7 @@ def test_collider_none_leaves_the_hair_where_the_keys_put_it(tmp_path, capsys):
 def test_a_collider_file_is_used_and_named(tmp_path, capsys):
     head = default_head()
     mesh = tmp_path / "my_head.obj"
-    _write_obj(mesh, head.vertices, head.triangles)
+    write_obj(mesh, head.vertices, head.triangles)
     out = tmp_path / "hair.npz"
     assert main(["generate", "--preset", "curly", "--count", "800", "--collider", str(mesh), "--out", str(out)]) == 0
     assert "moved out of my_head.obj" in capsys.readouterr().out
@@ -75,7 +71,7 @@ def test_a_bad_collider_file_exits_2_naming_it(tmp_path, capsys, content, words)
 def test_a_collider_far_from_the_scalp_is_refused(tmp_path, capsys):
     head = default_head()
     mesh = tmp_path / "elsewhere.obj"
-    _write_obj(mesh, head.vertices + [0.0, 0.0, 0.6], head.triangles)
+    write_obj(mesh, head.vertices + [0.0, 0.0, 0.6], head.triangles)
     assert main(["generate", "--preset", "wavy", "--count", "100", "--collider", str(mesh),
                  "--out", str(tmp_path / "h.npz")]) == 2
     assert "collider 'elsewhere.obj'" in capsys.readouterr().err

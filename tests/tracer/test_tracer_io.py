@@ -3,11 +3,9 @@
 import os
 import shlex
 import signal
-import struct
 import subprocess
 import sys
 import time
-import zlib
 
 import numpy as np
 import pytest
@@ -23,22 +21,9 @@ from tracer_scenes import curls, uv_sphere
 
 
 def _decode_png(data):
-    """Minimal decoder for what encode_png writes (filter 0 rows), to check round trips."""
-    assert data[:8] == b"\x89PNG\r\n\x1a\n"
-    pos, idat, size = 8, b"", None
-    while pos < len(data):
-        (n,) = struct.unpack(">I", data[pos:pos + 4])
-        kind, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + n]
-        assert zlib.crc32(kind + body) & 0xFFFFFFFF == struct.unpack(">I", data[pos + 8 + n:pos + 12 + n])[0]
-        if kind == b"IHDR":
-            size = struct.unpack(">II", body[:8])
-        elif kind == b"IDAT":
-            idat += body
-        pos += 12 + n
-    w, h = size
-    raw = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(h, 1 + 4 * w)
-    assert np.all(raw[:, 0] == 0)
-    return raw[:, 1:].reshape(h, w, 4)
+    """What encode_png wrote, decoded with every chunk's CRC checked."""
+    from tracer.png import decode_png_rgba8
+    return decode_png_rgba8(data)
 
 
 def test_srgb_transfer_function():
