@@ -63,3 +63,15 @@ def unconvert_points(points, axis="none", scale=1.0):
         # float64 before the division, so x * s rounded to float32 and divided by s gives x back.
         out[..., src] = points[..., dst] * sign if scale == 1.0 else points[..., dst].astype(np.float64) * (sign / float(scale))
     return out
+
+
+def unconvert_strands(strands, axis="none"):
+    """The inverse of convert_strands at scale 1: `strands` in the `axis` frame back in
+    Blender's frame (their key strands too; radii, guides, weights and root UVs kept)."""
+    if axis == "none":
+        return strands
+    guides = strands.guides
+    if guides is not None:
+        guides = Guides(unconvert_strands(guides.keys, axis), guides.group, guides.index, guides.weights)
+    return Strands.from_arrays(unconvert_points(strands.points, axis), strands.counts, strands.radius,
+                               strands.color, strands.alpha, strands.wisp, guides=guides, root_uv=strands.root_uv)

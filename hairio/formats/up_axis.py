@@ -11,9 +11,8 @@ then face the front, and Ratboy's mohawk sweeps back from its brow.
 """
 import os
 
-from ..strands import Guides, Strands
 from ..validate import InputError
-from .axes import unconvert_points
+from .axes import unconvert_points, unconvert_strands
 
 UP_CHOICES = ("z", "y", "auto")
 
@@ -41,11 +40,4 @@ def points_to_z_up(points, path, up="auto"):
 
 def strands_to_z_up(strands, path, up="auto"):
     """`strands` read from the file at `path`, in our Z-up frame (their key strands too)."""
-    frame = file_frame(path, up)
-    if frame == "none":
-        return strands
-    guides = strands.guides
-    if guides is not None:
-        guides = Guides(strands_to_z_up(guides.keys, path, up), guides.group, guides.index, guides.weights)
-    return Strands.from_arrays(unconvert_points(strands.points, frame), strands.counts, strands.radius,
-                               strands.color, strands.alpha, strands.wisp, guides=guides, root_uv=strands.root_uv)
+    return unconvert_strands(strands, file_frame(path, up))

@@ -384,3 +384,13 @@ def test_groom_generate_writes_the_guides_it_interpolated(tmp_path):
     np.testing.assert_array_equal(s.guides.keys.points[s.guides.keys.offsets],
                                   np.float32([k.root for k in placement.keys]))
     np.testing.assert_array_equal(s.wisp, result.guides[:, 0])
+
+
+@pytest.mark.parametrize("axis", ["y-up", "unreal", "directx"])
+def test_a_groom_turned_into_a_frame_and_back_is_the_same_groom_exactly(axis):
+    from hairio.formats.axes import convert_strands, unconvert_strands
+    g = groom()
+    turned = convert_strands(g, axis)
+    assert not np.array_equal(turned.guides.keys.points, g.guides.keys.points)   # the keys turned too
+    assert_same(unconvert_strands(turned, axis), g)
+    assert unconvert_strands(g, "none") is g
