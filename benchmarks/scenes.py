@@ -165,13 +165,9 @@ def real_strands(name="straight.hair"):
 
 def crop_camera(camera, x0, y0, w, h):
     """The tracer camera that sees exactly pixels [x0, x0+w) × [y0, y0+h) of `camera`'s image,
-    pixel for pixel (same pixel size, shifted image centre). The float64 reference costs
-    rays × cylinders, so its comparisons run on such windows of the real image."""
-    tracer = tracer_api()
-    W, H = camera.size
-    shift = np.asarray(camera.shift_px, np.float64) + [x0 + w / 2 - W / 2, H / 2 - h / 2 - y0]
-    return tracer.Camera(camera.type, camera.position, camera.rotation, (int(w), int(h)),
-                         camera.pixel_size, shift)
+    pixel for pixel, with the samples those pixels have there (Camera.window). The float64
+    reference costs rays × cylinders, so its comparisons run on such windows of the real image."""
+    return camera.window(x0, y0, w, h)
 
 
 def pick_window(image, w, h, step=None):
