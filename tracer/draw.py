@@ -37,7 +37,8 @@ def trace_files(settings, meshes=False, accel="grid"):
     it (`accel`: "grid" or "bvh"), with `meshes` the triangles and their grid, the shading
     model of `settings`, the tracer's main."""
     mesh_files = ["shapes_triangle.glsl", "accel_mesh_grid.glsl"] if meshes else []
-    return (["trace_scene.glsl", "shapes_cylinder.glsl", "accel.glsl", f"accel_{accel}.glsl"] + mesh_files
+    return (["trace_scene.glsl", "shapes_cylinder.glsl", "accel.glsl", "sampler_pixel.glsl", f"accel_{accel}.glsl"]
+            + mesh_files
             + [shading_model(settings.shading).glsl, "trace_main.glsl"])
 
 
@@ -52,7 +53,7 @@ class Drawer:
     def program(self, settings, camera, layers, meshes=False, accel="grid"):
         key = (layers, settings.shadows and (1 if settings.shadow_mode == "hard" else 2),
                settings.shading, len(settings.lights), settings.spp_n, settings.min_pixel_width,
-               camera.type, settings.count, bool(meshes), layout.glsl_header(), accel)
+               camera.type, settings.count, bool(meshes), layout.glsl_header(), accel, settings.sampler)
         prog = self._programs.get(key)
         if prog is None:
             defines = {
@@ -64,6 +65,7 @@ class Drawer:
                 "ORTHO": int(camera.type == "ORTHO"),
                 "COUNT": int(settings.count),
                 "MESHES": int(bool(meshes)),
+                "PIXEL": int(settings.sampler == "pixel"),
             }
             program = self.ctx.program(vertex_shader=_VERTEX,
                                        fragment_shader=shader_source(330, trace_files(settings, meshes, accel),
@@ -151,7 +153,8 @@ class Drawer:
                     self.ctx.scissor = (tx, h - ty - th, tw, th)
                     # One sample per draw (the shader's main says why): the first replaces the
                     # cleared background, the others add to it (colour and counters alike).
-                    for s in range(settings.spp):
+                    # The pixel sampler takes all of a pixel's samples in one draw.
+                    for s in range(1 if settings.sampler == "pixel" else settings.spp):
                         set_uniforms(prog, sample_index=s)
                         if s == 1:
                             self.ctx.enable(moderngl.BLEND)

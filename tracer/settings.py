@@ -7,6 +7,7 @@ import numpy as np
 from hairio import InputError
 
 from . import hair_bsdf as hb
+from . import layout
 from .shading import DEFAULT_SHADING, shading_model
 
 MAX_LIGHTS = 8
@@ -15,6 +16,10 @@ HAIR_COLORS = ("strand", "melanin")      # what a strand's colour means to the "
 # to n * 2^-24 of the pixel's value. 4096 keeps that below 0.025 %, a sixteenth of an 8-bit
 # step; far past it more samples make the image worse, not better (10^6: up to 6 %).
 MAX_SPP = 4096
+# How a pixel's samples are taken: "independent", each its own ray and walk, one draw per
+# sample; "pixel", all of a pixel's samples in one walk, each distinct strand shaded once
+# (tracer/shaders/sampler_pixel.glsl; docs/DECISIONS.md, "Samples of one pixel share the walk").
+SAMPLERS = ("independent", "pixel")
 
 
 @dataclass(frozen=True)
@@ -51,6 +56,7 @@ class Light:
 @dataclass(frozen=True)
 class RenderSettings:
     spp: int = 1                      # samples per pixel, a square (1, 4, 9, 16, ...)
+    sampler: str = "independent"      # one of SAMPLERS
     shadows: bool = True
     shadow_mode: str = "hard"         # "hard": any hit darkens; "transmittance": product of (1 - alpha)
     layers: int = 4                   # alpha layers composited front to back
@@ -88,6 +94,15 @@ class RenderSettings:
             raise InputError(f"spp: {self.spp} samples per pixel, summed in float32, can be off by up to "
                              f"{self.spp * 2.0 ** -24:.2%} of a pixel's value; use at most {MAX_SPP} "
                              f"(error {MAX_SPP * 2.0 ** -24:.3%})")
+        if self.sampler not in SAMPLERS:
+            raise InputError(f"sampler: {self.sampler!r}; use one of {', '.join(map(repr, SAMPLERS))}")
+        if self.sampler == "pixel":
+            if self.spp > layout.PIXEL_MAX_SPP:
+                raise InputError(f"spp: {self.spp} with sampler 'pixel', which takes a pixel's samples in one walk, "
+                                 f"at most {layout.PIXEL_MAX_SPP}; use fewer samples or sampler 'independent'")
+            if self.min_pixel_width:
+                raise InputError("min_pixel_width with sampler 'pixel': the pixel sampler finds a pixel's coverage "
+                                 "from its samples, so widening strands would count them twice; turn one off")
         if self.shadow_mode not in ("hard", "transmittance"):
             raise InputError(f"shadow_mode: {self.shadow_mode!r}; use 'hard' or 'transmittance'")
         shading_model(self.shading)

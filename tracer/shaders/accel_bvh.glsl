@@ -216,3 +216,47 @@ float accel_transmittance(vec3 p, vec3 d, float tmax, int own, float tmin, inout
     return trans;
 }
 #endif
+
+#if PIXEL
+// The pixel sampler's walk (sampler_pixel.glsl): the tree in order along the pixel's central
+// ray, every box grown by how far a sample ray strays from that ray at the box's far side,
+// so that every cylinder a sample hits is offered (pixel_offer takes each once, whichever of
+// its pieces comes first). Once every sample has its LAYERS hits, boxes starting past the
+// farthest of them are skipped. Boxes are walked until a leaf is reached, as next_leaf does.
+int next_leaf_wide(inout int i, vec3 o, vec3 inv, float t1) {
+    int code = -1;
+    vec3 oi = o * inv;
+    for (int it = 0; it < bvh_entries && i < bvh_entries; ++it) {
+        ivec4 a = texelFetch(tex_node, WALK_TEXELS * i), b = texelFetch(tex_node, WALK_TEXELS * i + 1);
+        vec3 lo = intBitsToFloat(a.xyz), hi = intBitsToFloat(b.xyz);
+        float pad = px_reach_c + px_reach_t * (length(0.5 * (lo + hi) - o) + 0.5 * length(hi - lo));
+        bool enter = box_entered(lo - pad, hi + pad, inv, oi, 0.0, t1);
+#if COUNT
+        counter.z += 1.0;
+#endif
+        if (enter && b.w != BVH_NODE) { code = b.w; break; }
+        i = enter ? i + 1 : a.w;
+    }
+    return code;
+}
+
+void accel_pixel_nearest(vec3 o, vec3 d, float tmax) {
+    vec3 inv = safe_inverse(d);
+    float cut = tmax;
+    int i = 0;
+    for (int it = 0; it < bvh_entries; ++it) {
+        int code = next_leaf_wide(i, o, inv, cut);
+        if (code < 0) break;
+        ++i;
+        int count = code & ((1 << LEAF_BITS) - 1), first = code >> LEAF_BITS;
+#if COUNT
+        counter.w += float(count);
+#endif
+        for (int k = 0; k < count; ++k) {
+            int id = texelFetch(tex_order, first + k).x;
+            pixel_offer(id, cyl(id, CYL_TOP), cyl(id, CYL_TIP), o, d);
+        }
+        if (pixel_settled()) cut = min(cut, list_far());
+    }
+}
+#endif

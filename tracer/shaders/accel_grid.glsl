@@ -207,3 +207,41 @@ float accel_transmittance(vec3 p, vec3 d, float tmax, int own, float tmin, inout
     return trans;
 }
 #endif
+
+#if PIXEL
+// The pixel sampler's walk (sampler_pixel.glsl): the cells of the pixel's central ray, every
+// candidate offered to pixel_offer, which tests all the pixel's samples. A sample ray lies
+// within a pixel of the central one, and the grid lists each cylinder in every cell its
+// capsule widened GRID_WIDEN_CAP times touches, so where a cylinder is as wide as an eighth of
+// a pixel or more, the cells of the central ray list every cylinder a sample hits. No cell
+// range decides where a hit counts (the list takes a cylinder once, by id): a sample's hit
+// need not lie in a cell of the central ray.
+void accel_pixel_nearest(vec3 o, vec3 d, float tmax) {
+    vec3 inv = safe_inverse(d);
+    float t0 = 0.0, t1 = tmax;
+    if (enter_grid(o, inv, t0, t1)) {
+        ivec3 stp; vec3 tdelta;
+        Walk w = begin_walk(o, d, inv, t0, stp, tdelta);
+        int guard = dims.x + dims.y + dims.z + 3;
+        for (int it = 0; it < guard; ++it) {
+            bool empty = w.sc.x < 0;
+            float texit = min(min(w.tnext.x, w.tnext.y), min(w.tnext.z, t1));
+            bool last = texit >= t1;
+            Walk next;
+            bool inside = next_cell(w, empty, last, texit, tdelta, stp, t1, next);
+            int count = empty ? 0 : w.sc.y;
+#if COUNT
+            counter.z += 1.0; counter.w += float(count);
+#endif
+            for (int k = 0; k < count; ++k) {
+                vec4 A4, B4;
+                int id = take_candidate(w, k, A4, B4);
+                pixel_offer(id, A4, B4, o, d);
+            }
+            if (!empty && pixel_settled()) break;
+            if (!inside) break;
+            w = next;
+        }
+    }
+}
+#endif

@@ -152,39 +152,183 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
 }
 
 
-// One sample per draw: the host draws every pixel SPP_N² times, sample_index = 0, 1, ...,
-// and adds the passes with blending. Mesa's llvmpipe caps the loop iterations of one
-// shader invocation (65535 back-edges over all loops together, then every loop exits
-// early, silently); all samples in one invocation with several layers and shadow rays ran
-// past it and dropped hits, so the work of one invocation is kept to one sample.
-uniform int sample_index;
-
-// A pixel's samples depend only on its place in the whole image and the sample index, so
-// the tiles of a large render are the image rendered whole.
-void main() {
-    int px = int(gl_FragCoord.x) + pixel_origin.x;
-    int py = int(image_size.y) - 1 - int(gl_FragCoord.y) + pixel_origin.y;   // row 0 = top
-    int s = sample_index;
+// The sample positions of both samplers: sample s of pixel (px, py), stratified over an
+// SPP_N x SPP_N grid and jittered by a fixed hash, as an offset in pixels from the pixel's
+// top-left corner (x right, y down). A pixel's samples depend only on its place in the whole
+// image and the sample index, so the tiles of a large render are the image rendered whole.
+vec2 sample_jitter(int s, int px, int py) {
     vec2 jit = vec2(0.5);
 #if SPP_N > 1
     uint h = hash32(hash32(hash32(uint(s)) ^ uint(py)) ^ uint(px));
     vec2 rnd = vec2(float(h >> 8u), float(hash32(h ^ 0x68bc21ebu) >> 8u)) * (1.0 / 16777216.0);
     jit = (vec2(s % SPP_N, s / SPP_N) + rnd) / float(SPP_N);
 #endif
-    float x = float(px) + jit.x, y = float(py) + jit.y;
+    return jit;
+}
+
+// The camera ray through image point (x, y) (pixels, y down), and its `len` (the length of
+// the unnormalised direction; 1 for an orthographic camera).
+void camera_ray(float x, float y, out vec3 o, out vec3 d, out float len) {
     float u = (x - centre_px.x) * pixel_size;
     float v = (centre_px.y - y) * pixel_size;
-    vec3 o, d;
-    float widen_per_t = 0.0, widen_const = 0.0;
 #if ORTHO
     o = cam_pos + cam_rot * vec3(u, v, 0.0);
     d = -cam_rot[2];
-    widen_const = 0.5 * pixel_size;
+    len = 1.0;
 #else
     o = cam_pos;
     vec3 dc = cam_rot * vec3(u, v, -1.0);
-    float len = length(dc);
+    len = length(dc);
     d = dc / len;
+#endif
+}
+
+#if PIXEL
+// The pixel sampler (sampler_pixel.glsl): one walk for all of a pixel's samples, then each
+// sample composites its own hits front to back (at most LAYERS, none after its
+// transmittance fell below t_eps past the first, as trace() does per sample), which gives
+// every distinct cylinder its weight in the pixel; each cylinder that weighs at least
+// SHADE_MIN is shaded once, on the ray through the middle of the samples it covers, with one
+// shadow ray per light. Loops over the samples and the list have constant trip counts and
+// are unrolled, so llvmpipe's cap on loop iterations sees one walk and the shading loop.
+const float SHADE_MIN = 1.0 / 512.0;
+
+void main() {
+    int px = int(gl_FragCoord.x) + pixel_origin.x;
+    int py = int(image_size.y) - 1 - int(gl_FragCoord.y) + pixel_origin.y;   // row 0 = top
+    for (int s = 0; s < PN; ++s) px_off[s] = sample_jitter(s, px, py) - 0.5;
+    vec3 o, d; float len;
+    camera_ray(float(px) + 0.5, float(py) + 0.5, o, d, len);
+    px_du = cam_rot[0] * (pixel_size / len);
+    px_dv = -cam_rot[1] * (pixel_size / len);
+#if ORTHO
+    px_reach_c = 0.7072 * pixel_size; px_reach_t = 0.0;
+#else
+    px_reach_c = 0.0; px_reach_t = 0.7072 * pixel_size / len;
+#endif
+    float tmax = BIG;
+#if MESHES
+    // Each sample's own mesh hit ends that sample; the walk goes as far as the farthest.
+    int mesh_s = -1, mesh_tri = -1; vec3 mesh_n = vec3(0.0); float mesh_t = BIG;
+    float tfar = 0.0;
+    for (int s = 0; s < PN; ++s) {
+        vec3 so = o, sd = d;
+#if ORTHO
+        so = o + px_off[s].x * px_du + px_off[s].y * px_dv;
+#else
+        sd = normalize(d + px_off[s].x * px_du + px_off[s].y * px_dv);
+#endif
+        int tri; vec3 n;
+        float tm = mesh_nearest(so, sd, BIG, tri, n);
+        px_tm[s] = tri >= 0 ? tm : BIG;
+        tfar = max(tfar, px_tm[s]);
+        bool first = tri >= 0 && mesh_s < 0;
+        mesh_s = first ? s : mesh_s; mesh_tri = first ? tri : mesh_tri;
+        mesh_n = first ? n : mesh_n; mesh_t = first ? tm : mesh_t;
+    }
+    tmax = tfar;
+#endif
+    list_clear();
+    accel_pixel_nearest(o, d, tmax);
+
+    // Each sample's compositing, entry by entry in depth order: the entry's weight and the
+    // middle of the samples it covers.
+    float Ts[PN]; int cnt[PN];
+    for (int s = 0; s < PN; ++s) { Ts[s] = 1.0; cnt[s] = 0; }
+    float wgt[PIX_M]; vec2 mid[PIX_M];
+    for (int j = 0; j < PIX_M; ++j) {
+        float a = la[j], wj = 0.0, nj = 0.0;
+        vec2 cj = vec2(0.0);
+        for (int s = 0; s < PN; ++s) {
+            bool on = (lm[j] & (1u << uint(s))) != 0u && cnt[s] < LAYERS && (cnt[s] == 0 || Ts[s] >= t_eps);
+            wj += on ? Ts[s] * a : 0.0;
+            cj += on ? px_off[s] : vec2(0.0);
+            nj += on ? 1.0 : 0.0;
+            Ts[s] *= on ? 1.0 - a : 1.0;
+            cnt[s] += on ? 1 : 0;
+        }
+        wgt[j] = wj / float(PN);
+        mid[j] = cj / max(nj, 1.0);
+    }
+    int nshade = 0;
+    for (int j = 0; j < PIX_M; ++j) nshade += wgt[j] >= SHADE_MIN ? 1 : 0;
+    vec3 C = vec3(0.0);
+#if SHADOWS
+    for (int l = 0; l < NUM_LIGHTS; ++l) occluder[l] = -1;
+#endif
+    for (int i = 0; i < nshade; ++i) {
+        // The i-th entry worth shading, by constant indices (accel.glsl says why).
+        int k = -1, eid = 0; float wi = 0.0, et = 0.0; vec2 mi = vec2(0.0);
+        for (int j = 0; j < PIX_M; ++j) {
+            bool take = wgt[j] >= SHADE_MIN;
+            k += take ? 1 : 0;
+            bool here = take && k == i;
+            eid = here ? lid[j] : eid; wi = here ? wgt[j] : wi; et = here ? lt[j] : et; mi = here ? mid[j] : mi;
+        }
+        vec3 so = o, sd = d;
+#if ORTHO
+        so = o + mi.x * px_du + mi.y * px_dv;
+#else
+        sd = normalize(d + mi.x * px_du + mi.y * px_dv);
+#endif
+        int surf; float asc, alpha;
+        float th = hit_cylinder(eid, so, sd, 0.0, 0.0, surf, asc, alpha);
+        // The middle of the covered samples lies on the strand but for the linear test's
+        // rounding; where the exact test disagrees, the side at the representative distance.
+        bool exact = th > 0.0;
+        C += wi * shade(eid, exact ? surf : 0, so, sd, exact ? th : et);
+#if COUNT
+        counter.y += 1.0;
+#endif
+    }
+    float Tbg = 0.0;
+#if MESHES
+    float Tmesh = 0.0;
+    for (int s = 0; s < PN; ++s) {
+        bool m = px_tm[s] < BIG;
+        Tmesh += m ? Ts[s] : 0.0;
+        Tbg += m ? 0.0 : Ts[s];
+    }
+    if (mesh_s >= 0) {           // opaque: the samples that end on a mesh take its shade
+        vec2 q = vec2(0.0);
+        for (int s = 0; s < PN; ++s) q = s == mesh_s ? px_off[s] : q;
+        vec3 so = o, sd = d;
+#if ORTHO
+        so = o + q.x * px_du + q.y * px_dv;
+#else
+        sd = normalize(d + q.x * px_du + q.y * px_dv);
+#endif
+        C += (Tmesh / float(PN)) * shade_mesh(mesh_tri, so, sd, mesh_t, mesh_n);
+    }
+#else
+    for (int s = 0; s < PN; ++s) Tbg += Ts[s];
+#endif
+    Tbg /= float(PN);
+    frag_color = vec4(C + Tbg * background.rgb, 1.0 - Tbg + Tbg * background.a);
+#if COUNT
+    frag_count = counter;
+#endif
+}
+
+#else
+// One sample per draw: the host draws every pixel SPP_N² times, sample_index = 0, 1, ...,
+// and adds the passes with blending. Mesa's llvmpipe caps the loop iterations of one
+// shader invocation (65535 back-edges over all loops together, then every loop exits
+// early, silently); all samples in one invocation with several layers and shadow rays ran
+// past it and dropped hits, so the work of one invocation is kept to one sample (the pixel
+// sampler above shares one walk between the samples instead).
+uniform int sample_index;
+
+void main() {
+    int px = int(gl_FragCoord.x) + pixel_origin.x;
+    int py = int(image_size.y) - 1 - int(gl_FragCoord.y) + pixel_origin.y;   // row 0 = top
+    vec2 jit = sample_jitter(sample_index, px, py);
+    vec3 o, d; float len;
+    camera_ray(float(px) + jit.x, float(py) + jit.y, o, d, len);
+    float widen_per_t = 0.0, widen_const = 0.0;
+#if ORTHO
+    widen_const = 0.5 * pixel_size;
+#else
     // At distance t along this ray the depth is t / len and a pixel spans pixel_size times
     // that; the minimum width is half of it.
     widen_per_t = 0.5 * pixel_size / len;
@@ -194,3 +338,4 @@ void main() {
     frag_count = counter;
 #endif
 }
+#endif

@@ -1,0 +1,133 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+// The pixel sampler (RenderSettings.sampler "pixel", PIXEL 1): the SPP_N² samples of one
+// pixel share one walk. The accelerator walks the pixel's central ray and hands every
+// candidate to pixel_offer (accel_pixel_nearest of accel_grid.glsl / accel_bvh.glsl), which
+// tests all the pixel's sample rays against it at once (footprint_mask) and keeps the
+// PIX_M nearest distinct cylinders any sample hits, each with the mask of the samples it
+// covers. trace_main.glsl then composites each sample's own hits (at most LAYERS per
+// sample, as the independent sampler does) and shades each distinct cylinder once.
+// docs/DECISIONS.md, "Samples of one pixel share the walk".
+#if PIXEL
+const int PN = SPP_N * SPP_N;               // samples per pixel (settings: at most 25)
+const uint FULL = PN >= 32 ? 0xffffffffu : (1u << uint(PN)) - 1u;
+
+// Per pixel (set by trace_main.glsl's main): each sample's offset from the pixel's centre
+// in pixels (x right, y down, the same stratified jitter as the independent sampler), and
+// what one pixel of offset changes: with a perspective camera the unit central direction
+// (the sample's direction is d + ox·px_du + oy·px_dv), with an orthographic one the origin.
+vec2 px_off[PN];
+vec3 px_du, px_dv;
+// How far a sample ray strays from the central one at distance t: px_reach_c + px_reach_t·t.
+float px_reach_c, px_reach_t;
+#if MESHES
+float px_tm[PN];                            // each sample's nearest mesh hit (BIG: none)
+#endif
+
+// The PIX_M nearest distinct cylinders hit by any sample, sorted by (distance along the
+// central ray, id); empty slots (BIG, NO_ID, mask 0). Constant indices only (accel.glsl says
+// why).
+float lt[PIX_M]; float la[PIX_M]; int lid[PIX_M]; uint lm[PIX_M];
+
+void list_clear() {
+    for (int j = 0; j < PIX_M; ++j) { lt[j] = BIG; la[j] = 0.0; lid[j] = NO_ID; lm[j] = 0u; }
+}
+
+// The point of the line w + s·D nearest the line through the origin along ax (L2 = ax·ax).
+vec3 nearest_on_ray(vec3 w, vec3 D, vec3 ax, float L2) {
+    float a = dot(D, D), b = dot(D, ax), dd = dot(D, w), e = dot(ax, w);
+    float den = a * L2 - b * b;
+    return w + ((b * e - L2 * dd) / max(den, 1e-30 * a * L2)) * D;
+}
+
+// Which of the pixel's samples hit the cut cylinder (A4, B4, plane-2 normal n2) of the
+// central ray o + t·d: bit i for sample i. A sample hits where its ray passes within r of
+// the axis and the ray's point nearest the axis lies between the two planes. Within one
+// pixel both quantities are linear in the sample's offset (the distance between the lines
+// exactly so for a perspective camera: w·(D × ax) has no second-order terms when w moves
+// by t·δD), so each sample costs three multiply-adds and three compares; what is shared is
+// worked out once, around the point of the central ray nearest the cylinder's middle (the
+// shift of hit_cylinder_ab, for float32's sake). `trep`: the central ray's distance to its
+// point nearest the axis, which orders the cylinders of the pixel.
+uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
+    vec3 A = A4.xyz, ax = B4.xyz - A4.xyz;
+    float r = A4.w, L2 = dot(ax, ax);
+    float tc = dot(A + 0.5 * ax - o, d);
+    vec3 w = o + tc * d - A;
+#if ORTHO
+    vec3 wu = px_du, wv = px_dv, Du = vec3(0.0), Dv = vec3(0.0);
+#else
+    vec3 wu = tc * px_du, wv = tc * px_dv, Du = px_du, Dv = px_dv;
+#endif
+    vec3 c = cross(d, ax);
+    float s2 = dot(c, c);
+    float n0 = dot(w, c);
+    float nu = dot(wu, c) + dot(w, cross(Du, ax));
+    float nv = dot(wv, c) + dot(w, cross(Dv, ax));
+    float lim = r * r * s2;
+    vec3 p0 = nearest_on_ray(w, d, ax, L2);
+    vec3 pu = nearest_on_ray(w + wu, d + Du, ax, L2) - p0;
+    vec3 pv = nearest_on_ray(w + wv, d + Dv, ax, L2) - p0;
+    float f10 = dot(p0, ax), f1u = dot(pu, ax), f1v = dot(pv, ax);
+    float f20 = dot(p0 - ax, n2), f2u = dot(pu, n2), f2v = dot(pv, n2);
+    trep = tc + dot(p0 - w, d);
+    // Looking along the axis the lines are parallel and the nearest point undefined: then
+    // a sample hits where its ray lies within r of the axis (the entry is a plane), at the
+    // middle's distance less half the length.
+    bool along = s2 < 1e-6 * L2 * dot(d, d);
+    vec3 q0 = w - ax * (dot(w, ax) / L2), qu = wu - ax * (dot(wu, ax) / L2), qv = wv - ax * (dot(wv, ax) / L2);
+    if (along) {
+        trep = tc - 0.5 * sqrt(L2);
+        f10 = 0.0; f1u = 0.0; f1v = 0.0; f20 = 0.0; f2u = 0.0; f2v = 0.0;
+    }
+    uint m = 0u;
+    for (int i = 0; i < PN; ++i) {
+        vec2 q = px_off[i];
+        float n = n0 + q.x * nu + q.y * nv;
+        vec3 qa = q0 + q.x * qu + q.y * qv;
+        bool side = along ? dot(qa, qa) <= r * r : n * n <= lim;
+        bool hit = side && f10 + q.x * f1u + q.y * f1v >= 0.0 && f20 + q.x * f2u + q.y * f2v <= 0.0;
+#if MESHES
+        hit = hit && trep < px_tm[i];       // the sample ended on a nearer mesh
+#endif
+        m |= hit ? (1u << uint(i)) : 0u;
+    }
+    return trep > 0.0 ? m : 0u;
+}
+
+// Cylinder `id` (its TOP and TIP texels A4, B4) as a candidate of the central ray o + t·d:
+// into the list when any sample hits it, once (a cylinder comes from every cell or leaf
+// that lists it; the list keeps the first).
+void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d) {
+    float t;
+    uint m = footprint_mask(A4, B4, cyl(id, CYL_N2).xyz, o, d, t);
+    bool dup = false;
+    for (int j = 0; j < PIX_M; ++j) dup = dup || lid[j] == id;
+    bool ok = m != 0u && !dup;
+    float ct = ok ? t : BIG, ca = B4.w; int cid = ok ? id : NO_ID; uint cm = ok ? m : 0u;
+    for (int j = 0; j < PIX_M; ++j) {
+        bool sw = ct < lt[j] || (ct == lt[j] && cid < lid[j]);
+        float ft = lt[j], fa = la[j]; int fi = lid[j]; uint fm = lm[j];
+        lt[j] = sw ? ct : ft; la[j] = sw ? ca : fa; lid[j] = sw ? cid : fi; lm[j] = sw ? cm : fm;
+        ct = sw ? ft : ct; ca = sw ? fa : ca; cid = sw ? fi : cid; cm = sw ? fm : cm;
+    }
+}
+
+// No farther cylinder can change the pixel: every sample has LAYERS hits in the list
+// (counted with one mask per count: have[k] holds the samples with more than k hits).
+bool pixel_settled() {
+    uint have[LAYERS];
+    for (int k = 0; k < LAYERS; ++k) have[k] = 0u;
+    for (int j = 0; j < PIX_M; ++j) {
+        for (int k = LAYERS - 1; k > 0; --k) have[k] |= have[k - 1] & lm[j];
+        have[0] |= lm[j];
+    }
+    return have[LAYERS - 1] == FULL;
+}
+
+// The farthest distance of a cylinder in the list.
+float list_far() {
+    float f = 0.0;
+    for (int j = 0; j < PIX_M; ++j) f = lt[j] < BIG ? max(f, lt[j]) : f;
+    return f;
+}
+#endif
