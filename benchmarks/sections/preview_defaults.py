@@ -13,6 +13,10 @@ come from the frame's middle 480×270 (Camera.window: the same pixels, samples a
 Times: the median of the harness's runs for the one-sample settings; the many-sample
 renders, a single run.
 
+The pixel sampler (RenderSettings(sampler="pixel")) takes all of a pixel's samples in one walk
+and shades each strand it finds once (docs/DECISIONS.md, "Samples of one pixel share the walk");
+its rows beside the 16-spp row give the cost of 16 samples shared against 16 separate ones.
+
 Run alone: `python -m benchmarks --full --only preview_defaults` (15-30 minutes on 2 cores,
 most of it the 64-sample references of `wavy`; the quick run's time limit stops it before
 `wavy`).
@@ -35,6 +39,10 @@ CANDIDATES = (
     ("min pixel width (cap 4, the default cap)", {"min_pixel_width": True}),
     ("min pixel width, cap 8", {"min_pixel_width": True, "min_pixel_width_cap": 8.0}),
     ("4 spp (stratified)", {"spp": 4}),
+    # The pixel sampler: all of a pixel's samples in one walk, each strand shaded once.
+    ("pixel sampler, 4² samples", {"sampler": "pixel", "spp": 16}),
+    ("pixel sampler, 3² samples", {"sampler": "pixel", "spp": 9}),
+    ("pixel sampler, 2² samples", {"sampler": "pixel", "spp": 4}),
 )
 
 
@@ -96,23 +104,26 @@ def run(sec, cfg):
             rows.append([name, where, "today's default (1 spp)", str(base), "1.00", fmt_num(e_base)])
             rows.append([name, where, f"{TARGET_SPP} spp (the error to reach)", fmt_time(t16) + " (1 run)",
                          f"{t16 / base.median:.2f}", fmt_num(e16)])
-            met = []
+            met, shared = [], None
             for label, change in CANDIDATES:
                 rs = tracer.RenderSettings(**change)
-                if rs.spp > 1:
+                if rs.spp > 1 and rs.sampler == "independent":
                     t, im = once(lambda: renderer.render(camera, rs))
                     cell = fmt_time(t) + " (1 run)"
                 else:
                     timing, im = measure(lambda: renderer.render(camera, rs), runs=cfg.runs)
                     t, cell = timing.median, str(timing)
                 e = hair_rmse(im, ref)
+                if change.get("sampler") == "pixel" and rs.spp == TARGET_SPP:
+                    shared = t
                 ok = e <= e16 and t <= 2.0 * base.median
                 met.append(ok)
                 rows.append([name, where, label + (" ✓" if ok else ""), cell, f"{t / base.median:.2f}", fmt_num(e)])
             sec.data[f"{name} {where}"] = {"default_s": base.median, "default_rmse": e_base, "rmse_16": e16,
-                                           "ref_s": t_ref}
+                                           "ref_s": t_ref, "t16_s": t16, "pixel16_s": shared}
             summary.append(f"{name} {where}: default {fmt_num(e_base)} RMSE in {base}, 16 spp {fmt_num(e16)}; "
-                           f"{sum(met)} of {len(met)} candidates meet both goals")
+                           f"{sum(met)} of {len(met)} candidates meet both goals; 16 samples with the pixel "
+                           f"sampler take {shared / t16:.2f} of the independent sampler's 16-spp time")
     sec.table(["scene", "image", "settings", "time (median)", "× default time", f"RMSE vs {REF_SPP} spp"], rows,
               caption="Default preview settings and the candidates (✓: the 16-sample error in at most twice "
                       "the default's time)")
