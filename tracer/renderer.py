@@ -225,7 +225,9 @@ class Renderer:
             raise InputError("render: no strands; call set_strands first")
         self._drawer.check_camera(camera, settings)
         t0 = time.perf_counter()
-        if settings.min_pixel_width and self.scene.grid_pad < GRID_WIDEN_CAP:
+        # Minimum pixel width widens strands, and the pixel sampler's samples stray up to a pixel
+        # from the ray it walks: both want every cylinder listed where its widened capsule reaches.
+        if (settings.min_pixel_width or settings.sampler == "pixel") and self.scene.grid_pad < GRID_WIDEN_CAP:
             self.scene.grid_pad = GRID_WIDEN_CAP
             self._build_structure(refit=True)      # a BVH keeps its tree: wider boxes only
             self.stats.grid_rebuilds += 1

@@ -40,6 +40,7 @@ CANDIDATES = (
     ("min pixel width, cap 8", {"min_pixel_width": True, "min_pixel_width_cap": 8.0}),
     ("4 spp (stratified)", {"spp": 4}),
     # The pixel sampler: all of a pixel's samples in one walk, each strand shaded once.
+    ("pixel sampler, 5² samples", {"sampler": "pixel", "spp": 25}),
     ("pixel sampler, 4² samples", {"sampler": "pixel", "spp": 16}),
     ("pixel sampler, 3² samples", {"sampler": "pixel", "spp": 9}),
     ("pixel sampler, 2² samples", {"sampler": "pixel", "spp": 4}),

@@ -71,21 +71,20 @@ uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
     float f20 = dot(p0 - ax, n2), f2u = dot(pu, n2), f2v = dot(pv, n2);
     trep = tc + dot(p0 - w, d);
     // Looking along the axis the lines are parallel and the nearest point undefined: then
-    // a sample hits where its ray lies within r of the axis (the entry is a plane), at the
-    // middle's distance less half the length.
+    // every sample hits where the central ray lies within r of the axis (the entry is a
+    // plane, at the middle's distance less half the length), none where it does not.
     bool along = s2 < 1e-6 * L2 * dot(d, d);
-    vec3 q0 = w - ax * (dot(w, ax) / L2), qu = wu - ax * (dot(wu, ax) / L2), qv = wv - ax * (dot(wv, ax) / L2);
+    vec3 q0 = w - ax * (dot(w, ax) / L2);
     if (along) {
         trep = tc - 0.5 * sqrt(L2);
+        n0 = dot(q0, q0) <= r * r ? 0.0 : BIG; nu = 0.0; nv = 0.0;
         f10 = 0.0; f1u = 0.0; f1v = 0.0; f20 = 0.0; f2u = 0.0; f2v = 0.0;
     }
     uint m = 0u;
     for (int i = 0; i < PN; ++i) {
         vec2 q = px_off[i];
         float n = n0 + q.x * nu + q.y * nv;
-        vec3 qa = q0 + q.x * qu + q.y * qv;
-        bool side = along ? dot(qa, qa) <= r * r : n * n <= lim;
-        bool hit = side && f10 + q.x * f1u + q.y * f1v >= 0.0 && f20 + q.x * f2u + q.y * f2v <= 0.0;
+        bool hit = n * n <= lim && f10 + q.x * f1u + q.y * f1v >= 0.0 && f20 + q.x * f2u + q.y * f2v <= 0.0;
 #if MESHES
         hit = hit && trep < px_tm[i];       // the sample ended on a nearer mesh
 #endif

@@ -187,9 +187,9 @@ void camera_ray(float x, float y, out vec3 o, out vec3 d, out float len) {
 // The pixel sampler (sampler_pixel.glsl): one walk for all of a pixel's samples, then each
 // sample composites its own hits front to back (at most LAYERS, none after its
 // transmittance fell below t_eps past the first, as trace() does per sample), which gives
-// every distinct cylinder its weight in the pixel; each cylinder that weighs at least
-// SHADE_MIN is shaded once, on the ray through the middle of the samples it covers, with one
-// shadow ray per light. Loops over the samples and the list have constant trip counts and
+// every distinct cylinder its weight in the pixel; the PIX_SHADE heaviest that weigh at least
+// SHADE_MIN are shaded, once each, on the ray through the middle of the samples they cover,
+// with one shadow ray per light. Loops over the samples and the list have constant trip counts and
 // are unrolled, so llvmpipe's cap on loop iterations sees one walk and the shading loop.
 const float SHADE_MIN = 1.0 / 512.0;
 
@@ -250,21 +250,29 @@ void main() {
         wgt[j] = wj / float(PN);
         mid[j] = cj / max(nj, 1.0);
     }
+    // The PIX_SHADE heaviest entries are shaded; the weight of the others (at most a few
+    // samples each) goes to them in proportion, so the pixel keeps its brightness.
+    float wall = 0.0, wshaded = 0.0;
     int nshade = 0;
-    for (int j = 0; j < PIX_M; ++j) nshade += wgt[j] >= SHADE_MIN ? 1 : 0;
+    for (int j = 0; j < PIX_M; ++j) {
+        wall += wgt[j];
+        nshade += wgt[j] >= SHADE_MIN ? 1 : 0;
+    }
+    nshade = min(nshade, PIX_SHADE);
     vec3 C = vec3(0.0);
 #if SHADOWS
     for (int l = 0; l < NUM_LIGHTS; ++l) occluder[l] = -1;
 #endif
     for (int i = 0; i < nshade; ++i) {
-        // The i-th entry worth shading, by constant indices (accel.glsl says why).
-        int k = -1, eid = 0; float wi = 0.0, et = 0.0; vec2 mi = vec2(0.0);
+        // The heaviest entry not shaded yet, by constant indices (accel.glsl says why).
+        int eid = 0, pick = -1; float wi = -1.0, et = 0.0; vec2 mi = vec2(0.0);
         for (int j = 0; j < PIX_M; ++j) {
-            bool take = wgt[j] >= SHADE_MIN;
-            k += take ? 1 : 0;
-            bool here = take && k == i;
+            bool here = wgt[j] > wi;
+            pick = here ? j : pick;
             eid = here ? lid[j] : eid; wi = here ? wgt[j] : wi; et = here ? lt[j] : et; mi = here ? mid[j] : mi;
         }
+        for (int j = 0; j < PIX_M; ++j) wgt[j] = j == pick ? -1.0 : wgt[j];
+        wshaded += wi;
         vec3 so = o, sd = d;
 #if ORTHO
         so = o + mi.x * px_du + mi.y * px_dv;
@@ -281,6 +289,7 @@ void main() {
         counter.y += 1.0;
 #endif
     }
+    C *= wshaded > 0.0 ? wall / wshaded : 0.0;
     float Tbg = 0.0;
 #if MESHES
     float Tmesh = 0.0;
