@@ -41,13 +41,15 @@ vec3 nearest_on_ray(vec3 w, vec3 D, vec3 ax, float L2) {
 
 // Which of the pixel's samples hit the cut cylinder (A4, B4, plane-2 normal n2) of the
 // central ray o + t·d: bit i for sample i. A sample hits where its ray passes within r of
-// the axis and the ray's point nearest the axis lies between the two planes. Within one
-// pixel both quantities are linear in the sample's offset (the distance between the lines
-// exactly so for a perspective camera: w·(D × ax) has no second-order terms when w moves
-// by t·δD), so each sample costs three multiply-adds and three compares; what is shared is
-// worked out once, around the point of the central ray nearest the cylinder's middle (the
-// shift of hit_cylinder_ab, for float32's sake). `trep`: the central ray's distance to its
-// point nearest the axis, which orders the cylinders of the pixel.
+// the axis and its chord through the infinite cylinder (the point of the ray nearest the
+// axis ± the half chord) reaches between the two planes. Within one pixel the distance
+// between the lines and the plane values at the nearest point are linear in the sample's
+// offset (the distance exactly so for a perspective camera: w·(D × ax) has no second-order
+// terms when w moves by t·δD), so each sample costs a few multiply-adds, one square root and
+// compares; what is shared is worked out once, around the point of the central ray nearest
+// the cylinder's middle (the shift of hit_cylinder_ab, for float32's sake). `trep`: where the
+// central ray enters the infinite cylinder (or passes nearest it), which orders the
+// cylinders of the pixel.
 uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
     vec3 A = A4.xyz, ax = B4.xyz - A4.xyz;
     float r = A4.w, L2 = dot(ax, ax);
@@ -59,7 +61,7 @@ uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
     vec3 wu = tc * px_du, wv = tc * px_dv, Du = px_du, Dv = px_dv;
 #endif
     vec3 c = cross(d, ax);
-    float s2 = dot(c, c);
+    float s2 = max(dot(c, c), 1e-30 * L2);
     float n0 = dot(w, c);
     float nu = dot(wu, c) + dot(w, cross(Du, ax));
     float nv = dot(wv, c) + dot(w, cross(Dv, ax));
@@ -67,24 +69,31 @@ uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
     vec3 p0 = nearest_on_ray(w, d, ax, L2);
     vec3 pu = nearest_on_ray(w + wu, d + Du, ax, L2) - p0;
     vec3 pv = nearest_on_ray(w + wv, d + Dv, ax, L2) - p0;
+    // Along the ray the plane values change by d·ax and d·n2 per unit: over the half chord
+    // h = sqrt(r²s2 - n²)·|ax| / s2 plane 1's value can grow by hk1 = |d·ax|·|ax| / s2 times
+    // the root, plane 2's fall by hk2.
+    float chord = sqrt(L2) / s2;
+    float hk1 = abs(dot(d, ax)) * chord, hk2 = abs(dot(d, n2)) * chord;
     float f10 = dot(p0, ax), f1u = dot(pu, ax), f1v = dot(pv, ax);
     float f20 = dot(p0 - ax, n2), f2u = dot(pu, n2), f2v = dot(pv, n2);
-    trep = tc + dot(p0 - w, d);
-    // Looking along the axis the lines are parallel and the nearest point undefined: then
-    // every sample hits where the central ray lies within r of the axis (the entry is a
+    trep = tc + dot(p0 - w, d) - sqrt(max(lim - n0 * n0, 0.0)) * chord;
+    // Looking exactly along the axis the lines are parallel and the nearest point undefined:
+    // then every sample hits where the central ray lies within r of the axis (the entry is a
     // plane, at the middle's distance less half the length), none where it does not.
-    bool along = s2 < 1e-6 * L2 * dot(d, d);
+    bool along = dot(c, c) < 1e-10 * L2 * dot(d, d);
     vec3 q0 = w - ax * (dot(w, ax) / L2);
     if (along) {
         trep = tc - 0.5 * sqrt(L2);
         n0 = dot(q0, q0) <= r * r ? 0.0 : BIG; nu = 0.0; nv = 0.0;
-        f10 = 0.0; f1u = 0.0; f1v = 0.0; f20 = 0.0; f2u = 0.0; f2v = 0.0;
+        f10 = 0.0; f1u = 0.0; f1v = 0.0; f20 = 0.0; f2u = 0.0; f2v = 0.0; hk1 = 0.0; hk2 = 0.0;
     }
     uint m = 0u;
     for (int i = 0; i < PN; ++i) {
         vec2 q = px_off[i];
         float n = n0 + q.x * nu + q.y * nv;
-        bool hit = n * n <= lim && f10 + q.x * f1u + q.y * f1v >= 0.0 && f20 + q.x * f2u + q.y * f2v <= 0.0;
+        float root = sqrt(max(lim - n * n, 0.0));
+        bool hit = n * n <= lim && f10 + q.x * f1u + q.y * f1v + hk1 * root >= 0.0
+                   && f20 + q.x * f2u + q.y * f2v - hk2 * root <= 0.0;
 #if MESHES
         hit = hit && trep < px_tm[i];       // the sample ended on a nearer mesh
 #endif
@@ -99,8 +108,20 @@ uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
 void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d) {
     float t;
     uint m = footprint_mask(A4, B4, cyl(id, CYL_N2).xyz, o, d, t);
+    // Samples that already have LAYERS nearer hits in the list will never see this one:
+    // their bits go (one mask per count, as in pixel_settled), so the list spends no slot on
+    // what is hidden (thin strands end-on filled it with hidden ones and lost the hits of
+    // samples they did not cover).
+    uint have[LAYERS];
+    for (int k = 0; k < LAYERS; ++k) have[k] = 0u;
     bool dup = false;
-    for (int j = 0; j < PIX_M; ++j) dup = dup || lid[j] == id;
+    for (int j = 0; j < PIX_M; ++j) {
+        dup = dup || lid[j] == id;
+        uint mj = lt[j] < t ? lm[j] : 0u;
+        for (int k = LAYERS - 1; k > 0; --k) have[k] |= have[k - 1] & mj;
+        have[0] |= mj;
+    }
+    m &= ~have[LAYERS - 1];
     bool ok = m != 0u && !dup;
     float ct = ok ? t : BIG, ca = B4.w; int cid = ok ? id : NO_ID; uint cm = ok ? m : 0u;
     for (int j = 0; j < PIX_M; ++j) {

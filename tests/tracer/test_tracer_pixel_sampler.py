@@ -1,0 +1,144 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The pixel sampler (RenderSettings(sampler="pixel")): a pixel's samples share one walk and
+each pixel's strands are found for all its samples at once (tracer/shaders/sampler_pixel.glsl).
+Checked against the geometry (a strand thinner than a pixel covers the fraction of each pixel
+it crosses), against the independent sampler at the same samples over whole images (both
+builds, both accelerators, with meshes), on a scene dense enough that a silent loop cap would
+drop hits, and its settings."""
+import numpy as np
+import pytest
+
+from hairio import InputError
+from tracer import Camera, Renderer, RenderSettings
+
+from tracer_scenes import curls, make_strands, uv_sphere
+
+
+def _hair_rmse(a, b):
+    """RMSE of RGBA over the pixels where either image has hair."""
+    mask = (a[..., 3] > 0) | (b[..., 3] > 0)
+    return float(np.sqrt(np.mean((a.astype(np.float64) - b)[mask] ** 2)))
+
+
+def _iou(a, b, level=0.05):
+    ma, mb = a[..., 3] > level, b[..., 3] > level
+    return (ma & mb).sum() / max((ma | mb).sum(), 1)
+
+
+# --- A strand thinner than a pixel --------------------------------------------------------------
+# An orthographic camera of 32 pixels over 1 unit looks down -Y at a straight strand along x,
+# 0.25 pixel wide, its centre 0.3 of a pixel into row 15: it covers the fraction 0.25 of every
+# pixel of row 15 it crosses (rows 14 and 16 nothing).
+PX = 1.0 / 32
+
+
+def _thin_strand_scene():
+    z = 0.5 - (15 + 0.3) * PX          # row 15 spans z in [0.5 - 16 px, 0.5 - 15 px]
+    strand = make_strands([np.array([[-0.3, 0.0, z], [0.0, 0.0, z + 1e-4], [0.3, 0.0, z]])],
+                          radius=0.125 * PX)
+    cam = Camera.look_at((0.0, -2.0, 0.0), (0.0, 0.0, 0.0), size=(32, 32), type="ORTHO", ortho_scale=1.0)
+    return strand, cam
+
+
+def test_thin_strand_alpha_is_its_coverage(renderer):
+    strand, cam = _thin_strand_scene()
+    renderer.set_strands(strand)
+    img = renderer.render(cam, RenderSettings(sampler="pixel", spp=16))
+    crossed = img[15, 8:24, 3]            # columns well inside the strand's length
+    # 16 jittered samples, one per cell of a 4x4 grid: the band [0.175, 0.425] of the pixel
+    # holds each column's sample of row 0 with probability 0.3, of row 1 with 0.7, so a
+    # pixel counts 0 to 8 of its 16 samples, 4 on average (std 1.3 per pixel, 0.33 over 16).
+    assert abs(crossed.mean() - 0.25) < 0.04, crossed
+    assert crossed.min() >= 1 / 16 and crossed.max() <= 0.5
+    assert img[14, 8:24, 3].max() == 0 and img[16, 8:24, 3].max() == 0
+    # The same samples as the independent sampler, each found by the footprint test as by
+    # its own ray (a sample on the strand's very edge may go either way).
+    ind = renderer.render(cam, RenderSettings(spp=16))[15, 8:24, 3]
+    assert np.abs(crossed - ind).max() <= 1 / 16 + 1e-6 and abs(crossed.mean() - ind.mean()) < 0.01
+    # The default (one sample) breaks the same strand into dust: whole pixels or none.
+    dust = renderer.render(cam, RenderSettings())[15, 8:24, 3]
+    assert set(np.unique(dust).tolist()) <= {0.0, 1.0}
+
+
+# --- The same image as the independent sampler --------------------------------------------------
+def _tuft_camera(size=72):
+    return Camera.look_at((0.0, -2.6, 0.5), (0.0, 0.0, 0.5), fov_deg=28, size=(size, size))
+
+
+@pytest.mark.parametrize("alpha, layers", [(1.0, 4), (0.45, 4)], ids=["opaque", "layers"])
+def test_pixel_sampler_matches_independent_at_same_samples(renderer, alpha, layers):
+    renderer.set_strands(curls(60, 12, radius=0.004, alpha=alpha))
+    cam = _tuft_camera()
+    rs = dict(spp=16, layers=layers)
+    ind = renderer.render(cam, RenderSettings(**rs))
+    pix = renderer.render(cam, RenderSettings(sampler="pixel", **rs))
+    empty = np.zeros_like(ind)
+    assert (ind[..., 3] > 0).sum() > 400, "the camera misses the hair: the test would prove nothing"
+    # Coverage: the same 16 sample positions per pixel, tested by a linear footprint test
+    # instead of each ray's own; a sample on a strand's edge may flip (one sample is 1/16).
+    da = np.abs(ind[..., 3] - pix[..., 3])
+    assert da.mean() < 0.01 and abs(ind[..., 3].mean() - pix[..., 3].mean()) < 0.005
+    assert np.quantile(da[(ind[..., 3] > 0) | (pix[..., 3] > 0)], 0.95) <= 0.125 + 1e-6
+    # Colour: each pixel shades its heaviest strand once (tracer/layout.py PIXEL_SHADE) and
+    # gives it the others' weight, where the independent sampler shades every sample; the
+    # strands of one pixel lie side by side in the same light, so the difference is a small
+    # part of the hair's own contrast. An empty image is far off on both counts.
+    assert _iou(pix, ind) > 0.9 and _iou(empty, ind) == 0
+    assert _hair_rmse(pix, ind) < 0.03
+    assert _hair_rmse(pix, ind) < 0.2 * _hair_rmse(empty, ind)
+
+
+@pytest.mark.parametrize("accel", ["grid", "bvh"])
+def test_pixel_sampler_with_meshes_and_both_accelerators(accel):
+    r = Renderer(accel=accel)
+    r.set_strands(curls(40, 12, radius=0.004))
+    r.set_meshes([(*uv_sphere((0.0, 0.0, 0.5), 0.15), (0.5, 0.5, 0.5))])
+    cam = _tuft_camera(64)
+    ind = r.render(cam, RenderSettings(spp=16))
+    pix = r.render(cam, RenderSettings(sampler="pixel", spp=16))
+    # The sphere in front hides the hair behind it and shows in both.
+    centre = (slice(28, 36), slice(28, 36))
+    assert np.all(pix[centre][..., 3] == 1.0) and np.all(ind[centre][..., 3] == 1.0)
+    assert np.abs(pix[centre] - ind[centre]).max() < 0.05
+    assert np.abs(ind[..., 3] - pix[..., 3]).mean() < 0.01
+    assert _hair_rmse(pix, ind) < 0.03
+
+
+# --- A scene dense enough for llvmpipe's loop cap -----------------------------------------------
+def test_dense_scene_keeps_every_hit(renderer):
+    """1,500 faint strands packed in front of the camera, 16 layers: every pixel walks hundreds
+    of cells and thousands of candidates in one invocation. A loop cap reached silently would
+    end walks early and drop hits, leaving the pixel sampler's alpha below the independent
+    sampler's, whose invocations each walk one sample."""
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 1.0, 24)[:, None]
+    lines = []
+    for _ in range(1500):
+        a, b = rng.uniform(-0.25, 0.25, 3), rng.uniform(-0.25, 0.25, 3)
+        lines.append(a + t * (b - a) + 0.02 * np.sin(9 * t + rng.uniform(0, 6)))
+    renderer.set_strands(make_strands(lines, radius=0.0015, alpha=0.08))
+    cam = Camera.look_at((0.0, -1.6, 0.0), (0.0, 0.0, 0.0), fov_deg=22, size=(40, 40))
+    rs = dict(spp=9, layers=16)
+    ind = renderer.render(cam, RenderSettings(**rs))
+    pix = renderer.render(cam, RenderSettings(sampler="pixel", count=True, **rs))
+    st = renderer.stats
+    hair = (pix[..., 3] > 0).sum()
+    assert st.cylinder_tests / hair > 1000, "not dense enough to prove anything"
+    assert abs(ind[..., 3].mean() - pix[..., 3].mean()) < 0.01
+    assert np.abs(ind[..., 3] - pix[..., 3]).mean() < 0.03
+
+
+# --- Settings -----------------------------------------------------------------------------------
+@pytest.mark.parametrize("change, words", [
+    (dict(sampler="stratified"), "sampler"),
+    (dict(sampler="pixel", spp=36), "at most 25"),
+    (dict(sampler="pixel", spp=16, min_pixel_width=True), "min_pixel_width"),
+])
+def test_sampler_settings_are_checked(change, words):
+    with pytest.raises(InputError, match=words):
+        RenderSettings(**change).check()
+
+
+def test_sampler_settings_accepted():
+    RenderSettings(sampler="pixel", spp=25).check()
+    RenderSettings(sampler="independent", spp=64).check()
