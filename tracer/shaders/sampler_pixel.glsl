@@ -60,11 +60,11 @@ uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
 #else
     vec3 wu = tc * px_du, wv = tc * px_dv, Du = px_du, Dv = px_dv;
 #endif
-    vec3 c = cross(d, ax);
+    vec3 c = cross(d, ax), cu = cross(Du, ax), cv = cross(Dv, ax);
     float s2 = max(dot(c, c), 1e-30 * L2);
     float n0 = dot(w, c);
-    float nu = dot(wu, c) + dot(w, cross(Du, ax));
-    float nv = dot(wv, c) + dot(w, cross(Dv, ax));
+    float nu = dot(wu, c) + dot(w, cu);
+    float nv = dot(wv, c) + dot(w, cv);
     float lim = r * r * s2;
     vec3 p0 = nearest_on_ray(w, d, ax, L2);
     vec3 pu = nearest_on_ray(w + wu, d + Du, ax, L2) - p0;
@@ -91,8 +91,11 @@ uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
     for (int i = 0; i < PN; ++i) {
         vec2 q = px_off[i];
         float n = n0 + q.x * nu + q.y * nv;
-        float root = sqrt(max(lim - n * n, 0.0));
-        bool hit = n * n <= lim && f10 + q.x * f1u + q.y * f1v + hk1 * root >= 0.0
+        // The sample's own |D × ax|²: near the axis's direction it changes across a pixel.
+        vec3 ci = c + q.x * cu + q.y * cv;
+        float si = max(dot(ci, ci), 1e-30 * L2), li = r * r * si;
+        float root = sqrt(max(li - n * n, 0.0)) * (s2 / si);
+        bool hit = n * n <= li && f10 + q.x * f1u + q.y * f1v + hk1 * root >= 0.0
                    && f20 + q.x * f2u + q.y * f2v - hk2 * root <= 0.0;
 #if MESHES
         hit = hit && trep < px_tm[i];       // the sample ended on a nearer mesh
