@@ -99,33 +99,39 @@ def test_pixel_sampler_with_meshes_and_both_accelerators(accel):
     # The sphere in front hides the hair behind it and shows in both.
     centre = (slice(28, 36), slice(28, 36))
     assert np.all(pix[centre][..., 3] == 1.0) and np.all(ind[centre][..., 3] == 1.0)
-    assert np.abs(pix[centre] - ind[centre]).max() < 0.05
+    # The mesh is shaded once a pixel, with one shadow ray per light, at one of its samples:
+    # the hair's shadow edges on it are as sharp as one sample makes them, so pixels differ
+    # there, but not the mesh as a whole (an unlit or black sphere would).
+    diff = np.abs(pix[centre] - ind[centre])[..., :3]
+    assert diff.mean() < 0.25 * ind[centre][..., :3].mean()
     assert np.abs(ind[..., 3] - pix[..., 3]).mean() < 0.01
     assert _hair_rmse(pix, ind) < 0.03
 
 
 # --- A scene dense enough for llvmpipe's loop cap -----------------------------------------------
 def test_dense_scene_keeps_every_hit(renderer):
-    """1,500 faint strands packed in front of the camera, 16 layers: every pixel walks hundreds
-    of cells and thousands of candidates in one invocation. A loop cap reached silently would
-    end walks early and drop hits, leaving the pixel sampler's alpha below the independent
-    sampler's, whose invocations each walk one sample."""
+    """8,000 faint strands (alpha 0.05, 4 layers) packed in front of the camera: a pixel's walk
+    crosses the whole tuft, hundreds of candidates, before its samples have their layers. A
+    loop cap reached silently would end walks early and drop hits, leaving the pixel sampler's
+    alpha below the independent sampler's, whose invocations each walk one sample; and one
+    invocation does one walk, not one per sample (the counters say so)."""
     rng = np.random.default_rng(3)
     t = np.linspace(0.0, 1.0, 24)[:, None]
     lines = []
-    for _ in range(1500):
+    for _ in range(8000):
         a, b = rng.uniform(-0.25, 0.25, 3), rng.uniform(-0.25, 0.25, 3)
         lines.append(a + t * (b - a) + 0.02 * np.sin(9 * t + rng.uniform(0, 6)))
-    renderer.set_strands(make_strands(lines, radius=0.0015, alpha=0.08))
-    cam = Camera.look_at((0.0, -1.6, 0.0), (0.0, 0.0, 0.0), fov_deg=22, size=(40, 40))
-    rs = dict(spp=9, layers=16)
-    ind = renderer.render(cam, RenderSettings(**rs))
-    pix = renderer.render(cam, RenderSettings(sampler="pixel", count=True, **rs))
-    st = renderer.stats
-    hair = (pix[..., 3] > 0).sum()
-    assert st.cylinder_tests / hair > 1000, "not dense enough to prove anything"
-    assert abs(ind[..., 3].mean() - pix[..., 3].mean()) < 0.01
-    assert np.abs(ind[..., 3] - pix[..., 3]).mean() < 0.03
+    renderer.set_strands(make_strands(lines, radius=0.0008, alpha=0.05))
+    cam = Camera.look_at((0.0, -1.6, 0.0), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
+    ind = renderer.render(cam, RenderSettings(spp=4, count=True))
+    ind_tests = renderer.stats.cylinder_tests
+    pix = renderer.render(cam, RenderSettings(sampler="pixel", spp=4, count=True))
+    pix_tests = renderer.stats.cylinder_tests
+    assert renderer.stats.layers_max == 4
+    assert pix_tests / pix[..., 3].size > 300, "not dense enough to prove anything"
+    assert pix_tests < 2 * ind_tests        # one walk a pixel (four would be ~4x a sample's)
+    assert abs(ind[..., 3].mean() - pix[..., 3].mean()) < 0.005
+    assert np.abs(ind[..., 3] - pix[..., 3]).mean() < 0.02
 
 
 # --- Settings -----------------------------------------------------------------------------------
