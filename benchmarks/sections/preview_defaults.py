@@ -14,8 +14,10 @@ Times: the median of the harness's runs for the one-sample settings; the many-sa
 renders, a single run.
 
 The pixel sampler (RenderSettings(sampler="pixel")) takes all of a pixel's samples in one walk
-and shades each strand it finds once (docs/DECISIONS.md, "Samples of one pixel share the walk");
-its rows beside the 16-spp row give the cost of 16 samples shared against 16 separate ones.
+and shades the strand that covers most of the pixel once (docs/DECISIONS.md, "Samples of one
+pixel share the walk"); its rows beside the 16-spp row give the cost of 16 samples shared
+against 16 separate ones. The default changes only for settings that meet both goals on every
+scene measured.
 
 Run alone: `python -m benchmarks --full --only preview_defaults` (15-30 minutes on 2 cores,
 most of it the 64-sample references of `wavy`; the quick run's time limit stops it before
