@@ -14,17 +14,22 @@ read when the section runs), with the same sun and two changes so it computes wh
 Cycles does: ambient 0 (Cycles' world gives no light), and the head's colour HEAD_RGB / pi
 (the preview shades a mesh as colour × irradiance × cos, Cycles' diffuse surface as
 colour / pi × irradiance × cos). The last table shows what each of those two costs when
-left as the add-on leaves it.
+left as the add-on leaves it, on the first preset.
 
 Error (benchmarks/region_error.py): over the hair pixels (where Cycles' hair covers at least
 half the pixel) and over the head pixels (where Cycles' head covers at least half), in
 linear RGB per pixel and channel, MAE = mean |preview − Cycles| and RMSE = sqrt(mean
-(preview − Cycles)^2), with the MAE relative to Cycles' mean there in brackets; coverage
-IoU of the hair = sum(min(a, b)) / sum(max(a, b)) of the fraction of each pixel the hair
-covers in each (Cycles': a render of the same scene with white hair on a black head). The
-regions are Cycles', so an empty or black preview scores relative error 1 and IoU 0.
-Cycles' own noise at its sample count, the same measure between two Cycles renders of
-different seeds divided by sqrt(2), is in the Cycles row of the preset it was measured on.
+(preview − Cycles)^2), with the MAE relative to Cycles' mean there in brackets, and the
+mean ratio (the preview's mean there / Cycles': how bright on the whole, whatever the
+per-pixel noise); coverage IoU of the hair = sum(min(a, b)) / sum(max(a, b)) of the
+fraction of each pixel the hair covers in each (Cycles': a render of the same scene with
+white hair on a black head, MASK_SAMPLES samples; the preview's: the same with its own
+sampling). The regions are Cycles', so an empty or black preview scores relative error 1
+(100 %) and IoU 0. On the first preset, Cycles' own noise at its sample count (the same
+measure between two Cycles renders of different seeds, divided by sqrt(2); the IoU between
+the two seeds' masks) stands in its row, and the preview is measured at CHECK_SPP samples
+too: whether the per-pixel error falls with the preview's samples (sampling the coverage of
+strands thinner than a pixel) or stays (the model, the curves' shape).
 
 Run alone: `python -m benchmarks --only contact_sheet [--full]` (quick: a quarter of each
 preset's strands at 320²; full: the presets' own counts at 512²).
@@ -36,7 +41,7 @@ import numpy as np
 from benchmarks.harness import NotMeasured, fmt_num, fmt_time, measure, once
 from benchmarks.region_error import compare
 from benchmarks.scenes import groom_api, load_preset, tracer_api, tracer_camera, view_matrix
-from benchmarks.sections import left
+from benchmarks.sections import left, now
 
 HEAD_RGB = (0.62, 0.45, 0.36)              # a skin tone, linear
 VIEW = np.array([0.45, 1.0, -0.25])        # the way the camera looks: the face and one side
@@ -44,6 +49,7 @@ SUN = np.array([0.3, 0.6, -0.75])          # the way the light travels: from the
 SUN_STRENGTH = 3.0                         # W/m² in Cycles, the preview light's intensity
 REFINED_SPP = 16                           # the preview's refined image (stratified samples)
 MASK_SAMPLES = 64                          # Cycles' coverage render
+CHECK_SPP = 64                             # the first preset's convergence check
 
 
 def hair_material(settings):
@@ -106,14 +112,18 @@ def run(sec, cfg):
     sec.text(__doc__.strip())
     sec.settings(image=f"{size[0]}x{size[1]}", strands="each preset's count" if full else "a quarter of each preset's",
                  cycles_samples=cycles_samples, cycles_mask_samples=MASK_SAMPLES, sun_strength=SUN_STRENGTH,
-                 head_rgb=HEAD_RGB, preview_spp=f"{defaults.spp} (default) and {REFINED_SPP}")
+                 head_rgb=HEAD_RGB, preview_spp=f"{defaults.spp} (default) and {REFINED_SPP}",
+                 check_spp=CHECK_SPP)
     sec.table(["the preview's defaults (tracer.settings.RenderSettings), as read when the section ran"],
               [[defaults_row(defaults)]])
     rows, conv_rows, panels = [], [], []
+    last = 60.0                      # seconds the last preset took (the next needs about as long)
     for name in groom.list_presets():
-        if left(sec) < 60:
-            rows.append([name, "", "not measured: the section's time ran out", "", "", ""])
+        if left(sec) < 1.3 * last:
+            rows.append([name, "", f"not measured: {fmt_time(left(sec))} of the section's time left, "
+                                   f"the last preset took {fmt_time(last)}", "", "", ""])
             continue
+        t_start = now()
         preset = load_preset(name)
         count = preset.params.count if full else max(1000, preset.params.count // 4)
         params = preset.params.replace(count=count)
@@ -161,7 +171,18 @@ def run(sec, cfg):
         else:
             rows.append([label, f"Cycles, {cycles_samples} samples", fmt_time(cyc["seconds"][0]),
                          "the reference", "the reference", ""])
-        for spp, t, e in ((first.spp, timing.median, e_first), (REFINED_SPP, t_refined, e_refined)):
+        runs = [(first.spp, timing.median, e_first), (REFINED_SPP, t_refined, e_refined)]
+        if first_preset:
+            # Does the per-pixel error fall with the preview's samples (sampling) or stay (the model)?
+            check = dataclasses.replace(first, spp=CHECK_SPP)
+            renderer.render(tracer_camera(matrix, (32, 32)), check)
+            t_check, img_check = once(lambda: renderer.render(camera, check))
+            cover_check = masker.render(camera, dataclasses.replace(mask_of[first.spp], spp=CHECK_SPP))[..., 0]
+            e_check = compare(img_check, cover_check, ref, ref_hair, ref_cover)
+            runs.append((CHECK_SPP, t_check, e_check))
+            numbers[f"{CHECK_SPP}spp"] = _numbers(e_check)
+            numbers["preview_seconds"][str(CHECK_SPP)] = t_check
+        for spp, t, e in runs:
             rows.append(["", f"preview, {spp} spp" + (" (default)" if spp == defaults.spp else ""), fmt_time(t),
                          _cell(e["hair"]), _cell(e["head"]), f"{e['iou']:.3f}"])
         if first_preset:
@@ -179,9 +200,11 @@ def run(sec, cfg):
             numbers["head_at_base_colour"] = _numbers(e_base)
             numbers["and_default_ambient"] = _numbers(e_amb)
             conv_name = name
+        numbers["section_seconds"] = now() - t_start
         sec.data[name] = numbers
         diff = np.abs(img_refined[..., :3] - ref).mean(axis=-1)
         panels.append((name, np.concatenate([ref, ref_cover[..., None]], axis=-1), img_first, img_refined, diff))
+        last = now() - t_start
 
     sec.table(["preset", "image", f"time (preview at {first.spp} spp: median of {max(cfg.runs, 5)} runs; "
                "the others one run)", "hair: MAE / RMSE (relative); mean ratio", "head: MAE / RMSE (relative); "
@@ -193,10 +216,17 @@ def run(sec, cfg):
                                      "against the same Cycles image):")
     if panels:
         _figure(sec, panels, first.spp)
-        rel = [v[f"{s}spp"]["hair_rel"] for v in sec.data.values() for s in (first.spp, REFINED_SPP)]
-        sec.summary.append(f"contact sheet: {len(panels)} presets with the head, preview vs Cycles (direct light): "
-                           f"hair MAE {min(rel):.0%}–{max(rel):.0%} of Cycles' mean hair value "
-                           f"({first.spp} and {REFINED_SPP} spp), errors beside each time")
+        data = [v for v in sec.data.values() if isinstance(v, dict) and "strands" in v]
+        rel = {spp: [v[f"{spp}spp"]["hair_rel"] for v in data] for spp in (first.spp, REFINED_SPP)}
+        ratio = [v[f"{spp}spp"]["hair_ratio"] for v in data for spp in (first.spp, REFINED_SPP)]
+        check = next((v for v in data if f"{CHECK_SPP}spp" in v), None)
+        sec.summary.append(
+            f"contact sheet, {len(data)} presets with the head against Cycles (direct light): the hair's mean "
+            f"×{min(ratio):.2f}–×{max(ratio):.2f} of Cycles'; per-pixel hair MAE {min(rel[first.spp]):.0%}–"
+            f"{max(rel[first.spp]):.0%} of Cycles' mean at {first.spp} spp (default), {min(rel[REFINED_SPP]):.0%}–"
+            f"{max(rel[REFINED_SPP]):.0%} at {REFINED_SPP}"
+            + (f", {check[f'{CHECK_SPP}spp']['hair_rel']:.0%} at {CHECK_SPP} (Cycles' own noise "
+               f"{check['cycles_noise']['hair_rel']:.0%})" if check and "cycles_noise" in check else ""))
 
 
 def _figure(sec, panels, first_spp):
