@@ -25,7 +25,7 @@ per-pixel noise); coverage IoU of the hair = sum(min(a, b)) / sum(max(a, b)) of 
 fraction of each pixel the hair covers in each (Cycles': a render of the same scene with
 white hair on a black head, MASK_SAMPLES samples; the preview's: the same with its own
 sampling). The regions are Cycles', so an empty or black preview scores relative error 1
-(100 %) and IoU 0. On the first preset, Cycles' own noise at its sample count (the same
+(100 %) and IoU 0. On the first preset, once every preset has its figures, Cycles' own noise at its sample count (the same
 measure between two Cycles renders of different seeds, divided by sqrt(2); the IoU between
 the two seeds' masks) stands in its row, and the preview is measured at CHECK_SPP samples
 too: whether the per-pixel error falls with the preview's samples (sampling the coverage of
@@ -116,12 +116,12 @@ def run(sec, cfg):
                  check_spp=CHECK_SPP)
     sec.table(["the preview's defaults (tracer.settings.RenderSettings), as read when the section ran"],
               [[defaults_row(defaults)]])
-    rows, conv_rows, panels = [], [], []
+    rows, conv_rows, panels, kept = {}, [], [], None
     last = 60.0                      # seconds the last preset took (the next needs about as long)
     for name in groom.list_presets():
         if left(sec) < 1.3 * last:
-            rows.append([name, "", f"not measured: {fmt_time(left(sec))} of the section's time left, "
-                                   f"the last preset took {fmt_time(last)}", "", "", ""])
+            rows[name] = [[name, "", f"not measured: {fmt_time(left(sec))} of the section's time left, "
+                                     f"the last preset took {fmt_time(last)}", "", "", ""]]
             continue
         t_start = now()
         preset = load_preset(name)
@@ -133,7 +133,6 @@ def run(sec, cfg):
         hi = np.maximum(strands.bounds()[1], head.vertices.max(axis=0))
         matrix = view_matrix(lo, hi, size, direction=VIEW)
         camera = tracer_camera(matrix, size)
-        first_preset = not panels
 
         renderer = tracer.Renderer()
         renderer.set_strands(strands)
@@ -148,64 +147,71 @@ def run(sec, cfg):
         cover_first = masker.render(camera, mask_of[first.spp])[..., 0]
         cover_refined = masker.render(camera, mask_of[refined.spp])[..., 0]
 
-        seeds = (1, 2) if first_preset else (1,)
         cyc = render_contact(strands, head.vertices, head.triangles, HEAD_RGB, matrix, size, SUN, SUN_STRENGTH,
-                             hair, cycles_samples, MASK_SAMPLES, seeds=seeds, mask_seeds=seeds)
+                             hair, cycles_samples, MASK_SAMPLES)
         ref, ref_hair, ref_cover = cyc["rgb"][0], cyc["hair"], cyc["cover"]
         e_first = compare(img_first, cover_first, ref, ref_hair, ref_cover)
         e_refined = compare(img_refined, cover_refined, ref, ref_hair, ref_cover)
-        label = f"{name}, {strands.num_strands:,} strands"
-        numbers = {"strands": int(strands.num_strands), "cycles_seconds": cyc["seconds"][0],
-                   "hair_pixels": e_first["hair"]["pixels"], "head_pixels": e_first["head"]["pixels"],
-                   "preview_seconds": {str(first.spp): timing.median, str(REFINED_SPP): t_refined},
-                   f"{first.spp}spp": _numbers(e_first), f"{REFINED_SPP}spp": _numbers(e_refined)}
-        if len(cyc["rgb"]) > 1:
-            n = compare(cyc["rgb"][1], cyc["masks"][1][0], ref, ref_hair, ref_cover)
-            hair_noise, head_noise = _noise(n["hair"]), _noise(n["head"])
-            rows.append([label, f"Cycles, {cycles_samples} samples", fmt_time(cyc["seconds"][0]),
-                         f"its own noise: {_cell(hair_noise)}", f"its own noise: {_cell(head_noise)}",
-                         f"{n['iou']:.3f} (two seeds)"])
-            numbers["cycles_noise"] = {"hair_mae": hair_noise["mae"], "hair_rel": hair_noise["rel"],
-                                       "head_mae": head_noise["mae"], "head_rel": head_noise["rel"],
-                                       "mask_iou_two_seeds": n["iou"]}
-        else:
-            rows.append([label, f"Cycles, {cycles_samples} samples", fmt_time(cyc["seconds"][0]),
-                         "the reference", "the reference", ""])
-        runs = [(first.spp, timing.median, e_first), (REFINED_SPP, t_refined, e_refined)]
-        if first_preset:
-            # Does the per-pixel error fall with the preview's samples (sampling) or stay (the model)?
-            check = dataclasses.replace(first, spp=CHECK_SPP)
-            renderer.render(tracer_camera(matrix, (32, 32)), check)
-            t_check, img_check = once(lambda: renderer.render(camera, check))
-            cover_check = masker.render(camera, dataclasses.replace(mask_of[first.spp], spp=CHECK_SPP))[..., 0]
-            e_check = compare(img_check, cover_check, ref, ref_hair, ref_cover)
-            runs.append((CHECK_SPP, t_check, e_check))
-            numbers[f"{CHECK_SPP}spp"] = _numbers(e_check)
-            numbers["preview_seconds"][str(CHECK_SPP)] = t_check
-        for spp, t, e in runs:
-            rows.append(["", f"preview, {spp} spp" + (" (default)" if spp == defaults.spp else ""), fmt_time(t),
-                         _cell(e["hair"]), _cell(e["head"]), f"{e['iou']:.3f}"])
-        if first_preset:
-            # What the add-on leaves as it is: the head at its base colour, the ambient term.
-            renderer.set_meshes([(head.vertices, head.triangles, HEAD_RGB, "head")])
-            e_base = compare(renderer.render(camera, refined), cover_refined, ref, ref_hair, ref_cover)
-            e_amb = compare(renderer.render(camera, dataclasses.replace(refined, ambient=defaults.ambient)),
-                            cover_refined, ref, ref_hair, ref_cover)
-            conv_rows = [["as measured above (head colour / pi, ambient 0)", _cell(e_refined["hair"]),
-                          _cell(e_refined["head"])],
-                         ["the head at its base colour, as the add-on passes it", _cell(e_base["hair"]),
-                          _cell(e_base["head"])],
-                         [f"that and the default ambient {defaults.ambient:g}", _cell(e_amb["hair"]),
-                          _cell(e_amb["head"])]]
-            numbers["head_at_base_colour"] = _numbers(e_base)
-            numbers["and_default_ambient"] = _numbers(e_amb)
-            conv_name = name
-        numbers["section_seconds"] = now() - t_start
-        sec.data[name] = numbers
+        sec.data[name] = {
+            "strands": int(strands.num_strands), "cycles_seconds": cyc["seconds"][0],
+            "hair_pixels": e_first["hair"]["pixels"], "head_pixels": e_first["head"]["pixels"],
+            "preview_seconds": {str(first.spp): timing.median, str(REFINED_SPP): t_refined},
+            f"{first.spp}spp": _numbers(e_first), f"{REFINED_SPP}spp": _numbers(e_refined)}
+        rows[name] = [[f"{name}, {strands.num_strands:,} strands", f"Cycles, {cycles_samples} samples",
+                       fmt_time(cyc["seconds"][0]), "the reference", "the reference", ""]]
+        for spp, t, e in ((first.spp, timing.median, e_first), (REFINED_SPP, t_refined, e_refined)):
+            rows[name].append(["", f"preview, {spp} spp" + (" (default)" if spp == defaults.spp else ""),
+                               fmt_time(t), _cell(e["hair"]), _cell(e["head"]), f"{e['iou']:.3f}"])
+        if kept is None:            # the first preset: its checks come when every preset has its figures
+            kept = (name, strands, matrix, camera, renderer, masker, ref, ref_hair, ref_cover, cover_refined,
+                    e_refined)
         diff = np.abs(img_refined[..., :3] - ref).mean(axis=-1)
         panels.append((name, np.concatenate([ref, ref_cover[..., None]], axis=-1), img_first, img_refined, diff))
         last = now() - t_start
+        sec.data[name]["section_seconds"] = last
 
+    if kept is not None and left(sec) > 1.5 * last:
+        name, strands, matrix, camera, renderer, masker, ref, ref_hair, ref_cover, cover_refined, e_refined = kept
+        numbers = sec.data[name]
+        # Cycles' own noise: another seed, for the image and the mask.
+        cyc2 = render_contact(strands, head.vertices, head.triangles, HEAD_RGB, matrix, size, SUN, SUN_STRENGTH,
+                              hair, cycles_samples, MASK_SAMPLES, seeds=(2,), mask_seeds=(2,))
+        n = compare(cyc2["rgb"][0], cyc2["hair"], ref, ref_hair, ref_cover)
+        hair_noise, head_noise = _noise(n["hair"]), _noise(n["head"])
+        rows[name][0][3:] = [f"its own noise: {_cell(hair_noise)}", f"its own noise: {_cell(head_noise)}",
+                             f"{n['iou']:.3f} (two seeds)"]
+        numbers["cycles_noise"] = {"hair_mae": hair_noise["mae"], "hair_rel": hair_noise["rel"],
+                                   "head_mae": head_noise["mae"], "head_rel": head_noise["rel"],
+                                   "mask_iou_two_seeds": n["iou"]}
+        # Does the per-pixel error fall with the preview's samples (sampling) or stay (the model)?
+        check = dataclasses.replace(first, spp=CHECK_SPP)
+        renderer.render(tracer_camera(matrix, (32, 32)), check)
+        t_check, img_check = once(lambda: renderer.render(camera, check))
+        cover_check = masker.render(camera, dataclasses.replace(mask_of[first.spp], spp=CHECK_SPP))[..., 0]
+        e_check = compare(img_check, cover_check, ref, ref_hair, ref_cover)
+        rows[name].append(["", f"preview, {CHECK_SPP} spp", fmt_time(t_check), _cell(e_check["hair"]),
+                           _cell(e_check["head"]), f"{e_check['iou']:.3f}"])
+        numbers[f"{CHECK_SPP}spp"] = _numbers(e_check)
+        numbers["preview_seconds"][str(CHECK_SPP)] = t_check
+        # What the add-on leaves as it is: the head at its base colour, the ambient term.
+        renderer.set_meshes([(head.vertices, head.triangles, HEAD_RGB, "head")])
+        e_base = compare(renderer.render(camera, refined), cover_refined, ref, ref_hair, ref_cover)
+        e_amb = compare(renderer.render(camera, dataclasses.replace(refined, ambient=defaults.ambient)),
+                        cover_refined, ref, ref_hair, ref_cover)
+        conv_rows = [["as measured above (head colour / pi, ambient 0)", _cell(e_refined["hair"]),
+                      _cell(e_refined["head"])],
+                     ["the head at its base colour, as the add-on passes it", _cell(e_base["hair"]),
+                      _cell(e_base["head"])],
+                     [f"that and the default ambient {defaults.ambient:g}", _cell(e_amb["hair"]),
+                      _cell(e_amb["head"])]]
+        numbers["head_at_base_colour"] = _numbers(e_base)
+        numbers["and_default_ambient"] = _numbers(e_amb)
+        conv_name = name
+    elif kept is not None:
+        sec.not_measured("Cycles' own noise, the convergence check and the two changes' worth",
+                         f"{fmt_time(left(sec))} of the section's time left")
+
+    rows = [r for name in rows for r in rows[name]]
     sec.table(["preset", "image", f"time (preview at {first.spp} spp: median of {max(cfg.runs, 5)} runs; "
                "the others one run)", "hair: MAE / RMSE (relative); mean ratio", "head: MAE / RMSE (relative); "
                "mean ratio", "hair coverage IoU"], rows,
