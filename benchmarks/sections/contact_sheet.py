@@ -25,11 +25,12 @@ per-pixel noise); coverage IoU of the hair = sum(min(a, b)) / sum(max(a, b)) of 
 fraction of each pixel the hair covers in each (Cycles': a render of the same scene with
 white hair on a black head, MASK_SAMPLES samples; the preview's: the same with its own
 sampling). The regions are Cycles', so an empty or black preview scores relative error 1
-(100 %) and IoU 0. On the first preset, once every preset has its figures, Cycles' own noise at its sample count (the same
-measure between two Cycles renders of different seeds, divided by sqrt(2); the IoU between
-the two seeds' masks) stands in its row, and the preview is measured at CHECK_SPP samples
-too: whether the per-pixel error falls with the preview's samples (sampling the coverage of
-strands thinner than a pixel) or stays (the model, the curves' shape).
+(100 %) and IoU 0. On the first preset, once every preset has its figures, Cycles' own
+noise at its sample count (the same measure between two Cycles renders of different seeds,
+divided by sqrt(2); the IoU between the two seeds' masks) stands in its row, and the preview
+is measured at CHECK_SPP samples too: whether the per-pixel error falls with the preview's
+samples (sampling the coverage of strands thinner than a pixel) or stays (the model, the
+curves' shape).
 
 Run alone: `python -m benchmarks --only contact_sheet [--full]` (quick: a quarter of each
 preset's strands at 320²; full: the presets' own counts at 512²).
