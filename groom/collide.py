@@ -467,8 +467,13 @@ class Collider:
         frac = np.empty((3, len(p)))
         for axis, n in enumerate(self.shape):
             g = (p[:, axis] - self.origin[axis]) * (1.0 / self.cell)
-            i = np.clip(g, 0, n - 2).astype(np.int64)
-            np.clip(g - i, 0.0, 1.0, out=frac[axis])
+            # np.maximum/np.minimum: np.clip's wrappers cost more than its work on the walk's
+            # small arrays (the same numbers).
+            i = np.minimum(np.maximum(g, 0), n - 2).astype(np.int64)
+            f = frac[axis]
+            np.subtract(g, i, out=f)
+            np.maximum(f, 0.0, out=f)
+            np.minimum(f, 1.0, out=f)
             base *= n
             base += i
         return base, frac
@@ -499,7 +504,8 @@ class Collider:
         for axis, m in enumerate(self.shape):
             np.subtract(p[:, axis], origin[axis], out=col, dtype=dt)
             col *= inv
-            np.clip(col, 0, m - 2, out=col)
+            np.maximum(col, 0, out=col)
+            np.minimum(col, m - 2, out=col)
             if axis:
                 idx *= m
                 np.copyto(i, col, casting="unsafe")   # truncation = floor, col >= 0
@@ -619,6 +625,12 @@ def _segment2(ap, ab, dot_ap_ab, len2):
     t = np.clip(dot_ap_ab / np.maximum(len2, np.float32(1e-30)), 0.0, 1.0).astype(ap.dtype)
     d = ap - t[..., None] * ab
     return _dot(d, d)
+
+
+def _indices(mask):
+    """np.flatnonzero of a 1-D mask, without its wrappers (the walk calls it thousands of
+    times on small arrays)."""
+    return mask.nonzero()[0]
 
 
 def _dot(u, v):
@@ -828,7 +840,7 @@ def _offending(collider, points, offsets, counts, radius, margin, lo, hi):
     look = ~_clear_with_middles(collider, pts, _half_segments(collider, pts, off), target,
                                 lambda i: 0.5 * (pts[i] + pts[i - 1]))
     look[off] = False  # roots never move
-    look = np.flatnonzero(look)
+    look = _indices(look)
     if not look.size:
         return none
     # A closer look at those, with the clearance near the root.
@@ -880,7 +892,7 @@ def _clear_with_middles(collider, p, half, clearance, middles):
     cells = collider._cells(p)
     ok = collider.lower_within(_REACH)[cells] >= thr
     ok &= half < _REACH - 0.01
-    rest = np.flatnonzero(~ok)
+    rest = _indices(~ok)
     if rest.size:
         own = collider.cell_lower[cells[rest]] >= thr[rest]
         ok[rest] = own & (collider.cell_lower[collider._cells(middles(rest))] >= thr[rest])
@@ -902,7 +914,7 @@ def _walk_strands(collider, points, offsets, counts, radius, margin, strands, k0
 def _flat_points(off, cnt):
     """Flat indices of all points of strands starting at off with cnt points, in order."""
     starts = np.cumsum(cnt) - cnt
-    return np.repeat(off - starts, cnt) + np.arange(int(cnt.sum()))
+    return (off - starts).repeat(cnt) + np.arange(int(cnt.sum()))
 
 
 def _clearance(target, root_value, p, root):
@@ -961,7 +973,7 @@ def _walk(collider, pts, target, cnt, k0, root_value):
     active = k < cnt
     unresolved = 0
     while True:
-        al = np.flatnonzero(active & check)
+        al = _indices(active & check)
         if al.size:
             jump = _first_offence(collider, pts, half, target, off[al], cnt[al], k[al], prev[al], root_value[al],
                                   roots[al])
@@ -974,7 +986,7 @@ def _walk(collider, pts, target, cnt, k0, root_value):
             prev[go] = pts[off[go] + k[go] - 1] + delta[going]
             u_prev[go] = _unit(pts[off[go] + k[go] - 1] - pts[off[go] + k[go] - 2])
             check[al] = False
-        act = np.flatnonzero(active)
+        act = _indices(active)
         if not act.size:
             break
         at = off[act] + k[act]
@@ -987,7 +999,7 @@ def _walk(collider, pts, target, cnt, k0, root_value):
         limited = ~aligned[act] & (c < cos_lim[act]) & (length > 0)
         u_new = u.copy()
         if limited.any():
-            li = np.flatnonzero(limited)
+            li = _indices(limited)
             w = _perpendicular_toward(up[li], u[li], c[li])
             u_new[li] = cos_lim[act[li], None] * up[li] + sin_lim[act[li], None] * w
         p0 = prev[act]
@@ -996,13 +1008,13 @@ def _walk(collider, pts, target, cnt, k0, root_value):
         # Only segments the cells' lower bounds do not clear get the closer look (the bound
         # clears a point for its target, so for the smaller clearance near a root too).
         short = np.full(len(act), -1.0)
-        near = np.flatnonzero(~_clear_with_middles(collider, end, length * (0.5 / collider.cell), need,
+        near = _indices(~_clear_with_middles(collider, end, length * (0.5 / collider.cell), need,
                                                    lambda i: mid[i]))
         if near.size:
             short[near] = _shortfall(collider, end[near], mid[near], need[near], rv[near], rt[near])
         push = (short > 0) & (length > 0)
         if push.any():
-            pi = np.flatnonzero(push)
+            pi = _indices(push)
             u_new[pi], left = _push_out(collider, p0[pi], u_new[pi], length[pi], need[pi], rv[pi], rt[pi], short[pi])
             unresolved += left
         placed = p0 + length[:, None] * u_new
@@ -1058,7 +1070,7 @@ def _push_out(collider, p0, u, length, target, root_value, root, short):
         todo = t[(short[t] > 0) & (s[t] < 1.0)]
         if not todo.size:
             break
-    todo = np.flatnonzero(short > 0)
+    todo = _indices(short > 0)
     for _ in range(_PUSH_ITERATIONS):
         if not todo.size:
             break
@@ -1103,13 +1115,13 @@ def _first_offence(collider, pts, half, target, off, cnt, k, prev, root_value, r
     twice the points the walk goes through. half: _half_segments of pts."""
     rest = np.minimum(cnt - k, _CHECK_AHEAD)
     idx = _flat_points(off + k, rest)
-    s_of = np.repeat(np.arange(len(off)), rest)
+    s_of = np.arange(len(off)).repeat(rest)
     delta = (prev - pts[off + k - 1])[s_of]
     p = pts[idx] + delta
 
     def middles(i):
         return 0.5 * (pts[idx[i]] + pts[idx[i] - 1]) + delta[i]
-    look = np.flatnonzero(~_clear_with_middles(collider, p, half[idx], target[idx], middles))
+    look = _indices(~_clear_with_middles(collider, p, half[idx], target[idx], middles))
     first = k + rest
     if look.size:
         sl = s_of[look]
