@@ -896,8 +896,8 @@ def _clear_with_middles(collider, p, half, clearance, middles):
     ok &= half < _REACH - 0.01
     rest = _indices(~ok)
     if rest.size:
-        own = collider.cell_lower[cells[rest]] >= thr[rest]
-        ok[rest] = own & (collider.cell_lower[collider._cells(middles(rest))] >= thr[rest])
+        rest = rest[collider.cell_lower[cells[rest]] >= thr[rest]]   # the others are not clear (ok is False)
+        ok[rest] = collider.cell_lower[collider._cells(middles(rest))] >= thr[rest]
     return ok
 
 
