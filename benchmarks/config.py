@@ -93,7 +93,7 @@ QUICK = Config(
 
 FULL = Config(
     mode="full",
-    limits={"generation": 400, "geometry": 300, "rendering": 240, "anchors": 900, "scaling": 300,
+    limits={"generation": 520, "geometry": 300, "rendering": 240, "anchors": 900, "scaling": 300,
             "skips": 180, "stress": 100, "gpu": 20, "integration": 240,
             "export": 420, "versions": 600, "preview_defaults": 1800, "contact_sheet": 1500,
             "accel": 900, "hair_shading": 1200, "meshes": 300},
