@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """python -m tracer render INPUT --out IMAGE.png [--size 512x512] [--spp N]
-[--shadows|--no-shadows] [--layers K] [--shading MODEL] [--min-pixel-width|--no-min-pixel-width]
+[--sampler independent|pixel] [--shadows|--no-shadows] [--layers K] [--shading MODEL]
+[--min-pixel-width|--no-min-pixel-width]
 [--camera auto|x,y,z:tx,ty,tz:fov] [--up auto|z|y] [--mesh MESH.obj [--mesh-color R,G,B]]...
 
 Bad input exits 2 with one line naming it and writes nothing. What can be known before the
@@ -178,7 +179,8 @@ HAIR_SLIDERS = (("--melanin", "hair_melanin", "melanin 0..1"),
 
 def build_parser():
     from hairio.formats.up_axis import UP_CHOICES
-    from .settings import HAIR_COLORS, MAX_SPP, RenderSettings
+    from .layout import PIXEL_MAX_SPP
+    from .settings import HAIR_COLORS, MAX_SPP, SAMPLERS, RenderSettings
     from .shading import DEFAULT_SHADING, SHADING_MODELS
     parser = argparse.ArgumentParser(prog="python -m tracer", description="Render strands with the GPU ray tracer.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -192,6 +194,10 @@ def build_parser():
     r.add_argument("--spp", type=int, default=1,
                    help=f"samples per pixel, a square number (1, 4, 9, ...) up to {MAX_SPP}, for stratified "
                         f"sampling (default %(default)s)")
+    r.add_argument("--sampler", choices=SAMPLERS, default=RenderSettings().sampler,
+                   help="how a pixel's samples are taken: independent (each its own ray, one pass per sample) "
+                        f"or pixel (all of them in one walk, each strand shaded once a pixel: 16 samples for "
+                        f"a fraction of 16 passes' time; at most {PIXEL_MAX_SPP}) (default %(default)s)")
     r.add_argument("--shadows", dest="shadows", action="store_true", default=True,
                    help="trace shadow rays toward the lights (the default)")
     r.add_argument("--no-shadows", dest="shadows", action="store_false", help="no shadow rays: faster, flatter")
@@ -247,7 +253,7 @@ def main(argv=None):
         from hairio.atomic import check_destination
         check_destination(args.out, f"--out {args.out}")
         from .settings import RenderSettings
-        settings = RenderSettings(spp=args.spp, shadows=args.shadows, layers=args.layers,
+        settings = RenderSettings(spp=args.spp, sampler=args.sampler, shadows=args.shadows, layers=args.layers,
                                   shading=args.shading, min_pixel_width=args.min_pixel_width,
                                   background=(0.0, 0.0, 0.0, 0.0), hair_color=args.hair_color,
                                   **{field: getattr(args, field) for _, field, _ in HAIR_SLIDERS})
@@ -292,6 +298,7 @@ def main(argv=None):
     else:
         print(f"BVH build {st['accel_s']:.3f} s: {st['bvh_pieces']} pieces, {st['bvh_entries']} nodes and leaves")
     print(f"render {render_s:.3f} s at {size[0]}x{size[1]}, {args.spp} spp"
+          + (" in one walk a pixel (sampler pixel)" if settings.sampler == "pixel" else "")
           + (", minimum pixel width" if settings.min_pixel_width else ""))
     print(f"wrote {args.out}")
     return 0
