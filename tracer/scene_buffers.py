@@ -168,6 +168,13 @@ class SceneBuffers:
         self[name].write(data, first=first)
         self.stats.bytes_uploaded += data.nbytes
 
+    def release(self):
+        """Gives every buffer back to the driver (hundreds of MB each for a big scene, in host
+        memory on a CPU driver); the next set_strands allocates them again."""
+        for store in self._tex.values():
+            store.release()
+        self._tex.clear()
+
     def bind(self, names):
         """Buffers `names` on texture units 0, 1, ... in that order (names it does not hold,
         such as parts a scene does not need, are skipped: their units stay unused)."""
