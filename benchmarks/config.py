@@ -92,7 +92,7 @@ FULL = Config(
     mode="full",
     # 1,000,000 strands: ~61 M cylinders, split over two buffer textures (anchors, accel).
     anc_counts=(10000, 100000, 1000000),
-    limits={"generation": 400, "geometry": 300, "rendering": 240, "anchors": 1800, "scaling": 300,
+    limits={"generation": 400, "geometry": 300, "rendering": 240, "anchors": 2200, "scaling": 300,
             "skips": 180, "stress": 100, "gpu": 20, "integration": 240,
             "export": 420, "versions": 600, "preview_defaults": 1800, "contact_sheet": 1200,
             "accel": 1300, "hair_shading": 1200, "meshes": 300},

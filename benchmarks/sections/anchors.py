@@ -115,15 +115,22 @@ def run(sec, cfg):
             sec.not_measured(name, f"{type(e).__name__}: {e}")
     # Every scene at the lowest sample count first (the issue's targets), then the higher
     # counts, each taking what is left; a job whose runs cannot fit is reported, not half-run.
-    for spp in sorted(cfg.anc_spp):
-        for sc in sorted(scenes, key=lambda s: s.strands.num_segments):   # cheapest first
-            try:
-                _tracer_job(sec, cfg, tracer, sc, spp)
-                _cycles_job(sec, cfg, sc, spp, size)
-            except Exception as e:  # noqa: BLE001 — one scene failing must not lose the others
-                sc.ours.setdefault(spp, f"failed: {type(e).__name__}: {e}")
-                if isinstance(sc.ours.get(spp), tuple):
-                    sc.cycles[spp] = f"failed: {type(e).__name__}: {e}"
+    # Huge scenes' lowest-spp jobs come first (their runs take about ten minutes of the budget,
+    # which must not go to the smaller scenes' higher counts) and their other jobs last.
+    low = min(cfg.anc_spp)
+    by_cost = sorted(scenes, key=lambda s: s.strands.num_segments)     # cheapest first
+    huge = [sc for sc in by_cost if _huge(sc)]
+    jobs = ([(low, sc) for sc in huge]
+            + [(spp, sc) for spp in sorted(cfg.anc_spp) for sc in by_cost if not _huge(sc)]
+            + [(spp, sc) for spp in sorted(cfg.anc_spp) if spp != low for sc in huge])
+    for spp, sc in jobs:
+        try:
+            _tracer_job(sec, cfg, tracer, sc, spp)
+            _cycles_job(sec, cfg, sc, spp, size)
+        except Exception as e:  # noqa: BLE001 — one scene failing must not lose the others
+            sc.ours.setdefault(spp, f"failed: {type(e).__name__}: {e}")
+            if isinstance(sc.ours.get(spp), tuple):
+                sc.cycles[spp] = f"failed: {type(e).__name__}: {e}"
     _report(sec, cfg, scenes, size)
 
 
