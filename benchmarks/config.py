@@ -49,6 +49,8 @@ class Config:
     # 9. integration (extension, export)
     int_strands: int = 100000
     tfx_vertices: tuple = (4, 8, 16, 32, 64)
+    # 14. contact sheet
+    contact_cycles_samples: int = 128
     # per-section wall-clock limit in seconds (the section is killed and reported past it)
     limits: dict = field(default_factory=dict)
 
@@ -82,6 +84,7 @@ QUICK = Config(
     stress_examples=30,
     int_strands=5000,
     tfx_vertices=(4, 16, 64),
+    contact_cycles_samples=128,
     limits={"generation": 150, "geometry": 35, "rendering": 45, "anchors": 90, "scaling": 45,
             "skips": 30, "stress": 25, "gpu": 10, "integration": 40, "export": 40,
             "versions": 300, "preview_defaults": 600, "contact_sheet": 600, "accel": 120,
@@ -92,9 +95,9 @@ FULL = Config(
     mode="full",
     # 1,000,000 strands: ~61 M cylinders, split over two buffer textures (anchors, accel).
     anc_counts=(10000, 100000, 1000000),
-    limits={"generation": 400, "geometry": 300, "rendering": 240, "anchors": 2200, "scaling": 300,
+    limits={"generation": 520, "geometry": 300, "rendering": 240, "anchors": 2200, "scaling": 300,
             "skips": 180, "stress": 100, "gpu": 20, "integration": 240,
-            "export": 420, "versions": 600, "preview_defaults": 1800, "contact_sheet": 1200,
+            "export": 420, "versions": 600, "preview_defaults": 1800, "contact_sheet": 1500,
             "accel": 1300, "hair_shading": 1200, "meshes": 300},
 )
 

@@ -264,7 +264,7 @@ def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step, mix=Non
     return grid[valid], valid.sum(axis=1).astype(np.int64), capped, need
 
 
-def strand_attributes(seed, ids, counts, along, base_radius, base_color, params):
+def strand_attributes(seed, ids, counts, along, base_radius, base_color, params, out=None):
     """Per-point radius, colour and alpha (SPEC §6), float32, for strands with `counts` points
     at fractions `along` of their length (0 at the root, 1 at the tip), so a profile is the
     same whatever the resolution: `along` is flat (P,), or (n,) shared by every strand when
@@ -272,7 +272,18 @@ def strand_attributes(seed, ids, counts, along, base_radius, base_color, params)
     `along` may also be (sigma (P,), frac (S,)), the fractions σ / f_j made a range at a time.
     Radius: r(1 - s) ('linear', the thesis's r(1 - i/res)), r ('constant'), or constant up to
     taper_start then linear to 0 ('taper_from'). Colour: base + U(-1,1)·variation per strand
-    and per point, clamped to [0, 1]. Alpha: 1 up to alpha_start, then linear to alpha_tip."""
+    and per point, clamped to [0, 1]. Alpha: 1 up to alpha_start, then linear to alpha_tip.
+    out: None or (radius (P,), colour (P, 3), alpha (P,)) float32 arrays to write into (the
+    rows of a block of the whole result); the arrays written are returned either way."""
+    if out is not None:
+        made = strand_attributes(seed, ids, counts, along, base_radius, base_color, params) if (
+            not isinstance(along, tuple) or np.any(params.color_variation_point)) else None
+        if made is None:
+            color = strand_colors(seed, ids, base_color, params)
+            return _flat_attributes(along, counts, base_radius, color, params, out=out)
+        for whole, part in zip(out, made):
+            whole[...] = part
+        return out
     n_pts = int(counts.sum())
     color = strand_colors(seed, ids, base_color, params)
     var_p = np.asarray(params.color_variation_point)
@@ -303,14 +314,15 @@ def strand_attributes(seed, ids, counts, along, base_radius, base_color, params)
     return radius, color, np.ones(n_pts, np.float32) if alpha is None else alpha
 
 
-def _flat_attributes(s, counts, base_radius, color, params, threads=None):
+def _flat_attributes(s, counts, base_radius, color, params, threads=None, out=None):
     """strand_attributes without per-point colour variation, for strands of any counts at
     fractions s (P,) float32, or (sigma (P,), frac (S,)) whose quotient they are: ranges of
     strands on the worker threads, each writing its own rows (a colour channel at a time:
-    np.repeat of 12-byte rows is slow)."""
+    np.repeat of 12-byte rows is slow). out: None or the arrays to write into."""
     ends = np.cumsum(counts)
     n_pts = int(ends[-1]) if len(ends) else 0
-    out = (np.empty(n_pts, np.float32), np.empty((n_pts, 3), np.float32), np.empty(n_pts, np.float32))
+    if out is None:
+        out = (np.empty(n_pts, np.float32), np.empty((n_pts, 3), np.float32), np.empty(n_pts, np.float32))
     radius, rgb, alpha = out
     base = base_radius.astype(np.float32)
     clamped = np.clip(color, 0.0, 1.0)

@@ -281,12 +281,14 @@ class _Grower:
         self._note_resolution(idx, res.met, tol, res.needed)
         return res.sigma, res.counts
 
-    def _grow(self, context, roots, transforms, g, w, frac, ids, idx, report, plan=None):
+    def _grow(self, context, roots, transforms, g, w, frac, ids, idx, report, plan=None, into=None):
         """Points and attributes (points, counts, radius, colour, alpha) of one block of
         strands from their per-strand inputs, component-major: roots (3, n), transforms (9,
         n), guides g (3, n), weights w (3, n), length fractions and ids (n,); idx: where they
         lie among the strands (a slice or indices), for the resolution and collision notes;
-        plan: their _plan, made here when None."""
+        plan: their _plan, made here when None; into: None or (points, radius, colour, alpha)
+        arrays of the block's rows of the whole result, written where the work allows (the
+        arrays returned are then those)."""
         p = self.params
         radii, rows = context["radii"], context["rows"]
         report(0.0, "growing strands")
@@ -300,11 +302,14 @@ class _Grower:
             n = p.points_per_strand
             along = np.arange(n) / (n - 1)
             jobs, attrs = self._attribute_jobs(ids, counts, along, g, w, base_radius)
-            pts, done = evaluate_strands(*args, counts, rows, frac=frac, also=jobs, threads=threads, clump=clump)
+            pts, done = evaluate_strands(*args, counts, rows, frac=frac, also=jobs, threads=threads, clump=clump,
+                                         out=None if into is None else into[0])
             attrs = attrs or done[0]
         else:
-            pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma, threads=threads, clump=clump)
-            attrs = self._attributes(ids, counts, (sigma, frac), g, w, base_radius)
+            pts, _ = evaluate_strands(*args, counts, rows, sigma=sigma, threads=threads, clump=clump,
+                                      out=None if into is None else into[0])
+            attrs = self._attributes(ids, counts, (sigma, frac), g, w, base_radius,
+                                     out=None if into is None else into[1:])
         del args, clump
         report(0.5, "frizz and curl")
         shape_strands(pts, counts, sigma, frac, transforms, g[0], ids, rows, p, threads)
@@ -314,10 +319,10 @@ class _Grower:
             pts = self._collision.apply(pts, counts, attrs[0], idx, threads)
         return (pts, counts) + tuple(attrs)
 
-    def _attributes(self, ids, counts, along, g, w, base_radius):
+    def _attributes(self, ids, counts, along, g, w, base_radius, out=None):
         """(radius, colour, alpha) per point (cylinders.strand_attributes) from the guides' colours."""
         return strand_attributes(self.params.seed, ids, counts, along, base_radius, self._base_color(g, w),
-                                 self.params)
+                                 self.params, out=out)
 
     def _base_color(self, g, w):
         """The guides' colours blended by the weights, (S,3) float64."""
@@ -495,11 +500,15 @@ class Generator(_Grower):
         for i in range(len(blocks)):
             inputs, idx = block(i)
             plan, plans[i] = plans[i], None
-            grown = self._grow(context, *inputs, idx, self._block_report(i, len(blocks), 0.35), plan)
+            # The block grows straight into its rows of the whole (no copy of some 32 bytes a
+            # point, nor the fresh pages of a block's own arrays).
+            rows = slice(at, at + int(plan[1].sum()))
+            grown = self._grow(context, *inputs, idx, self._block_report(i, len(blocks), 0.35), plan,
+                               into=tuple(whole[rows] for whole in out))
             del plan
-            rows = slice(at, at + len(grown[0]))
             for whole, part in zip(out, grown[:1] + grown[2:]):
-                whole[rows] = part
+                if not np.may_share_memory(whole, part):
+                    whole[rows] = part
             at = rows.stop
             del grown
             if self._collision is not None:

@@ -150,7 +150,8 @@ class Drawer:
             if meshes:
                 set_uniforms(prog, mesh_lo=tuple(float(x) for x in mesh_grid.lo),
                              mesh_cell_size=tuple(float(x) for x in mesh_grid.cell_size),
-                             mesh_dims=tuple(int(x) for x in mesh_grid.dims), mesh_offset=float(mesh_offset))
+                             mesh_dims=tuple(int(x) for x in mesh_grid.dims), mesh_offset=float(mesh_offset),
+                             mesh_brdf=float(shading_model(settings.shading).mesh_brdf))
             self.ctx.blend_func = moderngl.ONE, moderngl.ONE
             self.ctx.blend_equation = moderngl.FUNC_ADD
             x0, y0, x1, y1 = box

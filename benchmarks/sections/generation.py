@@ -20,11 +20,13 @@ import time
 
 import numpy as np
 
-from benchmarks.harness import TooSlow, fmt_time, measure, ratio, run_child
+from benchmarks.harness import Timing, TooSlow, fmt_time, measure, ratio, run_child
 from benchmarks.scenes import groom_api, load_preset
 from benchmarks.sections import left, over_budget
 
 MEMORY_LIMIT_MB = 2048.0
+# From this many strands on, one timed run a side (see run).
+SINGLE_RUN_COUNT = 1_000_000
 PRESET = "wavy"
 
 _MEMORY_CHILD = """
@@ -121,6 +123,21 @@ class _StageClock:
                    if a[1] == "moving hair out of the collider")
 
 
+def _single_run(job, data, count, budget, side="ours"):
+    """(Timing of one call of job, its result), for the counts where the runs of `measure`
+    would not fit: TooSlow when the largest row measured so far, scaled linearly to
+    `count`, says one call would not fit `budget` either."""
+    if data:
+        d = data[-1]
+        guess = d[side] * count / d["count"]
+        if guess > budget:
+            raise TooSlow(f"one run should take about {fmt_time(guess)} ({fmt_time(d[side])} at {d['count']:,} strands), "
+                          f"more than the {fmt_time(max(budget, 0))} left in this section's budget")
+    t0 = time.perf_counter()
+    out = job()
+    return Timing([time.perf_counter() - t0]), out
+
+
 def counts_for(cfg):
     """The strand counts of the main table: the mode's, and 1M in the full report."""
     counts = tuple(cfg.gen_counts)
@@ -144,7 +161,8 @@ def run(sec, cfg):
 
     rows, data = [], []
     for count in counts_for(cfg):
-        if data and over_budget(sec, 0.45):
+        single = count >= SINGLE_RUN_COUNT
+        if data and over_budget(sec, 0.6 if single else 0.45):
             sec.not_measured(f"{count:,} strands", "skipped to stay inside the section's time budget")
             continue
         params = base.replace(count=int(count))
@@ -158,34 +176,50 @@ def run(sec, cfg):
             return out
         try:
             our_cpu = _Cpu(job)
-            ours, result = measure(our_cpu, runs=cfg.runs, budget=left(sec, 0.35))
+            if single:
+                ours, result = _single_run(our_cpu, data, count, left(sec, 0.6))
+            else:
+                ours, result = measure(our_cpu, runs=cfg.runs, budget=left(sec, 0.35))
             points = int(round(result.strands.num_points / result.strands.num_strands))
-            anchor = InterpolateAnchor(*blender_inputs(scalp, keys, params, result, points))
+            inputs = blender_inputs(scalp, keys, params, result, points)
+            # Only these of the result are needed from here: at 1M strands it holds 2 GB.
+            roots, num_points, moved = result.roots, result.strands.num_points, result.collision.strands_moved
+            del result
+            anchor = InterpolateAnchor(*inputs)
+            del inputs
             their_cpu = _Cpu(anchor.evaluate)
-            theirs, _ = measure(their_cpu, runs=cfg.runs, before=anchor.invalidate, budget=left(sec, 0.45))
+            if single:
+                anchor.invalidate()
+                theirs, _ = _single_run(their_cpu, data, count, left(sec, 0.6), side="blender")
+            else:
+                theirs, _ = measure(their_cpu, runs=cfg.runs, before=anchor.invalidate, budget=left(sec, 0.45))
         except TooSlow as e:
             sec.not_measured(f"{count:,} strands", str(e))
             continue
         blender_pos = anchor.positions()
-        root_err = float(np.abs(blender_pos[:, 0] - result.roots).max())
+        root_err = float(np.abs(blender_pos[:, 0] - roots).max())
+        blender_shape = blender_pos.shape
+        del blender_pos
         collision = float(np.median(costs[1:] or costs))
         r = ratio(ours.median, theirs.median)
         cpu = (our_cpu.median(), their_cpu.median())
-        rows.append([f"{count:,}", f"{result.strands.num_points / count:.1f}", str(ours), fmt_time(collision),
-                     f"{result.collision.strands_moved / count:.1%}", str(theirs),
-                     f"{blender_pos.shape[0]:,}×{blender_pos.shape[1]}", f"{root_err:.1e}", f"{r:.2f}",
+        rows.append([f"{count:,}" + (" (1 run)" if single else ""), f"{num_points / count:.1f}", str(ours),
+                     fmt_time(collision), f"{moved / count:.1%}", str(theirs),
+                     f"{blender_shape[0]:,}×{blender_shape[1]}", f"{root_err:.1e}", f"{r:.2f}",
                      fmt_time(cpu[0]), fmt_time(cpu[1]), f"{ratio(*cpu):.2f}", f"{os.getloadavg()[0]:.1f}"])
         data.append({"count": count, "ours": ours.median, "blender": theirs.median, "ratio": r,
-                     "collision": collision, "points_per_strand": result.strands.num_points / count,
+                     "collision": collision, "points_per_strand": num_points / count, "runs": len(ours.runs),
                      "ours_cpu": cpu[0], "blender_cpu": cpu[1], "cpu_ratio": ratio(*cpu)})
         sec.summary.append(f"{count:,} strands ({PRESET}, collision on): groom {ours} vs Interpolate Curves {theirs} "
                            f"→ ratio {r:.2f} (collision {fmt_time(collision)})")
-        del anchor, result
+        del anchor
     sec.table(["strands", "points per strand (mean)", "groom (median)", "of which collision", "strands moved",
                "Interpolate Curves (median)", "Blender output", "Blender root error (m)", "ratio groom/Blender",
                "groom CPU (median)", "Interpolate Curves CPU (median)", "CPU ratio", "load average"], rows,
               caption="Generation time with the shipped preset (median of runs after a warm-up; both in this "
-                      "process). *of which collision*: the collision stage of the same runs (median). *CPU*: "
+                      f"process). From {SINGLE_RUN_COUNT:,} strands on (*1 run*), one timed run each side and no "
+                      "warm-up (the smaller rows have warmed both up): five would not fit the section's budget. "
+                      "*of which collision*: the collision stage of the same runs (median). *CPU*: "
                       "process CPU seconds of the same runs, all threads. *load average*: the machine's 1-minute "
                       "load average after the row (above its core count, other work competed for the cores).")
     sec.text("*Blender output*: strands × points, the same count and the average of groom's adaptive counts. "

@@ -292,3 +292,51 @@ def test_collision_off_gives_the_plain_groom(head):
     b = generate(scalp, keys, params)
     np.testing.assert_array_equal(a.strands.points, b.strands.points)
     assert a.collision is None
+
+
+def test_one_look_up_for_a_point_and_its_middle_agrees_with_two(head):
+    """_clear_with_middles (the cells within reach of a point, then the point's own and its
+    middle's for the rest) says exactly what clear_of of the point and of the middle say, for
+    segments of every length around the reach, near the head and far from it."""
+    from groom.collide import _REACH, _clear_with_middles
+    rs = np.random.default_rng(3)
+    n = 40000
+    p = np.concatenate([_near_surface(head, n // 2, seed=7, spread=0.004),
+                        rs.uniform(-0.15, 0.15, (n // 2, 3))]).astype(np.float32)
+    # Segments from a tenth of a cell to twice what the reach covers, in random directions.
+    length = head.cell * rs.uniform(0.1, 4.0 * _REACH, n)
+    step = rs.normal(size=(n, 3))
+    step *= (length / np.linalg.norm(step, axis=1))[:, None]
+    before = (p - step).astype(np.float32)
+    mid = (0.5 * (p + before)).astype(np.float32)
+    half = (0.5 / head.cell) * np.abs(p.astype(np.float64) - before).max(axis=1)
+    clearance = rs.uniform(0.0, 0.002, n).astype(np.float32)
+    got = _clear_with_middles(head, p, half, clearance, lambda i: mid[i])
+    want = head.clear_of(p, clearance) & head.clear_of(mid, clearance)
+    np.testing.assert_array_equal(got, want)
+    assert 0.2 < want.mean() < 0.95   # both answers occur
+
+
+def test_lower_within_is_the_least_lower_bound_of_the_cells_around(head):
+    low = head.lower_within(2)
+    shape = tuple(s - 1 for s in head.shape)
+    cells = head.cell_lower.reshape(head.shape)[:shape[0], :shape[1], :shape[2]]
+    got = low.reshape(head.shape)[:shape[0], :shape[1], :shape[2]]
+    rs = np.random.default_rng(1)
+    for i, j, k in zip(*(rs.integers(0, s, 300) for s in shape)):
+        box = cells[max(i - 2, 0):i + 3, max(j - 2, 0):j + 3, max(k - 2, 0):k + 3]
+        assert got[i, j, k] == box.min()
+
+
+def test_keys_checked_again_after_a_change_are_not_the_answer_kept(head):
+    """Generate keeps the keys-inside check of the last key sets: a key then moved into the
+    head is still named, and moved back out it is not."""
+    scalp = default_scalp()
+    keys = load_preset("wavy").keys_on(scalp)[:6]
+    params = GroomParams(count=200)
+    assert generate(scalp, keys, params, collider=head).collision.keys_inside == ()
+    r = keys[2].root
+    moved = list(keys)
+    moved[2] = KeyStrand(np.array([r, r - 0.05 * r / np.linalg.norm(r), r - 0.12 * r / np.linalg.norm(r)]))
+    assert [k.key for k in generate(scalp, moved, params, collider=head).collision.keys_inside] == [2]
+    assert generate(scalp, keys, params, collider=head).collision.keys_inside == ()

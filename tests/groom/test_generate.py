@@ -344,16 +344,17 @@ def test_adaptive_strands_end_without_a_sliver_segment(scalp):
     assert length.min() > 1e-6
 
 
-@pytest.mark.parametrize("resolution", ["adaptive", "fixed"])
-def test_growing_in_blocks_changes_no_number(scalp, resolution):
+@pytest.mark.parametrize("resolution, variation", [("adaptive", 0.02), ("fixed", 0.02), ("adaptive", 0.0)])
+def test_growing_in_blocks_changes_no_number(scalp, resolution, variation):
     """Blocks of 200 strands against one block, on the wavy preset with
     its clump and collision: every array, the resolution notes, the collision's report and an
-    incremental update spanning blocks."""
+    incremental update spanning blocks. Without per-point colour variation the blocks' points
+    and attributes are written straight into the whole's arrays; with it, copied there."""
     from groom import default_collider, load_preset
     placement = load_preset("wavy").place_keys(scalp)
     params = placement.params.replace(count=3000, seed=4, resolution_mode=resolution,
                                       points_per_strand=96 if resolution == "adaptive" else 24,
-                                      color_variation_point=(0.02, 0.02, 0.02))
+                                      color_variation_point=(variation,) * 3)
     keys = list(placement.keys)
     one = Generator(scalp, keys, params, collider=default_collider(), block_strands=10_000)
     blocks = Generator(scalp, keys, params, collider=default_collider(), block_strands=200)

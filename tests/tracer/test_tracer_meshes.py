@@ -70,8 +70,9 @@ def test_a_strand_shadows_a_plane(meshed):
     img, _ = _matches_reference(meshed, strand, [(*floor, GREY)], cam, settings)
     col = img[..., :3]
     # Straight down: the floor gets the full sun but under the strand (which hides that from
-    # above), where it gets ambient only.
-    lit_level, shadow_level = GREY[0] * (settings.ambient + 1.0), GREY[0] * settings.ambient
+    # above), where it gets ambient only. The default shading's lights are irradiance (as
+    # Cycles' sun strength), so the floor, a Lambertian surface, sends base colour / pi of it.
+    lit_level, shadow_level = GREY[0] * (settings.ambient + 1.0 / np.pi), GREY[0] * settings.ambient
     floor_px = np.isclose(col[..., 1], col[..., 0]) & (img[..., 3] == 1.0)
     assert np.isclose(col[..., 0][floor_px], lit_level, atol=1e-4).sum() > 500
     # From the side the shadow shows.
@@ -132,4 +133,4 @@ def test_meshes_without_strands(meshed):
     settings = RenderSettings(lights=(Light(vector=(0.0, 0.0, -1.0)),))
     img, ref = _matches_reference(meshed, Strands.empty(), [(*floor, GREY)], cam, settings)
     assert (img[..., 3] == 1.0).mean() > 0.3
-    np.testing.assert_allclose(img[img[..., 3] == 1.0][:, :3], GREY[0] * (settings.ambient + 1.0), atol=1e-5)
+    np.testing.assert_allclose(img[img[..., 3] == 1.0][:, :3], GREY[0] * (settings.ambient + 1.0 / np.pi), atol=1e-5)

@@ -42,9 +42,10 @@ def _hair_transmittance(cyl, p, L, dist, own, tmin, settings, target):
 
 def shade_mesh(cyl, tris, tri, o, d, t, n, settings):
     """The shader's shade_mesh: base colour times ambient plus every light's colour times
-    max(N·L, 0), in the shadow of hair and meshes (shadow rays leave tris.offset off the
+    max(N·L, 0) times the model's mesh_brdf (tracer/shading), in the shadow of hair and meshes (shadow rays leave tris.offset off the
     surface and ignore the triangle they leave)."""
     col = tris.color[tri]
+    brdf = shading_model(settings.shading).mesh_brdf
     q = o + t[:, None] * d + n * tris.offset
     out = settings.ambient * col
     for L, dist, lcol, target in _lights(settings, q):
@@ -53,7 +54,7 @@ def shade_mesh(cyl, tris, tri, o, d, t, n, settings):
             lit = _hair_transmittance(cyl, q, L, dist, np.full(len(q), -1), np.zeros(len(q)), settings, target)
             lit[mesh_blocked(tris, q, L, dist, tri)] = 0.0
         nl = np.maximum(np.einsum("ij,ij->i", n, L), 0.0)
-        out = out + (lit * (lit > 0))[:, None] * lcol * nl[:, None] * col
+        out = out + (lit * (lit > 0))[:, None] * lcol * nl[:, None] * (brdf * col)
     return out
 
 

@@ -83,8 +83,10 @@ vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
 
 #if MESHES
 // A mesh's point, shaded diffusely with its base colour (tracer/meshes.py): ambient plus
-// every light's colour times max(N·L, 0), in the shadow of hair and meshes. Shadow rays
+// every light's colour times max(N·L, 0) times mesh_brdf (1/pi where the model's lights
+// are irradiance: tracer/shading), in the shadow of hair and meshes. Shadow rays
 // leave mesh_offset off the surface, ignoring the triangle they leave.
+uniform float mesh_brdf;
 vec3 shade_mesh(int tri, vec3 o, vec3 d, float t, vec3 N) {
     vec3 col = triangle_color(tri);
     vec3 q = o + t * d + N * mesh_offset;
@@ -103,7 +105,7 @@ vec3 shade_mesh(int tri, vec3 o, vec3 d, float t, vec3 N) {
         lit = accel_transmittance(q, L, dist, -1, 0.0, hint);
         if (lit <= 0.0) continue;
 #endif
-        result += lit * light_col[l] * max(dot(N, L), 0.0) * col;
+        result += lit * light_col[l] * max(dot(N, L), 0.0) * (mesh_brdf * col);
     }
     return result;
 }

@@ -20,6 +20,7 @@ A model with settings of its own gives `uniforms(settings)`: the uniforms its GL
 The ambient term, the lights, their colours and the shadows are the tracer's (the same for
 every model).
 """
+import math
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -49,12 +50,18 @@ class ShadingModel:
     reference: Callable     # float64 shade_light(surface, L, settings) -> (n, 3)
     needs_normal: bool      # whether shade_light reads s.N (the references skip it otherwise)
     uniforms: Callable = field(default=lambda settings: {})   # settings -> {uniform: value}
+    # The meshes beside the hair reflect light as Lambertian surfaces of their base colour:
+    # base colour / pi times the light's irradiance times cos. A model in radiometric units
+    # (its lights are irradiance, as Cycles' sun strength is) takes the 1/pi; the models
+    # with lights in their own units take the base colour as is, as their hair does.
+    mesh_brdf: float = 1.0
 
 
 SHADING_MODELS = (
     ShadingModel("chiang", "Principled hair (Chiang)",
                  "Physically based fibre scattering, the model of Cycles' Principled Hair BSDF (Chiang)",
-                 "shading_chiang.glsl", chiang.shade_light, needs_normal=True, uniforms=chiang.uniforms),
+                 "shading_chiang.glsl", chiang.shade_light, needs_normal=True, uniforms=chiang.uniforms,
+                 mesh_brdf=1.0 / math.pi),
     ShadingModel("kajiya-kay", "Kajiya-Kay", "The classic hair shading, with a highlight along the strand",
                  "shading_kajiya_kay.glsl", kajiya_kay.shade_light, needs_normal=False),
     ShadingModel("phong", "Phong", "Plastic-like shading, as in the thesis",

@@ -1,0 +1,178 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Cycles' side of the contact sheet (section contact_sheet): a groom and the head it grows
+on, lit by one sun, rendered so that Cycles computes the light transport the preview
+computes, plus the coverage masks the error is measured over.
+
+The hair and the film are set up as in benchmarks/blender_hair_shading.py (section
+hair_shading, where the preview's fibre model meets Cycles' to MAE <= 0.0043): Principled
+Hair BSDF (Chiang), round curves, a delta sun (angle 0, irradiance = its strength), max
+bounces 0 (direct light only), a black world of strength 0, a box pixel filter of width 1,
+no denoiser, adaptive sampling, clamping or glossy filter, linear floats from an OpenEXR
+file. The head is a flat-shaded mesh with a Diffuse BSDF (Lambert, roughness 0) of its base
+colour: Cycles' diffuse surface, radiance = base colour / pi * irradiance * cos.
+
+The masks come from a second, cheap render of the same scene: the hair an Emission of 1,
+the head an Emission of 0, the film transparent, so each pixel's red is the fraction of it
+the hair covers and its alpha the fraction hair or head cover (box filter: the mean over
+the pixel's area, as the preview's stratified samples take it).
+
+Only this module (and the one it borrows from) imports bpy, lazily.
+"""
+import os
+import tempfile
+import time
+
+import numpy as np
+
+from benchmarks.blender_hair_shading import _hair_object, _material, _matrix
+
+
+def _bpy():
+    import bpy
+    return bpy
+
+
+def _head_object(vertices, triangles):
+    bpy = _bpy()
+    mesh = bpy.data.meshes.new("head")
+    mesh.from_pydata(np.asarray(vertices, np.float64).tolist(), [], np.asarray(triangles, np.int64).tolist())
+    mesh.update()
+    obj = bpy.data.objects.new("head", mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def _node_material(name, kind, rgb, strength=1.0):
+    """A material of one shader node: "diffuse" (Lambert) or "emission"."""
+    bpy = _bpy()
+    mat = bpy.data.materials.new(name)
+    if hasattr(mat, "use_nodes") and not mat.use_nodes:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    if kind == "diffuse":
+        node = nt.nodes.new("ShaderNodeBsdfDiffuse")
+        node.inputs["Roughness"].default_value = 0.0
+    else:
+        node = nt.nodes.new("ShaderNodeEmission")
+        node.inputs["Strength"].default_value = float(strength)
+    node.inputs["Color"].default_value = (*(float(c) for c in rgb), 1.0)
+    if kind == "emission" and hasattr(mat, "cycles"):
+        mat.cycles.emission_sampling = 'NONE'      # a mask, not a light: nothing to sample
+    nt.links.new(node.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def _sun(sc, direction, strength):
+    bpy = _bpy()
+    sun = bpy.data.lights.new("sun", 'SUN')
+    sun.energy, sun.angle = float(strength), 0.0
+    obj = bpy.data.objects.new("sun", sun)
+    sc.collection.objects.link(obj)
+    d = np.asarray(direction, np.float64)
+    z = -d / np.linalg.norm(d)                      # a sun shines along its local -Z
+    x = np.cross((0.0, 0.0, 1.0), z) if abs(z[2]) < 0.99 else np.array([1.0, 0.0, 0.0])
+    x /= np.linalg.norm(x)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2] = x, np.cross(z, x), z
+    obj.matrix_world = _matrix(m)
+
+
+def _render(sc, samples, seed, transparent):
+    """(H, W, 4) float64 RGBA, row 0 at the top, and the render's wall time."""
+    bpy = _bpy()
+    sc.cycles.samples = int(samples)
+    sc.cycles.seed = int(seed)
+    sc.render.film_transparent = bool(transparent)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "cycles.exr")
+        sc.render.filepath = path
+        t0 = time.perf_counter()
+        bpy.ops.render.render(write_still=True)
+        seconds = time.perf_counter() - t0
+        img = bpy.data.images.load(path)
+        w, h = img.size
+        px = np.empty(w * h * 4, np.float32)
+        img.pixels.foreach_get(px)
+        bpy.data.images.remove(img)
+    return px.reshape(h, w, 4)[::-1].astype(np.float64), seconds
+
+
+def render_contact(strands, head_vertices, head_triangles, head_rgb, camera_matrix, size, sun_direction,
+                   sun_strength, hair, samples, mask_samples=64, seeds=(1,), mask_seeds=(1,), lens=50.0,
+                   sensor_width=36.0):
+    """Cycles' images of the strands (the Principled Hair `hair`: a dict as
+    blender_hair_shading._material takes) and the head (a diffuse mesh of `head_rgb`).
+
+    Returns a dict: rgb, a list of (H, W, 3) linear RGB renders, one per seed (on a black
+    film); seconds, their render times; hair, (H, W) the fraction of each pixel the hair
+    covers; cover, (H, W) the fraction hair or head cover; masks, (hair, cover) per mask
+    seed (the first is hair, cover); mask_seconds."""
+    bpy = _bpy()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    hair_obj = _hair_object(strands)
+    head_obj = _head_object(head_vertices, head_triangles)
+    hair_mat, head_mat = _material(hair), _node_material("skin", "diffuse", head_rgb)
+    hair_obj.data.materials.append(hair_mat)
+    head_obj.data.materials.append(head_mat)
+
+    cam = bpy.data.cameras.new("camera")
+    cam.lens, cam.sensor_width, cam.sensor_fit = float(lens), float(sensor_width), 'AUTO'
+    cam.clip_start, cam.clip_end = 1e-3, 1e4
+    cam_obj = bpy.data.objects.new("camera", cam)
+    sc.collection.objects.link(cam_obj)
+    cam_obj.matrix_world = _matrix(camera_matrix)
+    sc.camera = cam_obj
+    _sun(sc, sun_direction, sun_strength)
+
+    world = bpy.data.worlds.new("black")
+    sc.world = world
+    if hasattr(world, "use_nodes") and not world.use_nodes:
+        world.use_nodes = True
+    bg = world.node_tree.nodes.get("Background")
+    if bg is not None:
+        bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+        bg.inputs["Strength"].default_value = 0.0
+
+    sc.render.engine = 'CYCLES'
+    c = sc.cycles
+    c.device = 'CPU'
+    sc.render.threads_mode = 'FIXED'
+    sc.render.threads = int(os.cpu_count())
+    sc.render.resolution_x, sc.render.resolution_y = int(size[0]), int(size[1])
+    sc.render.resolution_percentage = 100
+    c.use_denoising = False
+    c.use_adaptive_sampling = False
+    c.max_bounces = 0
+    c.transparent_max_bounces = 0
+    c.sample_clamp_direct = 0.0
+    c.sample_clamp_indirect = 0.0
+    c.blur_glossy = 0.0
+    c.pixel_filter_type = 'BOX'
+    c.filter_width = 1.0
+    sc.cycles_curves.shape = 'THICK'
+    sc.view_settings.view_transform = 'Standard'
+    sc.view_settings.look = 'None'
+    sc.view_settings.exposure = 0.0
+    sc.view_settings.gamma = 1.0
+    fmt = sc.render.image_settings
+    fmt.file_format = 'OPEN_EXR'
+    fmt.color_depth = '32'
+    fmt.color_mode = 'RGBA'
+
+    out = {"rgb": [], "seconds": []}
+    for seed in seeds:
+        img, seconds = _render(sc, samples, seed, transparent=False)
+        out["rgb"].append(img[..., :3])
+        out["seconds"].append(seconds)
+    # The masks: the same geometry, flat white hair on a black head.
+    hair_obj.data.materials[0] = _node_material("hair mask", "emission", (1.0, 1.0, 1.0))
+    head_obj.data.materials[0] = _node_material("head mask", "emission", (0.0, 0.0, 0.0))
+    out["masks"] = []
+    for seed in mask_seeds:
+        img, out["mask_seconds"] = _render(sc, mask_samples, seed, transparent=True)
+        out["masks"].append((img[..., 0], img[..., 3]))
+    out["hair"], out["cover"] = out["masks"][0]
+    return out
