@@ -93,10 +93,12 @@ QUICK = Config(
 
 FULL = Config(
     mode="full",
-    limits={"generation": 520, "geometry": 300, "rendering": 240, "anchors": 900, "scaling": 300,
+    # 1,000,000 strands: ~61 M cylinders, split over two buffer textures (anchors, accel).
+    anc_counts=(10000, 100000, 1000000),
+    limits={"generation": 520, "geometry": 300, "rendering": 240, "anchors": 2200, "scaling": 300,
             "skips": 180, "stress": 100, "gpu": 20, "integration": 240,
             "export": 420, "versions": 600, "preview_defaults": 1800, "contact_sheet": 1500,
-            "accel": 900, "hair_shading": 1200, "meshes": 300},
+            "accel": 1300, "hair_shading": 1200, "meshes": 300},
 )
 
 GPU = Config(

@@ -14,6 +14,7 @@ from .gl_buffers import set_samplers
 from .gpu_build import set_uniforms
 from .grid import Grid
 from .mesh_upload import MESH_BUFFERS
+from .scene_buffers import split_part_names
 from .shader_source import shader_source
 from .shading import shading_model
 
@@ -22,6 +23,9 @@ from .shading import shading_model
 RENDER_COPIES = 3
 # The trace program's buffers per accelerator, on texture units 0, 1, 2, and with meshes 3, 4, 5.
 TRACE_BUFFERS = {"grid": ("tex_cyl", "tex_idx", "tex_cell"), "bvh": ("tex_cyl", "tex_node", "tex_order")}
+# Then, on units 6, 7, ..., the parts past the first of buffers split over the driver's limit
+# (tracer/scene_buffers.py); a scene within it binds none of them.
+SPLIT_PARTS = split_part_names()
 
 _VERTEX = """#version 330 core
 void main() {   // one triangle that covers the screen; the scissor picks the pixels
@@ -50,10 +54,12 @@ class Drawer:
         self._programs = {}
         self._fbos = {}
 
-    def program(self, settings, camera, layers, meshes=False, accel="grid"):
+    def program(self, settings, camera, layers, meshes=False, accel="grid", parts=(1, 1)):
+        """`parts`: buffer textures holding the cylinders and the cell lists (tracer/scene_buffers.py)."""
         key = (layers, settings.shadows and (1 if settings.shadow_mode == "hard" else 2),
                settings.shading, len(settings.lights), settings.spp_n, settings.min_pixel_width,
-               camera.type, settings.count, bool(meshes), layout.glsl_header(), accel, settings.sampler)
+               camera.type, settings.count, bool(meshes), layout.glsl_header(), accel, settings.sampler,
+               tuple(parts))
         prog = self._programs.get(key)
         if prog is None:
             defines = {
@@ -66,11 +72,14 @@ class Drawer:
                 "COUNT": int(settings.count),
                 "MESHES": int(bool(meshes)),
                 "PIXEL": int(settings.sampler == "pixel"),
+                "CYL_PARTS": parts[0],
+                "IDX_PARTS": parts[1],
             }
             program = self.ctx.program(vertex_shader=_VERTEX,
                                        fragment_shader=shader_source(330, trace_files(settings, meshes, accel),
                                                                      defines))
-            set_samplers(program, **{name: unit for unit, name in enumerate(TRACE_BUFFERS[accel] + MESH_BUFFERS)})
+            set_samplers(program, **{name: unit for unit, name in
+                                     enumerate(TRACE_BUFFERS[accel] + MESH_BUFFERS + SPLIT_PARTS)})
             prog = (program, self.ctx.vertex_array(program, []))
             self._programs[key] = prog
         return prog
@@ -129,8 +138,11 @@ class Drawer:
         if box is not None:
             meshes = mesh_grid is not None
             accel = "grid" if isinstance(structure, Grid) else "bvh"
-            prog, vao = self.program(settings, camera, layers, meshes, accel)
-            buffers.bind(TRACE_BUFFERS[accel] + (MESH_BUFFERS if meshes else ()))
+            parts = (buffers.parts("tex_cyl"), buffers.parts("tex_idx") if accel == "grid" else 1)
+            prog, vao = self.program(settings, camera, layers, meshes, accel, parts)
+            buffers.bind(TRACE_BUFFERS[accel] + (MESH_BUFFERS if meshes else ("",) * len(MESH_BUFFERS))
+                         + SPLIT_PARTS)
+            set_uniforms(prog, cyl_split=buffers.part_size("tex_cyl"), idx_split=buffers.part_size("tex_idx"))
             if accel == "grid":
                 set_uniforms(prog, grid_lo=tuple(float(x) for x in structure.lo),
                              cell_size=tuple(float(x) for x in structure.cell_size),

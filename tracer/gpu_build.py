@@ -46,24 +46,22 @@ class GpuBuilder:
         self.ctx = ctx
         self._passes = {}
 
-    def _programs(self):
-        """(cylinder pass, [grid count pass, grid fill pass]) for the current layout."""
-        key = layout.glsl_header()
-        progs = self._passes.get(key)
-        if progs is None:
-            ctx = self.ctx
-            progs = (ctx.compute_shader(shader_source(430, ["cylinders_build.glsl"])),
-                     [ctx.compute_shader(shader_source(430, ["grid_build.glsl"], {"PASS": p})) for p in (0, 1)])
-            self._passes[key] = progs
-        return progs
+    def _program(self, name, **defines):
+        """The pass of file `name` with `defines`, for the current layout."""
+        key = (layout.glsl_header(), name, tuple(sorted(defines.items())))
+        prog = self._passes.get(key)
+        if prog is None:
+            prog = self._passes[key] = self.ctx.compute_shader(shader_source(430, [name], defines))
+        return prog
 
     @property
     def _cyl(self):
-        return self._programs()[0]
+        return self._program("cylinders_build.glsl")
 
-    @property
-    def _grid(self):
-        return self._programs()[1]
+    def _grid(self, pass_, tex_cyl, tex_idx=None):
+        """The grid pass `pass_` (0 count, 1 fill) for buffers split into these parts."""
+        return self._program("grid_build.glsl", PASS=pass_, CYL_PARTS=len(tex_cyl.parts),
+                             IDX_PARTS=1 if tex_idx is None else len(tex_idx.parts))
 
     def make_cylinders(self, store, n_cyl, repeat_distance=0.0, first=0, count=None):
         """Writes cylinders first..first+count (all by default) into store["tex_cyl"] from the
@@ -77,13 +75,20 @@ class GpuBuilder:
         prog = self._cyl
         for unit, name in enumerate(("tex_pos", "tex_rad", "tex_col", "tex_alpha", "tex_cp")):
             store[name].use(unit)       # the shader's layout(binding = unit)
-        set_uniforms(prog, n_items=int(count), first_item=int(first), n_cyl=int(n_cyl),
-                     repeat2=float(repeat_distance) ** 2 if repeat_distance > 0 else -1.0)
         repeats = self.ctx.buffer(reserve=4 * (layout.MAX_REPEATS + 1))
         repeats.clear()
-        store["tex_cyl"].bind_to_image(0, write=True)
         repeats.bind_to_storage_buffer(1)
-        prog.run(*_groups(count))
+        # One dispatch per part of the cylinder buffer the range reaches (one below the
+        # driver's limit, tracer/scene_buffers.py).
+        per = store.part_size("tex_cyl")
+        for k, part in enumerate(store["tex_cyl"].parts):
+            a, b = max(first, k * per), min(first + count, (k + 1) * per)
+            if a >= b:
+                continue
+            set_uniforms(prog, n_items=int(b - a), first_item=int(a), n_cyl=int(n_cyl), part_first=int(k * per),
+                         repeat2=float(repeat_distance) ** 2 if repeat_distance > 0 else -1.0)
+            part.bind_to_image(0, write=True)
+            prog.run(*_groups(b - a))
         self.ctx.memory_barrier()
         n_found = int(np.frombuffer(repeats.read(size=4), np.int32)[0])
         found = None
@@ -94,23 +99,26 @@ class GpuBuilder:
         repeats.release()
         return found
 
-    def _bind_grid(self, prog, n, tex_cyl, lo, cs, dims, pad_factor):
-        tex_cyl.use(0)
+    def _bind_grid(self, prog, n, tex_cyl, lo, cs, dims, pad_factor, tex_idx=None):
+        for unit, part in enumerate(tex_cyl.parts):
+            part.use(unit)
         set_uniforms(prog, n_items=int(n), grid_lo=tuple(float(x) for x in lo),
                      inv_cell=tuple(float(1.0 / x) for x in cs), dims=tuple(int(x) for x in dims),
-                     pad_factor=float(pad_factor))
+                     pad_factor=float(pad_factor), cyl_split=tex_cyl.part_texels // layout.TEXELS_PER_CYL,
+                     idx_split=0 if tex_idx is None else tex_idx.part_texels)
 
     def count(self, n, tex_cyl, lo, cs, dims, pad_factor):
         """(references per cell, flat int32 in cell-id order; the storage buffer holding
         them, for fill), or None when some cylinder spans too many cells for one invocation
-        (the caller then builds in numpy)."""
+        (the caller then builds in numpy). `tex_cyl`: the cylinders
+        (tracer.scene_buffers.SplitBuffer)."""
         ctx = self.ctx
         ncell = int(np.prod(dims))
         cells = ctx.buffer(reserve=4 * ncell)
         cells.clear()
         overflow = ctx.buffer(reserve=4)
         overflow.clear()
-        prog = self._grid[0]
+        prog = self._grid(0, tex_cyl)
         self._bind_grid(prog, n, tex_cyl, lo, cs, dims, pad_factor)
         cells.bind_to_storage_buffer(0)
         overflow.bind_to_storage_buffer(1)
@@ -124,11 +132,11 @@ class GpuBuilder:
         return np.frombuffer(cells.read(), np.int32).copy(), cells
 
     def fill(self, n, tex_cyl, lo, cs, dims, pad_factor, cells, start, tex_idx):
-        """Writes every cell's list into `tex_idx` (an int32 BufferTexture) from the cell's
-        `start` on; `cells` (from count) becomes the cursors and is released."""
+        """Writes every cell's list into `tex_idx` (int32, a tracer.scene_buffers.SplitBuffer)
+        from the cell's `start` on; `cells` (from count) becomes the cursors and is released."""
         cells.write(np.ascontiguousarray(start, np.int32))
-        prog = self._grid[1]
-        self._bind_grid(prog, n, tex_cyl, lo, cs, dims, pad_factor)
+        prog = self._grid(1, tex_cyl, tex_idx)
+        self._bind_grid(prog, n, tex_cyl, lo, cs, dims, pad_factor, tex_idx)
         cells.bind_to_storage_buffer(0)
         tex_idx.bind_to_image(1, write=True)
         prog.run(*_groups(n))

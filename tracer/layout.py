@@ -34,6 +34,14 @@ CAP_PLANE2 = 2
 CYL_TEXELS = ("TOP", "TIP", "N2", "COL")
 TEXELS_PER_CYL = len(CYL_TEXELS)
 
+# --- Buffers past the driver's limit ---------------------------------------------------------
+# The cylinder buffer and the grid's cell lists may hold more texels than one buffer texture
+# of the driver (GL_MAX_TEXTURE_BUFFER_SIZE, 2^27 on llvmpipe: 33 M cylinders, 134 M list
+# entries). Past it they continue in up to this many buffer textures in all (tex_cyl,
+# tex_cyl1, ...; tex_idx, tex_idx1, ...), each full but the last; a shader picks the one
+# holding an id by comparing it with the parts' size (tracer/scene_buffers.py).
+MAX_BUFFER_PARTS = 4
+
 # --- Triangle buffer (meshes): per triangle, TEXELS_PER_TRI consecutive RGBA32F texels ------
 #   V0: xyz corner 0, w red   V1: xyz corner 1, w green   V2: xyz corner 2, w blue
 TRI_TEXELS = ("V0", "V1", "V2")

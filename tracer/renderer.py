@@ -40,7 +40,9 @@ class Renderer:
     def __init__(self, max_buffer_texels=None, build="auto", accel=DEFAULT_ACCEL):
         """`max_buffer_texels`: the most texels one buffer texture may hold (default: the
         driver's GL_MAX_TEXTURE_BUFFER_SIZE, 2^27 on llvmpipe and current desktop GPUs, i.e.
-        33 M cylinders or 134 M grid references); scenes past it get an InputError.
+        33 M cylinders or 134 M grid references); the cylinders and the grid's lists are split
+        over up to layout.MAX_BUFFER_PARTS buffers past it (tracer/scene_buffers.py), and
+        scenes past that get an InputError.
         `build`: where cylinders and grid are made — "gpu" (compute shaders, GL 4.3+),
         "numpy", or "auto" (the GPU where the driver has compute shaders).
         `accel`: what rays walk — "grid" (tracer/grid.py) or "bvh" (tracer/bvh.py, built in

@@ -14,6 +14,13 @@ a shared machine; each time is the median of its runs, as wall-clock time and as
 process's CPU time (the driver's threads included), which another process's load disturbs
 less. The ratio BVH ÷ grid is the figure to read.
 
+1,000,000 `wavy` strands (~61 M cylinders, more than one buffer texture of the driver holds:
+the cylinders and the cell lists are split over two each) are measured with the grid alone,
+built by the compute passes (the default build; the numpy build's host copy of the cylinders
+and its lists need several times the memory), once at 1 spp. The BVH is not built there: its
+numpy build took 30 s and 280 MB at 100,000 strands and grows with the cylinders, past the
+section's time and this machine's memory at ten times as many.
+
 Run alone: `python -m benchmarks --quick --only accel` (or `--full`).
 """
 import statistics
@@ -28,10 +35,10 @@ from benchmarks.scenes import groom_scene, real_strands, settings, tracer_api, t
 from benchmarks.sections import left, over_budget
 
 QUICK_SCENES = (("straight.hair", None), ("wavy", 1000), ("wavy", 10000))
-# 1,000,000 wavy strands make ~61 M cylinders, past the 33 M one buffer texture holds
-# (set_strands refuses them; the scaling section shows where the limit lies).
-FULL_SCENES = QUICK_SCENES + (("wavy", 100000),)
+FULL_SCENES = QUICK_SCENES + (("wavy", 100000), ("wavy", 1000000))
 ACCELS = ("grid", "bvh")
+# Scenes of more strands than this: the grid alone, GPU build, one run (see the module text).
+HUGE_STRANDS = 500_000
 
 
 def _work(renderer, camera, kw):
@@ -82,8 +89,12 @@ def run(sec, cfg):
         if over_budget(sec, 0.6):
             rows.append([label, "not measured: time budget"])
             continue
+        huge = count is not None and count > HUGE_STRANDS
         label, strands = _scene(name, count)
         cam = tracer_camera(view_matrix(*strands.bounds(), size), size)
+        if huge:
+            _huge_scene(sec, tracer, label, strands, cam, kw, rows, work_rows)
+            continue
         renderers, builds = {}, {}
         for accel in ACCELS:
             r = tracer.Renderer(build="numpy", accel=accel)
@@ -116,15 +127,56 @@ def run(sec, cfg):
                 "build_s": st["accel_s"], "bytes": st["accel_bytes"], "wall_1spp_s": wall1[accel],
                 "cpu_1spp_s": cpu1[accel], "cpu_16spp_s": None if cpu16 is None else cpu16[accel],
                 "primary_steps": pw, "primary_tests": pt, "shadow_steps": sw, "shadow_tests": stt}
+        for r in renderers.values():     # GL buffers are not freed with their renderer
+            r.buffers.release()
         ratio = cpu1["bvh"] / cpu1["grid"]
         sec.summary.append(f"{label}: BVH ÷ grid CPU time {ratio:.2f} at 1 spp (wall {fmt_time(wall1['bvh'])} vs "
                            f"{fmt_time(wall1['grid'])}); build {fmt_time(builds['bvh']['accel_s'])} vs "
                            f"{fmt_time(builds['grid']['accel_s'])}; images differ by at most {diff:.1e}")
     sec.table(["scene", "structure", "cylinders", "build", "MB", "1 spp wall", "1 spp CPU", "16 spp CPU",
                "16 spp ÷ 16×(1 spp)", "max abs diff BVH vs grid"], [r + [""] * (10 - len(r)) for r in rows],
-              caption="Build (numpy), size and render time (medians; grid and BVH rendered in turn). "
-                      "MB: the structure's buffers (grid: lists and cell table; BVH: nodes, leaves and pieces).")
+              caption="Build (numpy; the 1,000,000-strand grid: compute passes), size and render time (medians; "
+                      "grid and BVH rendered in turn). MB: the structure's buffers (grid: lists and cell table; "
+                      "BVH: nodes, leaves and pieces).")
     sec.table(["scene", "structure", "steps / primary ray", "tests / primary ray", "steps / shadow ray",
                "tests / shadow ray"], work_rows,
               caption="Work per ray (tracer counters, 1 spp). Steps are BVH boxes tested or grid cells visited; "
                       "tests are cylinder (BVH: piece) intersection tests.")
+
+
+def _huge_scene(sec, tracer, label, strands, cam, kw, rows, work_rows):
+    """The grid alone, built by the compute passes, one render at 1 spp (see the module text)."""
+    bvh_row = [label, "bvh", f"{strands.num_segments:,}", "not measured: the numpy BVH build at this size needs "
+               "more time than the section has and more memory than this machine has (see the text)"]
+    r = tracer.Renderer(build="auto", accel="grid")
+    try:
+        once(lambda: r.set_strands(strands))
+    except InputError as e:
+        rows.extend([[label, "grid", f"refused: {e}"], bvh_row])
+        return
+    st = r.stats.as_dict()
+    parts = (r.buffers.parts("tex_cyl"), r.buffers.parts("tex_idx"))
+    rs1 = settings(spp=1, **kw)
+    try:
+        r.render(cam, rs1)          # compiles the programs of the split buffers
+        t0, c0 = time.perf_counter(), time.process_time()
+        r.render(cam, rs1)
+        wall1, cpu1 = time.perf_counter() - t0, time.process_time() - c0
+        pw, pt, sw, stt = _work(r, cam, kw) if left(sec) > 3 * wall1 else (None,) * 4
+    finally:
+        r.buffers.release()
+    build = f"{fmt_time(st['accel_s'])} ({st['grid_build']} build)"
+    rows.append([label, "grid", f"{strands.num_segments:,}", build, f"{st['accel_bytes'] / 2**20:.1f}",
+                 fmt_time(wall1), fmt_time(cpu1), "not measured: 16 one-spp renders of this size exceed the budget",
+                 "", f"cylinders in {parts[0]} buffer textures, cell lists in {parts[1]}"])
+    rows.append(bvh_row)
+    if pw is None:
+        work_rows.append([label, "grid", "not measured: time budget", "", "", ""])
+    else:
+        work_rows.append([label, "grid", fmt_num(pw), fmt_num(pt), fmt_num(sw), fmt_num(stt)])
+    sec.data.setdefault(label, {})["grid"] = {
+        "build_s": st["accel_s"], "build": st["grid_build"], "bytes": st["accel_bytes"], "wall_1spp_s": wall1,
+        "cpu_1spp_s": cpu1, "cpu_16spp_s": None, "primary_steps": pw, "primary_tests": pt, "shadow_steps": sw,
+        "shadow_tests": stt, "buffer_parts": parts, "grid_refs": st["grid_refs"], "grid_dims": st["grid_dims"]}
+    sec.summary.append(f"{label}: grid only ({st['grid_build']} build {fmt_time(st['accel_s'])}, "
+                       f"{st['accel_bytes'] / 2**20:.0f} MB, {st['grid_refs']:,} references), 1 spp {fmt_time(wall1)}")

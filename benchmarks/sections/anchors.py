@@ -17,14 +17,20 @@ Beside each scene's time, the tracer's error against both float64 references (th
 model and the solids', section 3) over the whole image: coverage IoU over the union of both
 hair masks and RMSE over those pixels, on every pixel or, where that would not fit the
 scene's share of the time, a random subset of the image's pixel centres (its size is shown).
+
+Scenes of more than 20 M cylinders (1,000,000 `wavy` strands: ~61 M, split over two buffer
+textures of the driver) are timed once after one warm-up (the tracer) or once (Cycles, whose
+every render pays sync and BVH build anyway), without the float64 references (numpy over
+61 M cylinders needs more memory than the machine has); the tracer's GPU buffers are given
+back before Cycles renders, so the two never hold the scene at once.
 """
 import os
 import tempfile
 
 import numpy as np
 
-from benchmarks.blender_anchors import CyclesAnchor
-from benchmarks.harness import TooSlow, fmt_num, fmt_time, measure, ratio, to_srgb8
+from benchmarks.blender_anchors import CyclesAnchor, reset_scene
+from benchmarks.harness import MIN_RUNS, Timing, TooSlow, fmt_num, fmt_time, measure, ratio, to_srgb8
 from benchmarks.metrics import image_error
 from benchmarks.scenes import (SUN_DIRECTION, crop_camera, groom_scene, orbit, pick_window, real_strands,
                                settings, tracer_api, tracer_camera, view_matrix)
@@ -35,6 +41,39 @@ REF_PAIRS = 6e7      # rays × cylinders the old method's float64 window may cos
 REF_SHARE = 0.06     # of the section's budget, per scene, for the two whole-image references
 LAYERS = 4
 ALPHA_START, ALPHA_TIP = 0.7, 0.4   # the groom scenes' alpha fade (see the module text)
+# Scenes past this many cylinders are timed once (see the module text): one first render of
+# 1,000,000 wavy strands takes about a minute on the 2-core machine, one Cycles render more.
+HUGE = 20_000_000
+
+
+def _huge(sc):
+    return sc.strands.num_segments > HUGE
+
+
+def _runs(sc, cfg):
+    return 1 if _huge(sc) else cfg.runs
+
+
+def _measure(job, runs, warmup=1, budget=None):
+    """measure(), or for fewer than its MIN_RUNS runs the same thing done by hand: `warmup`
+    untimed calls, TooSlow when `runs` more would not fit `budget`, then `runs` timed ones."""
+    if runs >= MIN_RUNS:
+        return measure(job, runs=runs, warmup=warmup, budget=budget)
+    import time
+    warm = []
+    for _ in range(warmup):
+        t0 = time.perf_counter()
+        job()
+        warm.append(time.perf_counter() - t0)
+        if budget is not None and warm[-1] * runs > budget:
+            raise TooSlow(f"one run takes {fmt_time(warm[-1])}, so {runs} run(s) would exceed the "
+                          f"{fmt_time(max(budget, 0))} left in this section's budget")
+    times = []
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        result = job()
+        times.append(time.perf_counter() - t0)
+    return Timing(times, warm), result
 
 
 def _scene_makers(cfg):
@@ -55,6 +94,8 @@ class _Scene:
         self.renderer = tracer.Renderer()
         self.cold = None
         self.parts = None       # the stages of the last first render (renderer stats)
+        self.parts_split = None  # buffer textures of the cylinders and of the cell lists (huge scenes)
+        self.error_note = None
         self.ours, self.cycles, self.images, self.error = {}, {}, {}, None
 
 
@@ -74,15 +115,22 @@ def run(sec, cfg):
             sec.not_measured(name, f"{type(e).__name__}: {e}")
     # Every scene at the lowest sample count first (the issue's targets), then the higher
     # counts, each taking what is left; a job whose runs cannot fit is reported, not half-run.
-    for spp in sorted(cfg.anc_spp):
-        for sc in sorted(scenes, key=lambda s: s.strands.num_segments):   # cheapest first
-            try:
-                _tracer_job(sec, cfg, tracer, sc, spp)
-                _cycles_job(sec, cfg, sc, spp, size)
-            except Exception as e:  # noqa: BLE001 — one scene failing must not lose the others
-                sc.ours.setdefault(spp, f"failed: {type(e).__name__}: {e}")
-                if isinstance(sc.ours.get(spp), tuple):
-                    sc.cycles[spp] = f"failed: {type(e).__name__}: {e}"
+    # Huge scenes' lowest-spp jobs come first (their runs take about ten minutes of the budget,
+    # which must not go to the smaller scenes' higher counts) and their other jobs last.
+    low = min(cfg.anc_spp)
+    by_cost = sorted(scenes, key=lambda s: s.strands.num_segments)     # cheapest first
+    huge = [sc for sc in by_cost if _huge(sc)]
+    jobs = ([(low, sc) for sc in huge]
+            + [(spp, sc) for spp in sorted(cfg.anc_spp) for sc in by_cost if not _huge(sc)]
+            + [(spp, sc) for spp in sorted(cfg.anc_spp) if spp != low for sc in huge])
+    for spp, sc in jobs:
+        try:
+            _tracer_job(sec, cfg, tracer, sc, spp)
+            _cycles_job(sec, cfg, sc, spp, size)
+        except Exception as e:  # noqa: BLE001 — one scene failing must not lose the others
+            sc.ours.setdefault(spp, f"failed: {type(e).__name__}: {e}")
+            if isinstance(sc.ours.get(spp), tuple):
+                sc.cycles[spp] = f"failed: {type(e).__name__}: {e}"
     _report(sec, cfg, scenes, size)
 
 
@@ -101,14 +149,15 @@ def _tracer_job(sec, cfg, tracer, sc, spp):
     r = sc.renderer
     rs = settings(spp=spp, layers=LAYERS, shading="kajiya-kay")
     guess = _predicted(sc, spp, cfg)
+    runs = _runs(sc, cfg)
     # first render + re-render, each (runs + 1) times
-    if guess is not None and 2 * guess * (cfg.runs + 1) > left(sec):
+    if guess is not None and 2 * guess * (runs + 1) > left(sec):
         sc.ours[spp] = (f"tracer: one run should take about {fmt_time(guess)} (from the {min(cfg.anc_spp)}-spp runs), "
-                        f"more than the {fmt_time(max(0, left(sec)))} left allows for {cfg.runs} runs")
+                        f"more than the {fmt_time(max(0, left(sec)))} left allows for {runs} run(s)")
         return
     try:
-        first, _ = measure(lambda: (r.set_strands(sc.strands), r.render(sc.cam, rs)), runs=cfg.runs,
-                           budget=left(sec))
+        first, _ = _measure(lambda: (r.set_strands(sc.strands), r.render(sc.cam, rs)), runs,
+                            budget=left(sec))
         if sc.cold is None:
             sc.cold = first.warmups[0]
         if spp == min(cfg.anc_spp):
@@ -121,13 +170,23 @@ def _tracer_job(sec, cfg, tracer, sc, spp):
             return r.render(sc.moved if flip["on"] else sc.cam, rs)
 
         uploaded = r.stats.bytes_uploaded
-        again, _ = measure(rerender, runs=cfg.runs, budget=left(sec))
+        again, img = _measure(rerender, runs, budget=left(sec))
         no_upload = r.stats.bytes_uploaded == uploaded
-        img = r.render(sc.cam, rs)
+        if flip["on"]:      # the last run saw the moved camera
+            img = r.render(sc.cam, rs)
         sc.ours[spp] = (first, again, no_upload)
         sc.images[("ours", spp)] = img
+        if _huge(sc):
+            sc.parts_split = (r.buffers.parts("tex_cyl"), r.buffers.parts("tex_idx"))
     except TooSlow as e:
         sc.ours[spp] = f"tracer: {e}"
+        return
+    finally:
+        if _huge(sc):       # several GB the Cycles render needs more
+            r.buffers.release()
+    if _huge(sc):
+        sc.error_note = ("not measured: the float64 references (numpy) over "
+                         f"{sc.strands.num_segments / 1e6:.0f} M cylinders need more memory than this machine has")
         return
     if sc.error is None and spp == min(cfg.anc_spp) and left(sec) > 0:
         # Error beside the time: both float64 references over the whole image (a random
@@ -146,9 +205,16 @@ def _tracer_job(sec, cfg, tracer, sc, spp):
 def _cycles_job(sec, cfg, sc, spp, size):
     if not isinstance(sc.ours.get(spp), tuple):
         return      # nothing to compare with
+    low = sc.cycles.get(min(cfg.anc_spp))
+    if _huge(sc) and spp != min(cfg.anc_spp) and hasattr(low, "median") and low.median > left(sec):
+        # A render at more samples takes at least as long as the lowest-spp one.
+        sc.cycles[spp] = (f"Cycles: one render at {min(cfg.anc_spp)} spp took {fmt_time(low.median)}, more than the "
+                          f"{fmt_time(max(0, left(sec)))} left")
+        return
     cyc = CyclesAnchor(sc.strands, sc.matrix, size=size, sun_direction=SUN_DIRECTION, layers=LAYERS)
     try:
-        sc.cycles[spp], _ = measure(lambda: cyc.render(spp), runs=cfg.runs, budget=left(sec))
+        sc.cycles[spp], _ = _measure(lambda: cyc.render(spp), _runs(sc, cfg), warmup=0 if _huge(sc) else 1,
+                                     budget=left(sec))
     except TooSlow as e:
         sc.cycles[spp] = f"Cycles: {e}"
         return
@@ -157,6 +223,9 @@ def _cycles_job(sec, cfg, sc, spp, size):
         cyc.save_last(path)
         import matplotlib.image as mpimg
         sc.images[("cycles", spp)] = mpimg.imread(path)
+    if _huge(sc):       # give Blender's copy of the scene back before the next job
+        del cyc
+        reset_scene()
 
 
 def _report(sec, cfg, scenes, size):
@@ -180,7 +249,8 @@ def _report(sec, cfg, scenes, size):
                                  f"({e['hair_pixels']:,} hair px of {e['rays']:,})" for e in (model, solid))
                 err += f" · old method: {fmt_num(old['rmse'])} / {100 * old['coverage_agree']:.1f} % ({side}² window)"
             else:
-                err = "see the lowest-spp row" if sc.error else "not measured: time budget"
+                err = ("see the lowest-spp row" if sc.error else sc.error_note if sc.error_note
+                       else "not measured: time budget")
             rows.append([sc.name, label, str(spp), str(theirs), str(first), f"{ratio(first.median, theirs.median):.2f}",
                          f"{ratio(first.median, c1):.2f}" if c1 else "n/a", str(again),
                          f"{ratio(again.median, c1):.2f}" if c1 else "n/a", "yes" if no_upload else "NO", err])
@@ -195,7 +265,9 @@ def _report(sec, cfg, scenes, size):
                      + (f"Cold first render (shader compile included): {fmt_time(sc.cold)}." if sc.cold else "")
                      + (" The last first render's stages: cylinders {}, upload {}, grid ({} build) {}, "
                         "render {}.".format(fmt_time(sc.parts[0]), fmt_time(sc.parts[1]), sc.parts[4],
-                                            fmt_time(sc.parts[2]), fmt_time(sc.parts[3])) if sc.parts else ""))
+                                            fmt_time(sc.parts[2]), fmt_time(sc.parts[3])) if sc.parts else "")
+                     + (" Cylinders in {} buffer textures, cell lists in {}; one run after one warm-up (no warm-up "
+                        "for Cycles).".format(*sc.parts_split) if sc.parts_split else ""))
             sec.summary.append(f"{sc.name}: first {fmt_time(f1)} = {ratio(f1, c1):.2f}× Cycles 1 spp ({fmt_time(c1)}); "
                                f"re-render {fmt_time(a1)} = {ratio(a1, c1):.2f}×")
         both = [s for s in cfg.anc_spp if ("ours", s) in sc.images and ("cycles", s) in sc.images]

@@ -4,13 +4,38 @@
 // its padded capsules may touch, and whole empty BLOCK³ blocks jumped in one step.
 
 uniform isamplerBuffer tex_idx;   // cell lists (CSR), cylinder ids
+#if IDX_PARTS > 1                 // past the driver's limit: entry i in tex_idx<i / idx_split>
+uniform isamplerBuffer tex_idx1;
+uniform int idx_split;
+#endif
+#if IDX_PARTS > 2
+uniform isamplerBuffer tex_idx2;
+#endif
+#if IDX_PARTS > 3
+uniform isamplerBuffer tex_idx3;
+#endif
 uniform isamplerBuffer tex_cell;  // per cell: x = first slot (EMPTY_BLOCK: the whole
                                   // BLOCK^3 block of this cell is empty), y = count
 uniform vec3 grid_lo;
 uniform vec3 cell_size;
 uniform ivec3 dims;
 
-int list_entry(int i) { return texelFetch(tex_idx, i).x; }
+int list_entry(int i) {
+#if IDX_PARTS > 1
+    if (i >= idx_split) {
+#if IDX_PARTS > 2
+        if (i >= 2 * idx_split) {
+#if IDX_PARTS > 3
+            if (i >= 3 * idx_split) return texelFetch(tex_idx3, i - 3 * idx_split).x;
+#endif
+            return texelFetch(tex_idx2, i - 2 * idx_split).x;
+        }
+#endif
+        return texelFetch(tex_idx1, i - idx_split).x;
+    }
+#endif
+    return texelFetch(tex_idx, i).x;
+}
 ivec2 cell_entry(ivec3 c) { return texelFetch(tex_cell, c.x + dims.x * (c.y + dims.y * c.z)).xy; }
 
 // Most cells a ray crosses are empty (hair is a thin shell with air inside and around).

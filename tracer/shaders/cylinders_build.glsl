@@ -12,6 +12,9 @@ layout(local_size_x = GROUP) in;
 uniform int n_items;        // cylinders to make in this dispatch
 uniform int first_item;     // index of the first of them
 uniform int n_cyl;          // cylinders in the scene
+uniform int part_first;     // first cylinder of the part of the buffer bound to cyl_img
+                            // (tracer/scene_buffers.py: past the driver's limit the host
+                            // runs one dispatch per part)
 uniform float repeat2;      // squared distance below which a point repeats its predecessor
                             // (0: the host dropped repeats already)
 
@@ -61,7 +64,7 @@ void main() {
         cap1 = u0.x * u1.x + u0.y * u1.y + u0.z * u1.z < COS_SHARP;
     }
     int flags = (cap1 ? CAP_PLANE1 : 0) | (!has_next || sharp ? CAP_PLANE2 : 0);
-    int base = TEXELS_PER_CYL * k;
+    int base = TEXELS_PER_CYL * (k - part_first);
     imageStore(cyl_img, base + CYL_TOP, vec4(A, texelFetch(tex_rad, p).x));
     imageStore(cyl_img, base + CYL_TIP, vec4(B, texelFetch(tex_alpha, p).x));
     imageStore(cyl_img, base + CYL_N2, vec4(u2, float(flags)));

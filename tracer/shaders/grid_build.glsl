@@ -23,15 +23,48 @@ uniform ivec3 dims;
 uniform float pad_factor;
 
 layout(binding = 0) uniform samplerBuffer tex_cyl;   // TEXELS_PER_CYL texels per cylinder
+// Past the driver's limit the cylinders and the lists continue in further buffers,
+// cyl_split cylinders and idx_split entries in each but the last (tracer/scene_buffers.py).
+#if CYL_PARTS > 1
+layout(binding = 1) uniform samplerBuffer tex_cyl1;
+#endif
+#if CYL_PARTS > 2
+layout(binding = 2) uniform samplerBuffer tex_cyl2;
+#endif
+#if CYL_PARTS > 3
+layout(binding = 3) uniform samplerBuffer tex_cyl3;
+#endif
+uniform int cyl_split;
+uniform int idx_split;
 layout(std430, binding = 0) buffer Cells { int cells[]; };
 #if PASS == 0
 layout(std430, binding = 1) buffer Overflow { int overflow; };
 #endif
 #if PASS == 1
 layout(r32i, binding = 1) uniform writeonly iimageBuffer idx_img;
+#if IDX_PARTS > 1
+layout(r32i, binding = 2) uniform writeonly iimageBuffer idx_img1;
+#endif
+#if IDX_PARTS > 2
+layout(r32i, binding = 3) uniform writeonly iimageBuffer idx_img2;
+#endif
+#if IDX_PARTS > 3
+layout(r32i, binding = 4) uniform writeonly iimageBuffer idx_img3;
+#endif
 #endif
 
-vec4 cyl(int id, int j) { return texelFetch(tex_cyl, TEXELS_PER_CYL * id + j); }
+vec4 cyl(int id, int j) {
+#if CYL_PARTS > 3
+    if (id >= 3 * cyl_split) return texelFetch(tex_cyl3, TEXELS_PER_CYL * (id - 3 * cyl_split) + j);
+#endif
+#if CYL_PARTS > 2
+    if (id >= 2 * cyl_split) return texelFetch(tex_cyl2, TEXELS_PER_CYL * (id - 2 * cyl_split) + j);
+#endif
+#if CYL_PARTS > 1
+    if (id >= cyl_split) return texelFetch(tex_cyl1, TEXELS_PER_CYL * (id - cyl_split) + j);
+#endif
+    return texelFetch(tex_cyl, TEXELS_PER_CYL * id + j);
+}
 
 int item_index() {
     return int(gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * GROUP + int(gl_LocalInvocationID.x);
@@ -42,6 +75,15 @@ void visit(int cell, int id) {
     atomicAdd(cells[cell], 1);
 #else
     int slot = atomicAdd(cells[cell], 1);
+#if IDX_PARTS > 3
+    if (slot >= 3 * idx_split) { imageStore(idx_img3, slot - 3 * idx_split, ivec4(id)); return; }
+#endif
+#if IDX_PARTS > 2
+    if (slot >= 2 * idx_split) { imageStore(idx_img2, slot - 2 * idx_split, ivec4(id)); return; }
+#endif
+#if IDX_PARTS > 1
+    if (slot >= idx_split) { imageStore(idx_img1, slot - idx_split, ivec4(id)); return; }
+#endif
     imageStore(idx_img, slot, ivec4(id));
 #endif
 }

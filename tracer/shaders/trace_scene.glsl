@@ -25,7 +25,19 @@
 // CYL_TOP: xyz top, w radius; CYL_TIP: xyz tip, w alpha; CYL_N2: xyz unit normal of plane
 // 2, w cap flags (CAP_PLANE1, CAP_PLANE2); CYL_COL: rgb colour. Buffer textures
 // (tracer/gl_buffers.py): texel i is found by its index alone.
+// Past the driver's texel limit (CYL_PARTS > 1, tracer/scene_buffers.py) cylinder id lives
+// in tex_cyl<id / cyl_split>, at id % cyl_split; within it (CYL_PARTS 1) there is no compare.
 uniform samplerBuffer tex_cyl;
+#if CYL_PARTS > 1
+uniform samplerBuffer tex_cyl1;
+uniform int cyl_split;                // cylinders in each part but the last
+#endif
+#if CYL_PARTS > 2
+uniform samplerBuffer tex_cyl2;
+#endif
+#if CYL_PARTS > 3
+uniform samplerBuffer tex_cyl3;
+#endif
 
 uniform vec4 material;                // ambient, diffuse, specular, shininess
 uniform float mpw_cap;                // largest widening factor r'/r
@@ -39,7 +51,22 @@ const float BIG = 1e30;
 const int NO_ID = 0x7fffffff;
 
 // Texel `j` of cylinder `id`.
-vec4 cyl(int id, int j) { return texelFetch(tex_cyl, id * TEXELS_PER_CYL + j); }
+vec4 cyl(int id, int j) {
+#if CYL_PARTS > 1
+    if (id >= cyl_split) {
+#if CYL_PARTS > 2
+        if (id >= 2 * cyl_split) {
+#if CYL_PARTS > 3
+            if (id >= 3 * cyl_split) return texelFetch(tex_cyl3, (id - 3 * cyl_split) * TEXELS_PER_CYL + j);
+#endif
+            return texelFetch(tex_cyl2, (id - 2 * cyl_split) * TEXELS_PER_CYL + j);
+        }
+#endif
+        return texelFetch(tex_cyl1, (id - cyl_split) * TEXELS_PER_CYL + j);
+    }
+#endif
+    return texelFetch(tex_cyl, id * TEXELS_PER_CYL + j);
+}
 
 // A hit to shade (tracer/shading: the shading model interface): the point, the unit
 // tangent, the unit normal of the surface entered (facing the ray), the unit ray direction
