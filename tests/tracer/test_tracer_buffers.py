@@ -20,6 +20,7 @@ from tracer_scenes import curls
 
 BUILDS = ["gpu", "numpy"] if compute_available(shared_context()) else ["numpy"]
 SETTINGS = RenderSettings(layers=4, shadows=True, count=True)
+PIXEL = RenderSettings(layers=4, shadows=True, spp=16, sampler="pixel")
 COUNTERS = ("cells_visited", "cylinder_tests", "shadow_rays", "layers_traced")
 
 
@@ -74,6 +75,7 @@ def test_a_scene_split_over_several_buffers_renders_as_the_unsplit_scene(build):
     whole = Renderer(build=build)
     whole.set_strands(s)
     want = whole.render(cam, SETTINGS)
+    want_pixel = whole.render(cam, PIXEL)
     assert whole.buffers.parts("tex_cyl") == 1 and whole.buffers.parts("tex_idx") == 1
     assert want[..., 3].max() > 0
     seen = set()
@@ -87,6 +89,8 @@ def test_a_scene_split_over_several_buffers_renders_as_the_unsplit_scene(build):
         np.testing.assert_array_equal(np.sort(split.grid_indices()), np.sort(whole.grid_indices()))
         np.testing.assert_array_equal(split.render(cam, SETTINGS), want)
         assert {k: getattr(split.stats, k) for k in COUNTERS} == {k: getattr(whole.stats, k) for k in COUNTERS}
+        # The pixel sampler walks the same lists.
+        np.testing.assert_array_equal(split.render(cam, PIXEL), want_pixel)
     # Three different splits were traced, one with the cylinders split too.
     assert {p[1] for p in seen} == {4, 3, 2} and max(p[0] for p in seen) >= 2, seen
 
