@@ -195,6 +195,17 @@ void camera_ray(float x, float y, out vec3 o, out vec3 d, out float len) {
 // are unrolled, so llvmpipe's cap on loop iterations sees one walk and the shading loop.
 const float SHADE_MIN = 1.0 / 512.0;
 
+// The ray of the sample at offset q (pixels, from the pixel's centre) of the central ray
+// o + t·d: moved sideways (orthographic) or turned (perspective) by q pixels.
+void sample_ray(vec3 o, vec3 d, vec2 q, out vec3 so, out vec3 sd) {
+    so = o; sd = d;
+#if ORTHO
+    so = o + q.x * px_du + q.y * px_dv;
+#else
+    sd = normalize(d + q.x * px_du + q.y * px_dv);
+#endif
+}
+
 void main() {
     int px = int(gl_FragCoord.x) + pixel_origin.x;
     int py = int(image_size.y) - 1 - int(gl_FragCoord.y) + pixel_origin.y;   // row 0 = top
@@ -214,12 +225,8 @@ void main() {
     int mesh_s = -1, mesh_tri = -1; vec3 mesh_n = vec3(0.0); float mesh_t = BIG;
     float tfar = 0.0;
     for (int s = 0; s < PN; ++s) {
-        vec3 so = o, sd = d;
-#if ORTHO
-        so = o + px_off[s].x * px_du + px_off[s].y * px_dv;
-#else
-        sd = normalize(d + px_off[s].x * px_du + px_off[s].y * px_dv);
-#endif
+        vec3 so, sd;
+        sample_ray(o, d, px_off[s], so, sd);
         int tri; vec3 n;
         float tm = mesh_nearest(so, sd, BIG, tri, n);
         px_tm[s] = tri >= 0 ? tm : BIG;
@@ -275,12 +282,8 @@ void main() {
         }
         for (int j = 0; j < PIX_M; ++j) wgt[j] = j == pick ? -1.0 : wgt[j];
         wshaded += wi;
-        vec3 so = o, sd = d;
-#if ORTHO
-        so = o + mi.x * px_du + mi.y * px_dv;
-#else
-        sd = normalize(d + mi.x * px_du + mi.y * px_dv);
-#endif
+        vec3 so, sd;
+        sample_ray(o, d, mi, so, sd);
         int surf; float asc, alpha;
         float th = hit_cylinder(eid, so, sd, 0.0, 0.0, surf, asc, alpha);
         // The middle of the covered samples lies on the strand but for the linear test's
@@ -303,12 +306,8 @@ void main() {
     if (mesh_s >= 0) {           // opaque: the samples that end on a mesh take its shade
         vec2 q = vec2(0.0);
         for (int s = 0; s < PN; ++s) q = s == mesh_s ? px_off[s] : q;
-        vec3 so = o, sd = d;
-#if ORTHO
-        so = o + q.x * px_du + q.y * px_dv;
-#else
-        sd = normalize(d + q.x * px_du + q.y * px_dv);
-#endif
+        vec3 so, sd;
+        sample_ray(o, d, q, so, sd);
         C += (Tmesh / float(PN)) * shade_mesh(mesh_tri, so, sd, mesh_t, mesh_n);
     }
 #else
