@@ -564,12 +564,15 @@ class Collider:
         """Unit outward directions (N,3): the sampled distance's gradient, or away from the
         mesh's centre where that is flat (deep inside or far away)."""
         _, g = self.value(points, gradient=True)
-        length = np.linalg.norm(g, axis=1)
-        radial = points - 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0))
-        r = np.linalg.norm(radial, axis=1)
-        radial = np.where(r[:, None] > 0, radial / np.where(r > 0, r, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
+        length = np.sqrt(_dot(g, g))
         flat = length < 0.1
-        return np.where(flat[:, None], radial, g / np.where(flat, 1.0, length)[:, None])
+        g /= np.where(flat, 1.0, length)[:, None]
+        fl = _indices(flat)
+        if fl.size:
+            radial = points[fl] - 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0))
+            r = np.sqrt(_dot(radial, radial))
+            g[fl] = np.where(r[:, None] > 0, radial / np.where(r > 0, r, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
+        return g
 
 
 def _neighbourhood_max(a):
@@ -633,6 +636,14 @@ def _indices(mask):
     """np.flatnonzero of a 1-D mask, without its wrappers (the walk calls it thousands of
     times on small arrays)."""
     return mask.nonzero()[0]
+
+
+def _dot3(u, v):
+    """_dot of component-major (3, ...) arrays."""
+    out = u[0] * v[0]
+    out += u[1] * v[1]
+    out += u[2] * v[2]
+    return out
 
 
 def _dot(u, v):
@@ -852,11 +863,9 @@ def _offending(collider, points, offsets, counts, radius, margin, lo, hi):
     roots = pts[off[suspect]].astype(np.float64)
     root_value = collider.value(roots)
     p = pts[look].astype(np.float64)
-    m = 0.5 * (p + pts[look - 1])
-    short, at_end = _shortfall(collider, p, m, target[look].astype(np.float64), root_value[which], roots[which],
-                               values=True)
+    bad, at_end = _offends(collider, p, lambda i: 0.5 * (p[i] + pts[look[i] - 1]), target[look].astype(np.float64),
+                           root_value[which], roots[which])
     inside = int((at_end < -rad[look]).sum())
-    bad = short > 0
     first_bad = np.full(len(suspect), np.iinfo(np.int64).max)
     np.minimum.at(first_bad, which[bad], (look - off[suspect][which])[bad])
     hit = first_bad < np.iinfo(np.int64).max
@@ -937,17 +946,37 @@ def _shortfall(collider, end, mid, target, root_value, root, values=False):
     return (short, both[:n]) if values else short
 
 
+def _offends(collider, end, middles, target, root_value, root):
+    """(_shortfall(...) > 0, the ends' sampled distances) of segments with ends `end`, their
+    middles looked up only where the end is clear (middles: a callable giving the middles
+    of the segments at the indices it is given): most segments looked at closely end inside
+    the head, and an end too close says enough."""
+    at_end = collider.value(end)
+    bad = _clearance(target, root_value, end, root) - at_end > 0
+    ok = _indices(~bad)
+    if ok.size:
+        mid = middles(ok)
+        bad[ok] = _clearance(target[ok], root_value[ok], mid, root[ok]) - collider.value(mid) > 0
+    return bad, at_end
+
+
 def _turn_limits(pts, off, cnt):
     """Per strand (cos, sin) of the largest turn a segment may make from the one before:
     the strand's sharpest original bend, at least 20°. pts holds the strands one after
     another (off, cnt)."""
-    seg = pts[1:] - pts[:-1]
-    l2 = np.einsum("ij,ij->i", seg, seg)
-    dots = np.einsum("ij,ij->i", seg[:-1], seg[1:])
+    # One coordinate column at a time: einsum over (N, 3) rows runs its loops 3 items long.
+    n = len(pts)
+    seg = np.empty((3, max(n - 1, 0)))
+    for axis in range(3):
+        np.subtract(pts[1:, axis], pts[:-1, axis], out=seg[axis])
+    l2 = _dot3(seg, seg)
+    dots = _dot3(seg[:, :-1], seg[:, 1:])
     both = l2[:-1] * l2[1:]
-    joint = np.ones(len(pts))
+    joint = np.ones(n)
     # joint[k]: the bend at point k, between the segments ending and starting there.
-    joint[1:-1] = np.where(both > 0, dots / np.sqrt(np.where(both > 0, both, 1.0)), 1.0)
+    ok = both > 0
+    np.sqrt(both, out=both)
+    np.divide(dots, both, out=joint[1:-1], where=ok)
     joint[off] = 1.0            # a root is no joint (the segment before it is another strand's)
     joint[off + cnt - 1] = 1.0  # nor is a tip
     cos = np.minimum(np.minimum.reduceat(joint, off), _MIN_TURN_COS)
@@ -1148,7 +1177,7 @@ def _offence(collider, pts, half, target, off, start, end, delta, root_value, ro
     first = end.copy()
     if look.size:
         sl = s_of[look]
-        bad = _shortfall(collider, p[look], middles(look), target[idx[look]], root_value[sl], roots[sl]) > 0
+        bad, _ = _offends(collider, p[look], lambda i: middles(look[i]), target[idx[look]], root_value[sl], roots[sl])
         np.minimum.at(first, sl[bad], (idx[look] - off[sl])[bad])
     return first
 
