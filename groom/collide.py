@@ -783,7 +783,10 @@ def describe_keys_inside(name, found):
 class CollisionStats:
     """What resolve_strands did: strands / points tested, strands and points moved, the
     largest push (scene units) and points left closer than their clearance (0 unless the
-    collider traps a segment: a narrow cleft)."""
+    collider traps a segment: a narrow cleft). points_inside_before: points the first pass
+    found deeper than their radius; it looks no further into a strand than its first few
+    suspect points once one offends, so a lower bound (measure with signed_distance for
+    the share inside)."""
     strands: int = 0
     points: int = 0
     strands_moved: int = 0
@@ -841,7 +844,9 @@ def resolve_strands(collider, points, counts, radius, margin, threads=None, dtyp
 
 def _offending(collider, points, offsets, counts, radius, margin, lo, hi):
     """For strands lo..hi: (the strands that must move (global indices), the first point of
-    each that is too close, their roots' sampled distance, points deeper than their radius)."""
+    each that is too close, their roots' sampled distance, points found deeper than their
+    radius among those looked at closely: the first pass stops at a strand's first offence,
+    so this counts the points inside up to there, not all of them)."""
     off, cnt = offsets[lo:hi], counts[lo:hi]
     first, stop = int(off[0]), int(off[-1] + cnt[-1])
     pts, rad = points[first:stop], radius[first:stop]
@@ -856,18 +861,35 @@ def _offending(collider, points, offsets, counts, radius, margin, lo, hi):
     look = _indices(look)
     if not look.size:
         return none
-    # A closer look at those, with the clearance near the root.
+    # A closer look at those, with the clearance near the root. `look` is in order, so are
+    # the strands it falls in.
     strand_of = np.searchsorted(off, look, side="right") - 1
-    suspect, which = np.unique(strand_of, return_inverse=True)
-    which = which.ravel()
+    new = np.empty(len(look), bool)
+    new[0] = True
+    np.not_equal(strand_of[1:], strand_of[:-1], out=new[1:])
+    starts = _indices(new)
+    suspect = strand_of[starts]
+    which = np.cumsum(new) - 1
     roots = pts[off[suspect]].astype(np.float64)
     root_value = collider.value(roots)
-    p = pts[look].astype(np.float64)
-    bad, at_end = _offends(collider, p, lambda i: 0.5 * (p[i] + pts[look[i] - 1]), target[look].astype(np.float64),
-                           root_value[which], roots[which])
-    inside = int((at_end < -rad[look]).sum())
+    at = look - off[suspect][which]     # the points' indices in their strands
     first_bad = np.full(len(suspect), np.iinfo(np.int64).max)
-    np.minimum.at(first_bad, which[bad], (look - off[suspect][which])[bad])
+    inside = 0
+    # Only each strand's first offence matters: its first _CHECK_FIRST suspect points are
+    # looked at first, the others only for strands not yet found offending (most points
+    # looked at closely lie inside the head: their strand is found in the first round).
+    rank = np.arange(len(look)) - starts[which]
+    first_round = rank < _CHECK_FIRST
+    for rnd in range(2):
+        sel = _indices(first_round if rnd == 0 else ~first_round & (first_bad[which] == np.iinfo(np.int64).max))
+        if not sel.size:
+            continue
+        i, w = look[sel], which[sel]
+        p = pts[i].astype(np.float64)
+        bad, at_end = _offends(collider, p, lambda j: 0.5 * (p[j] + pts[i[j] - 1]), target[i].astype(np.float64),
+                               root_value[w], roots[w])
+        inside += int((at_end < -rad[i]).sum())
+        np.minimum.at(first_bad, w[bad], at[sel][bad])
     hit = first_bad < np.iinfo(np.int64).max
     return lo + suspect[hit], first_bad[hit], root_value[hit], inside
 
