@@ -833,7 +833,8 @@ def resolve_strands(collider, points, counts, radius, margin, threads=None, dtyp
     walked = run_jobs([partial(_walk_strands, collider, points, offsets, counts, radius, margin, strands[p], k0[p],
                                root_value[p]) for p in parts if len(p)], threads)
     for part, (rows, new, changed, unresolved, largest) in zip([p for p in parts if len(p)], walked):
-        out[rows[changed]] = new[changed]
+        ch = _indices(changed)
+        out[rows[ch]] = _take(new, ch)
         moved[strands[part]] = np.logical_or.reduceat(changed, np.cumsum(counts[strands[part]]) - counts[strands[part]])
         stats.points_moved += int(changed.sum())
         stats.unresolved += unresolved
@@ -936,7 +937,7 @@ def _walk_strands(collider, points, offsets, counts, radius, margin, strands, k0
     """(rows, new points float64, which rows changed, unresolved points, largest move) of
     the strands walked."""
     rows = _flat_points(offsets[strands], counts[strands])
-    original = points[rows].astype(np.float64)
+    original = _take(points, rows).astype(np.float64)
     target = radius[rows].astype(np.float64) + margin
     new, unresolved = _walk(collider, original, target, counts[strands], k0, root_value)
     step = new - original
