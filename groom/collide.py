@@ -1058,21 +1058,25 @@ def _walk(collider, pts, target, cnt, k0, root_value):
             u_new[li] = cos_lim[act[li], None] * _take(up, li) + sin_lim[act[li], None] * w
         p0 = _take(prev, act)
         need, rv, rt = target[at], root_value[act], _take(roots, act)
-        end, mid = p0 + length[:, None] * u_new, p0 + 0.5 * length[:, None] * u_new
+        end = p0 + length[:, None] * u_new
+
+        def mid(i):
+            """The middles of segments i (only those looked at closely need them)."""
+            return _take(p0, i) + 0.5 * length[i, None] * _take(u_new, i)
         # Only segments the cells' lower bounds do not clear get the closer look (the bound
         # clears a point for its target, so for the smaller clearance near a root too).
         short = np.full(len(act), -1.0)
-        near = _indices(~_clear_with_middles(collider, end, length * (0.5 / collider.cell), need,
-                                                   lambda i: _take(mid, i)))
+        near = _indices(~_clear_with_middles(collider, end, length * (0.5 / collider.cell), need, mid))
         if near.size:
-            short[near] = _shortfall(collider, _take(end, near), _take(mid, near), need[near], rv[near], rt[near])
+            short[near] = _shortfall(collider, _take(end, near), mid(near), need[near], rv[near], rt[near])
         push = (short > 0) & (length > 0)
         if push.any():
             pi = _indices(push)
             u_new[pi], left = _push_out(collider, _take(p0, pi), _take(u_new, pi), length[pi], need[pi], rv[pi],
                                         _take(rt, pi), short[pi])
             unresolved += left
-        placed = p0 + length[:, None] * u_new
+            end[pi] = _take(p0, pi) + length[pi, None] * _take(u_new, pi)
+        placed = end   # the segments' ends as they now point
         result[at] = placed
         prev[act] = placed
         u_prev[act] = np.where((length > 0)[:, None], u_new, up)
