@@ -1131,7 +1131,8 @@ def _push_out(collider, p0, u, length, target, root_value, root, short):
         out[todo] = st * _take(g, todo) + np.sqrt(np.maximum(0.0, 1.0 - st * st)) * _take(w, todo)
         t = todo
         p, o = _take(p0, t), _take(out, t)
-        short[t] = _shortfall(collider, p + length[t, None] * o, p + 0.5 * length[t, None] * o,
+        o *= length[t, None]    # the segment (0.5 times it is exact: its middle as before)
+        short[t] = _shortfall(collider, p + o, p + 0.5 * o,
                               target[t], root_value[t], _take(root, t))
         todo = t[(short[t] > 0) & (s[t] < 1.0)]
         if not todo.size:
@@ -1143,7 +1144,8 @@ def _push_out(collider, p0, u, length, target, root_value, root, short):
         t = todo
         half = 0.5 * length[t, None]
         p, o = _take(p0, t), _take(out, t)
-        end, mid = p + 2.0 * half * o, p + half * o
+        o *= half
+        end, mid = p + 2.0 * o, p + o
         v = collider.value(np.concatenate([end, mid]))
         n = len(t)
         lack_end = _clearance(target[t], root_value[t], end, _take(root, t)) - v[:n]
@@ -1154,7 +1156,8 @@ def _push_out(collider, p0, u, length, target, root_value, root, short):
         moved_to = at + (1.2 * np.maximum(lack, 0.0) + _OVERSHOOT * collider.cell)[:, None] * collider.outward(at)
         out[t] = _unit(moved_to - _take(p0, t))
         p, o = _take(p0, t), _take(out, t)
-        short[t] = _shortfall(collider, p + 2.0 * half * o, p + half * o, target[t],
+        o *= half
+        short[t] = _shortfall(collider, p + 2.0 * o, p + o, target[t],
                               root_value[t], _take(root, t))
         todo = t[short[t] > 0]
     if todo.size:
