@@ -1051,7 +1051,7 @@ def _walk(collider, pts, target, cnt, k0, root_value):
         c = _dot(u, up)
         # Back toward the strand's own direction, by no more than its sharpest bend.
         limited = ~aligned[act] & (c < cos_lim[act]) & (length > 0)
-        u_new = u.copy()
+        u_new = u   # u is not needed after the limited turns are written
         if limited.any():
             li = _indices(limited)
             w = _perpendicular_toward(_take(up, li), _take(u, li), c[li])
