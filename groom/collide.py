@@ -959,14 +959,13 @@ def _clearance(target, root_value, p, root):
     return np.minimum(target, root_value + RAMP_SLOPE * d)
 
 
-def _shortfall(collider, end, mid, target, root_value, root, values=False):
+def _shortfall(collider, end, mid, target, root_value, root):
     """How far the end (or twice how far the middle) of a segment falls short of its
-    clearance; <= 0 where it is clear. values: also the ends' sampled distances."""
+    clearance; <= 0 where it is clear (_offends: only whether it is)."""
     both = collider.value(np.concatenate([end, mid]))
     n = len(end)
-    short = np.maximum(_clearance(target, root_value, end, root) - both[:n],
-                       2.0 * (_clearance(target, root_value, mid, root) - both[n:]))
-    return (short, both[:n]) if values else short
+    return np.maximum(_clearance(target, root_value, end, root) - both[:n],
+                      2.0 * (_clearance(target, root_value, mid, root) - both[n:]))
 
 
 def _offends(collider, end, middles, target, root_value, root):
