@@ -564,12 +564,15 @@ class Collider:
         """Unit outward directions (N,3): the sampled distance's gradient, or away from the
         mesh's centre where that is flat (deep inside or far away)."""
         _, g = self.value(points, gradient=True)
-        length = np.linalg.norm(g, axis=1)
-        radial = points - 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0))
-        r = np.linalg.norm(radial, axis=1)
-        radial = np.where(r[:, None] > 0, radial / np.where(r > 0, r, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
+        length = np.sqrt(_dot(g, g))
         flat = length < 0.1
-        return np.where(flat[:, None], radial, g / np.where(flat, 1.0, length)[:, None])
+        g /= np.where(flat, 1.0, length)[:, None]
+        fl = _indices(flat)
+        if fl.size:
+            radial = points[fl] - 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0))
+            r = np.sqrt(_dot(radial, radial))
+            g[fl] = np.where(r[:, None] > 0, radial / np.where(r > 0, r, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
+        return g
 
 
 def _neighbourhood_max(a):
@@ -633,6 +636,14 @@ def _indices(mask):
     """np.flatnonzero of a 1-D mask, without its wrappers (the walk calls it thousands of
     times on small arrays)."""
     return mask.nonzero()[0]
+
+
+def _dot3(u, v):
+    """_dot of component-major (3, ...) arrays."""
+    out = u[0] * v[0]
+    out += u[1] * v[1]
+    out += u[2] * v[2]
+    return out
 
 
 def _dot(u, v):
@@ -772,7 +783,10 @@ def describe_keys_inside(name, found):
 class CollisionStats:
     """What resolve_strands did: strands / points tested, strands and points moved, the
     largest push (scene units) and points left closer than their clearance (0 unless the
-    collider traps a segment: a narrow cleft)."""
+    collider traps a segment: a narrow cleft). points_inside_before: points the first pass
+    found deeper than their radius; it looks no further into a strand than its first few
+    suspect points once one offends, so a lower bound (measure with signed_distance for
+    the share inside)."""
     strands: int = 0
     points: int = 0
     strands_moved: int = 0
@@ -819,7 +833,8 @@ def resolve_strands(collider, points, counts, radius, margin, threads=None, dtyp
     walked = run_jobs([partial(_walk_strands, collider, points, offsets, counts, radius, margin, strands[p], k0[p],
                                root_value[p]) for p in parts if len(p)], threads)
     for part, (rows, new, changed, unresolved, largest) in zip([p for p in parts if len(p)], walked):
-        out[rows[changed]] = new[changed]
+        ch = _indices(changed)
+        out[rows[ch]] = _take(new, ch)
         moved[strands[part]] = np.logical_or.reduceat(changed, np.cumsum(counts[strands[part]]) - counts[strands[part]])
         stats.points_moved += int(changed.sum())
         stats.unresolved += unresolved
@@ -830,7 +845,9 @@ def resolve_strands(collider, points, counts, radius, margin, threads=None, dtyp
 
 def _offending(collider, points, offsets, counts, radius, margin, lo, hi):
     """For strands lo..hi: (the strands that must move (global indices), the first point of
-    each that is too close, their roots' sampled distance, points deeper than their radius)."""
+    each that is too close, their roots' sampled distance, points found deeper than their
+    radius among those looked at closely: the first pass stops at a strand's first offence,
+    so this counts the points inside up to there, not all of them)."""
     off, cnt = offsets[lo:hi], counts[lo:hi]
     first, stop = int(off[0]), int(off[-1] + cnt[-1])
     pts, rad = points[first:stop], radius[first:stop]
@@ -840,25 +857,40 @@ def _offending(collider, points, offsets, counts, radius, margin, lo, hi):
     # A cheap look-up first, of the points and of the segments' middles (a long segment's
     # chord can dip into a convex head): most points are far from the head.
     look = ~_clear_with_middles(collider, pts, _half_segments(collider, pts, off), target,
-                                lambda i: 0.5 * (pts[i] + pts[i - 1]))
+                                lambda i: 0.5 * (_take(pts, i) + _take(pts, i - 1)))
     look[off] = False  # roots never move
     look = _indices(look)
     if not look.size:
         return none
-    # A closer look at those, with the clearance near the root.
+    # A closer look at those, with the clearance near the root. `look` is in order, so are
+    # the strands it falls in.
     strand_of = np.searchsorted(off, look, side="right") - 1
-    suspect, which = np.unique(strand_of, return_inverse=True)
-    which = which.ravel()
-    roots = pts[off[suspect]].astype(np.float64)
+    new = np.empty(len(look), bool)
+    new[0] = True
+    np.not_equal(strand_of[1:], strand_of[:-1], out=new[1:])
+    starts = _indices(new)
+    suspect = strand_of[starts]
+    which = np.cumsum(new) - 1
+    roots = _take(pts, off[suspect]).astype(np.float64)
     root_value = collider.value(roots)
-    p = pts[look].astype(np.float64)
-    m = 0.5 * (p + pts[look - 1])
-    short, at_end = _shortfall(collider, p, m, target[look].astype(np.float64), root_value[which], roots[which],
-                               values=True)
-    inside = int((at_end < -rad[look]).sum())
-    bad = short > 0
+    at = look - off[suspect][which]     # the points' indices in their strands
     first_bad = np.full(len(suspect), np.iinfo(np.int64).max)
-    np.minimum.at(first_bad, which[bad], (look - off[suspect][which])[bad])
+    inside = 0
+    # Only each strand's first offence matters: its first _CHECK_FIRST suspect points are
+    # looked at first, the others only for strands not yet found offending (most points
+    # looked at closely lie inside the head: their strand is found in the first round).
+    rank = np.arange(len(look)) - starts[which]
+    first_round = rank < _CHECK_FIRST
+    for rnd in range(2):
+        sel = _indices(first_round if rnd == 0 else ~first_round & (first_bad[which] == np.iinfo(np.int64).max))
+        if not sel.size:
+            continue
+        i, w = look[sel], which[sel]
+        p = _take(pts, i).astype(np.float64)
+        bad, at_end = _offends(collider, p, lambda j: 0.5 * (_take(p, j) + _take(pts, i[j] - 1)),
+                               target[i].astype(np.float64), root_value[w], _take(roots, w))
+        inside += int((at_end < -rad[i]).sum())
+        np.minimum.at(first_bad, w[bad], at[sel][bad])
     hit = first_bad < np.iinfo(np.int64).max
     return lo + suspect[hit], first_bad[hit], root_value[hit], inside
 
@@ -905,7 +937,7 @@ def _walk_strands(collider, points, offsets, counts, radius, margin, strands, k0
     """(rows, new points float64, which rows changed, unresolved points, largest move) of
     the strands walked."""
     rows = _flat_points(offsets[strands], counts[strands])
-    original = points[rows].astype(np.float64)
+    original = _take(points, rows).astype(np.float64)
     target = radius[rows].astype(np.float64) + margin
     new, unresolved = _walk(collider, original, target, counts[strands], k0, root_value)
     step = new - original
@@ -927,27 +959,46 @@ def _clearance(target, root_value, p, root):
     return np.minimum(target, root_value + RAMP_SLOPE * d)
 
 
-def _shortfall(collider, end, mid, target, root_value, root, values=False):
+def _shortfall(collider, end, mid, target, root_value, root):
     """How far the end (or twice how far the middle) of a segment falls short of its
-    clearance; <= 0 where it is clear. values: also the ends' sampled distances."""
+    clearance; <= 0 where it is clear (_offends: only whether it is)."""
     both = collider.value(np.concatenate([end, mid]))
     n = len(end)
-    short = np.maximum(_clearance(target, root_value, end, root) - both[:n],
-                       2.0 * (_clearance(target, root_value, mid, root) - both[n:]))
-    return (short, both[:n]) if values else short
+    return np.maximum(_clearance(target, root_value, end, root) - both[:n],
+                      2.0 * (_clearance(target, root_value, mid, root) - both[n:]))
+
+
+def _offends(collider, end, middles, target, root_value, root):
+    """(_shortfall(...) > 0, the ends' sampled distances) of segments with ends `end`, their
+    middles looked up only where the end is clear (middles: a callable giving the middles
+    of the segments at the indices it is given): most segments looked at closely end inside
+    the head, and an end too close says enough."""
+    at_end = collider.value(end)
+    bad = _clearance(target, root_value, end, root) - at_end > 0
+    ok = _indices(~bad)
+    if ok.size:
+        mid = middles(ok)
+        bad[ok] = _clearance(target[ok], root_value[ok], mid, _take(root, ok)) - collider.value(mid) > 0
+    return bad, at_end
 
 
 def _turn_limits(pts, off, cnt):
     """Per strand (cos, sin) of the largest turn a segment may make from the one before:
     the strand's sharpest original bend, at least 20°. pts holds the strands one after
     another (off, cnt)."""
-    seg = pts[1:] - pts[:-1]
-    l2 = np.einsum("ij,ij->i", seg, seg)
-    dots = np.einsum("ij,ij->i", seg[:-1], seg[1:])
+    # One coordinate column at a time: einsum over (N, 3) rows runs its loops 3 items long.
+    n = len(pts)
+    seg = np.empty((3, max(n - 1, 0)))
+    for axis in range(3):
+        np.subtract(pts[1:, axis], pts[:-1, axis], out=seg[axis])
+    l2 = _dot3(seg, seg)
+    dots = _dot3(seg[:, :-1], seg[:, 1:])
     both = l2[:-1] * l2[1:]
-    joint = np.ones(len(pts))
+    joint = np.ones(n)
     # joint[k]: the bend at point k, between the segments ending and starting there.
-    joint[1:-1] = np.where(both > 0, dots / np.sqrt(np.where(both > 0, both, 1.0)), 1.0)
+    ok = both > 0
+    np.sqrt(both, out=both)
+    np.divide(dots, both, out=joint[1:-1], where=ok)
     joint[off] = 1.0            # a root is no joint (the segment before it is another strand's)
     joint[off + cnt - 1] = 1.0  # nor is a tip
     cos = np.minimum(np.minimum.reduceat(joint, off), _MIN_TURN_COS)
@@ -962,11 +1013,11 @@ def _walk(collider, pts, target, cnt, k0, root_value):
     n = len(cnt)
     off = np.cumsum(cnt) - cnt
     result = pts.copy()
-    roots = pts[off]
+    roots = _take(pts, off)
     cos_lim, sin_lim = _turn_limits(pts, off, cnt)
     half = _half_segments(collider, pts, off)
     k = k0.copy()
-    prev = pts[off + k - 1].copy()          # the last point placed
+    prev = _take(pts, off + k - 1).copy()          # the last point placed
     u_prev = np.zeros((n, 3))               # the direction of the segment ending there
     have = k >= 2
     u_prev[have] = _unit(pts[off[have] + k[have] - 1] - pts[off[have] + k[have] - 2])
@@ -977,49 +1028,54 @@ def _walk(collider, pts, target, cnt, k0, root_value):
     while True:
         al = _indices(active & check)
         if al.size:
-            jump = _first_offence(collider, pts, half, target, off[al], cnt[al], k[al], prev[al], root_value[al],
-                                  roots[al])
-            delta = prev[al] - pts[off[al] + k[al] - 1]
+            jump = _first_offence(collider, pts, half, target, off[al], cnt[al], k[al], _take(prev, al), root_value[al],
+                                  _take(roots, al))
+            delta = _take(prev, al) - _take(pts, off[al] + k[al] - 1)
             _translate(result, pts, off[al], k[al], jump, delta)
             k[al] = jump
             going = jump < cnt[al]
             active[al] = going
             go = al[going]
-            prev[go] = pts[off[go] + k[go] - 1] + delta[going]
-            u_prev[go] = _unit(pts[off[go] + k[go] - 1] - pts[off[go] + k[go] - 2])
+            prev[go] = _take(pts, off[go] + k[go] - 1) + delta[going]
+            u_prev[go] = _unit(_take(pts, off[go] + k[go] - 1) - _take(pts, off[go] + k[go] - 2))
             check[al] = False
         act = _indices(active)
         if not act.size:
             break
         at = off[act] + k[act]
-        d = pts[at] - pts[at - 1]
+        d = _take(pts, at) - _take(pts, at - 1)
         length = np.sqrt(_dot(d, d))
         u = d / np.where(length > 0, length, 1.0)[:, None]
-        up = u_prev[act]
+        up = _take(u_prev, act)
         c = _dot(u, up)
         # Back toward the strand's own direction, by no more than its sharpest bend.
         limited = ~aligned[act] & (c < cos_lim[act]) & (length > 0)
-        u_new = u.copy()
+        u_new = u   # u is not needed after the limited turns are written
         if limited.any():
             li = _indices(limited)
-            w = _perpendicular_toward(up[li], u[li], c[li])
-            u_new[li] = cos_lim[act[li], None] * up[li] + sin_lim[act[li], None] * w
-        p0 = prev[act]
-        need, rv, rt = target[at], root_value[act], roots[act]
-        end, mid = p0 + length[:, None] * u_new, p0 + 0.5 * length[:, None] * u_new
+            w = _perpendicular_toward(_take(up, li), _take(u, li), c[li])
+            u_new[li] = cos_lim[act[li], None] * _take(up, li) + sin_lim[act[li], None] * w
+        p0 = _take(prev, act)
+        need, rv, rt = target[at], root_value[act], _take(roots, act)
+        end = p0 + length[:, None] * u_new
+
+        def mid(i):
+            """The middles of segments i (only those looked at closely need them)."""
+            return _take(p0, i) + 0.5 * length[i, None] * _take(u_new, i)
         # Only segments the cells' lower bounds do not clear get the closer look (the bound
         # clears a point for its target, so for the smaller clearance near a root too).
         short = np.full(len(act), -1.0)
-        near = _indices(~_clear_with_middles(collider, end, length * (0.5 / collider.cell), need,
-                                                   lambda i: mid[i]))
+        near = _indices(~_clear_with_middles(collider, end, length * (0.5 / collider.cell), need, mid))
         if near.size:
-            short[near] = _shortfall(collider, end[near], mid[near], need[near], rv[near], rt[near])
+            short[near] = _shortfall(collider, _take(end, near), mid(near), need[near], rv[near], rt[near])
         push = (short > 0) & (length > 0)
         if push.any():
             pi = _indices(push)
-            u_new[pi], left = _push_out(collider, p0[pi], u_new[pi], length[pi], need[pi], rv[pi], rt[pi], short[pi])
+            u_new[pi], left = _push_out(collider, _take(p0, pi), _take(u_new, pi), length[pi], need[pi], rv[pi],
+                                        _take(rt, pi), short[pi])
             unresolved += left
-        placed = p0 + length[:, None] * u_new
+            end[pi] = _take(p0, pi) + length[pi, None] * _take(u_new, pi)
+        placed = end   # the segments' ends as they now point
         result[at] = placed
         prev[act] = placed
         u_prev[act] = np.where((length > 0)[:, None], u_new, up)
@@ -1028,6 +1084,12 @@ def _walk(collider, pts, target, cnt, k0, root_value):
         k[act] += 1
         active[act] = k[act] < cnt[act]
     return result, unresolved
+
+
+def _take(a, i):
+    """a[i] for an index array i: rows of an (N, 3) array gathered by take, three times
+    faster than indexing them (numpy's fancy indexing copies 3-long rows one at a time)."""
+    return a.take(i, axis=0)
 
 
 def _unit(v):
@@ -1065,10 +1127,12 @@ def _push_out(collider, p0, u, length, target, root_value, root, short):
     for _ in range(_PUSH_ITERATIONS):
         s[todo] = np.minimum(s[todo] + (1.2 * short[todo] + _OVERSHOOT * collider.cell) / length[todo], 1.0)
         st = s[todo, None]
-        out[todo] = st * g[todo] + np.sqrt(np.maximum(0.0, 1.0 - st * st)) * w[todo]
+        out[todo] = st * _take(g, todo) + np.sqrt(np.maximum(0.0, 1.0 - st * st)) * _take(w, todo)
         t = todo
-        short[t] = _shortfall(collider, p0[t] + length[t, None] * out[t], p0[t] + 0.5 * length[t, None] * out[t],
-                              target[t], root_value[t], root[t])
+        p, o = _take(p0, t), _take(out, t)
+        o *= length[t, None]    # the segment (0.5 times it is exact: its middle as before)
+        short[t] = _shortfall(collider, p + o, p + 0.5 * o,
+                              target[t], root_value[t], _take(root, t))
         todo = t[(short[t] > 0) & (s[t] < 1.0)]
         if not todo.size:
             break
@@ -1078,18 +1142,22 @@ def _push_out(collider, p0, u, length, target, root_value, root, short):
             break
         t = todo
         half = 0.5 * length[t, None]
-        end, mid = p0[t] + 2.0 * half * out[t], p0[t] + half * out[t]
+        p, o = _take(p0, t), _take(out, t)
+        o *= half
+        end, mid = p + 2.0 * o, p + o
         v = collider.value(np.concatenate([end, mid]))
         n = len(t)
-        lack_end = _clearance(target[t], root_value[t], end, root[t]) - v[:n]
-        lack_mid = _clearance(target[t], root_value[t], mid, root[t]) - v[n:]
+        lack_end = _clearance(target[t], root_value[t], end, _take(root, t)) - v[:n]
+        lack_mid = _clearance(target[t], root_value[t], mid, _take(root, t)) - v[n:]
         by_mid = 2.0 * lack_mid > lack_end
         at = np.where(by_mid[:, None], mid, end)
         lack = np.where(by_mid, lack_mid, lack_end)
         moved_to = at + (1.2 * np.maximum(lack, 0.0) + _OVERSHOOT * collider.cell)[:, None] * collider.outward(at)
-        out[t] = _unit(moved_to - p0[t])
-        short[t] = _shortfall(collider, p0[t] + 2.0 * half * out[t], p0[t] + half * out[t], target[t],
-                              root_value[t], root[t])
+        out[t] = _unit(moved_to - _take(p0, t))
+        p, o = _take(p0, t), _take(out, t)
+        o *= half
+        short[t] = _shortfall(collider, p + 2.0 * o, p + o, target[t],
+                              root_value[t], _take(root, t))
         todo = t[short[t] > 0]
     if todo.size:
         # Still short (a strand wedged between an ear and the skull): of a fixed set of
@@ -1100,9 +1168,10 @@ def _push_out(collider, p0, u, length, target, root_value, root, short):
         n, m = len(t), len(dirs)
         rep = np.repeat(t, m)
         cand = np.tile(dirs, (n, 1))
-        sh = _shortfall(collider, p0[rep] + length[rep, None] * cand, p0[rep] + 0.5 * length[rep, None] * cand,
-                        target[rep], root_value[rep], root[rep]).reshape(n, m)
-        score = np.where(sh <= 0, 2.0 + u[t] @ dirs.T, -sh)
+        p = _take(p0, rep)
+        sh = _shortfall(collider, p + length[rep, None] * cand, p + 0.5 * length[rep, None] * cand,
+                        target[rep], root_value[rep], _take(root, rep)).reshape(n, m)
+        score = np.where(sh <= 0, 2.0 + _take(u, t) @ dirs.T, -sh)
         best = np.argmax(score, axis=1)
         out[t] = dirs[best]
         short[t] = sh[np.arange(n), best]
@@ -1118,14 +1187,15 @@ def _first_offence(collider, pts, half, target, off, cnt, k, prev, root_value, r
     first, the others only for strands clear so far (a quarter of the strands offend within
     them on the shipped presets): each point's answer is its own, so the first offence
     found is the same. half: _half_segments of pts."""
-    delta = prev - pts[off + k - 1]
+    delta = prev - _take(pts, off + k - 1)
     stop = k + np.minimum(cnt - k, _CHECK_AHEAD)
     first = stop.copy()
     sel = np.arange(len(off))
     start = k
     for ahead in (_CHECK_FIRST, _CHECK_AHEAD - _CHECK_FIRST):
         end = np.minimum(start + ahead, stop[sel])
-        found = _offence(collider, pts, half, target, off[sel], start, end, delta[sel], root_value[sel], roots[sel])
+        found = _offence(collider, pts, half, target, off[sel], start, end, _take(delta, sel), root_value[sel],
+                         _take(roots, sel))
         first[sel] = found
         more = (found == end) & (end < stop[sel])
         sel, start = sel[more], end[more]
@@ -1139,16 +1209,17 @@ def _offence(collider, pts, half, target, off, start, end, delta, root_value, ro
     rest = end - start
     idx = _flat_points(off + start, rest)
     s_of = np.arange(len(off)).repeat(rest)
-    d = delta[s_of]
-    p = pts[idx] + d
+    d = _take(delta, s_of)
+    p = _take(pts, idx) + d
 
     def middles(i):
-        return 0.5 * (pts[idx[i]] + pts[idx[i] - 1]) + d[i]
+        return 0.5 * (_take(pts, idx[i]) + _take(pts, idx[i] - 1)) + _take(d, i)
     look = _indices(~_clear_with_middles(collider, p, half[idx], target[idx], middles))
     first = end.copy()
     if look.size:
         sl = s_of[look]
-        bad = _shortfall(collider, p[look], middles(look), target[idx[look]], root_value[sl], roots[sl]) > 0
+        bad, _ = _offends(collider, _take(p, look), lambda i: middles(look[i]), target[idx[look]], root_value[sl],
+                          _take(roots, sl))
         np.minimum.at(first, sl[bad], (idx[look] - off[sl])[bad])
     return first
 
@@ -1158,7 +1229,7 @@ def _translate(result, pts, off, k, end, delta):
     n_rest = end - k
     if n_rest.sum():
         rows = _flat_points(off + k, n_rest)
-        result[rows] = pts[rows] + np.repeat(delta, n_rest, axis=0)
+        result[rows] = _take(pts, rows) + np.repeat(delta, n_rest, axis=0)
 
 
 # StrandCollision.check_keys's answers for recent key sets (by the collider's id, which a

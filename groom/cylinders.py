@@ -331,7 +331,9 @@ def _flat_attributes(s, counts, base_radius, color, params, threads=None, out=No
         start, stop = (int(ends[lo - 1]) if lo else 0), int(ends[hi - 1])
         n = counts[lo:hi]
         if isinstance(s, tuple):
-            part = (s[0][start:stop] / np.repeat(s[1][lo:hi], n)).astype(np.float32)
+            # The quotient in float64, stored straight into float32 (no float64 temporary).
+            part = np.empty(stop - start, np.float32)
+            np.divide(s[0][start:stop], np.repeat(s[1][lo:hi], n), out=part, casting="same_kind")
         else:
             part = s[start:stop]
         np.multiply(np.repeat(base[lo:hi], n), radius_profile(part, params), out=radius[start:stop])

@@ -323,9 +323,10 @@ def evaluate_strands(roots, transforms, guides, weights, counts, rows, sigma=Non
         pull = None
         if clump is not None:
             scale, exponent, towards = clump
-            pull = (src if exponent == 1.0 else np.power(src, exponent)).astype(np.float32)
+            pull, keep = buf["pull"], buf["keep"]
+            np.copyto(pull, src if exponent == 1.0 else np.power(src, exponent), casting="same_kind")
             pull *= np.float32(scale)
-            keep = np.float32(1.0) - pull
+            np.subtract(np.float32(1.0), pull, out=keep)
         np.multiply(src, samples - 1, out=pos)
         np.copyto(i0, pos, casting="unsafe")  # truncation = floor, σ >= 0
         np.minimum(i0, samples - 2, out=i0)
@@ -337,7 +338,9 @@ def evaluate_strands(roots, transforms, guides, weights, counts, rows, sigma=Non
             table.take(idx, axis=0, out=acc if k == 0 else row, mode="clip")
             wk = per_strand(weights[k])
             if pull is not None:
-                wk = wk * keep + pull if k == 0 else wk * keep
+                wk = np.multiply(wk, keep, out=buf["wk"])
+                if k == 0:
+                    wk += pull
             if k == 0:
                 acc *= wk[..., None]
             else:
@@ -357,7 +360,8 @@ def evaluate_strands(roots, transforms, guides, weights, counts, rows, sigma=Non
             np.multiply(per_strand(transforms[3 * a + 2]), d[2], out=term)
             e += term
             if pull is not None:
-                e += pull * per_strand(towards[a])
+                np.multiply(pull, per_strand(towards[a]), out=term)
+                e += term
             np.add(e, per_strand(roots[a]), out=dst[..., a], casting="same_kind")
 
     also = list(also)
@@ -377,6 +381,7 @@ def _scratch(shape):
         have = _SCRATCH.arrays = {
             "pos": np.empty(size), "i0": np.empty(size, np.int64), "idx": np.empty(size, np.int64),
             "fr": np.empty(size, np.float32), "term": np.empty(size, np.float32), "e": np.empty(size, np.float32),
+            "pull": np.empty(size, np.float32), "keep": np.empty(size, np.float32), "wk": np.empty(size, np.float32),
             "acc": np.empty((size, 8), np.float32), "row": np.empty((size, 8), np.float32),
             "d": np.empty((3, size), np.float32)}
     out = {name: a[:size].reshape(shape + a.shape[1:]) for name, a in have.items() if name != "d"}
