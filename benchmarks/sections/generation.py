@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 
-from benchmarks.harness import Timing, TooSlow, fmt_time, measure, ratio, run_child
+from benchmarks.harness import MIN_RUNS, Timing, TooSlow, fmt_time, measure, once, ratio, run_child
 from benchmarks.scenes import groom_api, load_preset
 from benchmarks.sections import left, over_budget
 
@@ -138,6 +138,27 @@ def _single_run(job, data, count, budget, side="ours"):
     return Timing([time.perf_counter() - t0]), out
 
 
+def _side_by_side(ours, warm_ours, theirs, invalidate, runs, budget):
+    """(Timing of `ours`, Timing of `theirs`): after one warm-up each (ours already had
+    its, `warm_ours` seconds), `runs` rounds of one call of each in turn, so that both see
+    the same state of a shared machine (measured one after the other, the two sides'
+    ratio swung from 1.0 to 2.2 between runs of the same code). TooSlow when the rounds
+    would not fit `budget`."""
+    invalidate()
+    warm_theirs, _ = once(theirs)
+    if (warm_ours + warm_theirs) * runs > budget:
+        raise TooSlow(f"one round takes {fmt_time(warm_ours + warm_theirs)}, so {runs} rounds would exceed the "
+                      f"{fmt_time(max(budget, 0))} left in this section's budget")
+    a, b = [], []
+    for _ in range(max(int(runs), MIN_RUNS)):
+        t, out = once(ours)
+        a.append(t)
+        del out
+        invalidate()
+        b.append(once(theirs)[0])
+    return Timing(a, [warm_ours]), Timing(b, [warm_theirs])
+
+
 def counts_for(cfg):
     """The strand counts of the main table: the mode's, and 1M in the full report."""
     counts = tuple(cfg.gen_counts)
@@ -179,7 +200,7 @@ def run(sec, cfg):
             if single:
                 ours, result = _single_run(our_cpu, data, count, left(sec, 0.6))
             else:
-                ours, result = measure(our_cpu, runs=cfg.runs, budget=left(sec, 0.35))
+                warm_ours, result = once(our_cpu)
             points = int(round(result.strands.num_points / result.strands.num_strands))
             inputs = blender_inputs(scalp, keys, params, result, points)
             # Only these of the result are needed from here: at 1M strands it holds 2 GB.
@@ -192,7 +213,8 @@ def run(sec, cfg):
                 anchor.invalidate()
                 theirs, _ = _single_run(their_cpu, data, count, left(sec, 0.6), side="blender")
             else:
-                theirs, _ = measure(their_cpu, runs=cfg.runs, before=anchor.invalidate, budget=left(sec, 0.45))
+                ours, theirs = _side_by_side(our_cpu, warm_ours, their_cpu, anchor.invalidate, cfg.runs,
+                                             left(sec, 0.45))
         except TooSlow as e:
             sec.not_measured(f"{count:,} strands", str(e))
             continue
@@ -217,7 +239,8 @@ def run(sec, cfg):
                "Interpolate Curves (median)", "Blender output", "Blender root error (m)", "ratio groom/Blender",
                "groom CPU (median)", "Interpolate Curves CPU (median)", "CPU ratio", "load average"], rows,
               caption="Generation time with the shipped preset (median of runs after a warm-up; both in this "
-                      f"process). From {SINGLE_RUN_COUNT:,} strands on (*1 run*), one timed run each side and no "
+                      "process, one call of each in turn, so that both see the same state of the machine). "
+                      f"From {SINGLE_RUN_COUNT:,} strands on (*1 run*), one timed run each side and no "
                       "warm-up (the smaller rows have warmed both up): five would not fit the section's budget. "
                       "*of which collision*: the collision stage of the same runs (median). *CPU*: "
                       "process CPU seconds of the same runs, all threads. *load average*: the machine's 1-minute "
