@@ -19,12 +19,10 @@ the pixel's area, as the preview's stratified samples take it).
 Only this module (and the one it borrows from) imports bpy, lazily.
 """
 import os
-import tempfile
-import time
 
 import numpy as np
 
-from benchmarks.blender_hair_shading import _hair_object, _material, _matrix
+from benchmarks.blender_hair_shading import _hair_object, _material, _matrix, render_exr
 
 
 def _bpy():
@@ -81,22 +79,10 @@ def _sun(sc, direction, strength):
 
 def _render(sc, samples, seed, transparent):
     """(H, W, 4) float64 RGBA, row 0 at the top, and the render's wall time."""
-    bpy = _bpy()
     sc.cycles.samples = int(samples)
     sc.cycles.seed = int(seed)
     sc.render.film_transparent = bool(transparent)
-    with tempfile.TemporaryDirectory() as tmp:
-        path = os.path.join(tmp, "cycles.exr")
-        sc.render.filepath = path
-        t0 = time.perf_counter()
-        bpy.ops.render.render(write_still=True)
-        seconds = time.perf_counter() - t0
-        img = bpy.data.images.load(path)
-        w, h = img.size
-        px = np.empty(w * h * 4, np.float32)
-        img.pixels.foreach_get(px)
-        bpy.data.images.remove(img)
-    return px.reshape(h, w, 4)[::-1].astype(np.float64), seconds
+    return render_exr(sc)
 
 
 def render_contact(strands, head_vertices, head_triangles, head_rgb, camera_matrix, size, sun_direction,

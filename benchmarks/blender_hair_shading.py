@@ -152,6 +152,14 @@ def render_cycles(strands, camera_matrix, size, sun_direction, sun_strength, hai
     settings.file_format = 'OPEN_EXR'
     settings.color_depth = '32'
     settings.color_mode = 'RGB'
+    img, seconds = render_exr(sc)
+    return img[..., :3], seconds
+
+
+def render_exr(sc):
+    """Render scene `sc` to a float EXR (its image settings say so) and read it back:
+    ((H, W, 4) float64 RGBA, row 0 at the top, the render's wall time)."""
+    bpy = _bpy()
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "cycles.exr")
         sc.render.filepath = path
@@ -164,4 +172,4 @@ def render_cycles(strands, camera_matrix, size, sun_direction, sun_strength, hai
         img.pixels.foreach_get(px)
         bpy.data.images.remove(img)
     # Blender's images start at the bottom row.
-    return px.reshape(h, w, 4)[::-1, :, :3].astype(np.float64), seconds
+    return px.reshape(h, w, 4)[::-1].astype(np.float64), seconds
