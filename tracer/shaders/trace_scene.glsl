@@ -6,7 +6,10 @@
 //   trace_scene.glsl      this file
 //   shapes_cylinder.glsl  ray vs one cut cylinder, its normal
 //   accel.glsl            the accelerator interface and the hit list it fills
-//   accel_grid.glsl       the uniform grid, implementing that interface
+//   sampler_pixel.glsl    the pixel sampler's list of distinct cylinders and coverage masks
+//                         (PIXEL 1; empty otherwise)
+//   accel_grid.glsl       the uniform grid (or accel_bvh.glsl, the BVH), implementing that
+//                         interface, and the pixel sampler's walk
 //   shapes_triangle.glsl, accel_mesh_grid.glsl   opaque meshes and their own grid (MESHES 1)
 //   shading_<model>.glsl  shade_light of the chosen model (tracer/shading: the registry)
 //   trace_main.glsl       camera rays, layers, shadows, samples: main
@@ -20,6 +23,9 @@
 //   ORTHO         1: orthographic camera
 //   COUNT         1: write per-pixel work counters to a second target
 //   MESHES        1: opaque triangle meshes beside the strands
+//   PIXEL         1: the pixel sampler: a pixel's SPP_N² samples in one walk, each distinct
+//                 cylinder shaded once (docs/DECISIONS.md, "Samples of one pixel share the walk")
+//   CYL_PARTS, IDX_PARTS  buffer textures the cylinders and the grid's cell lists are split over
 
 // Per cylinder, TEXELS_PER_CYL consecutive texels (one 64-byte cache line on a CPU driver),
 // CYL_TOP: xyz top, w radius; CYL_TIP: xyz tip, w alpha; CYL_N2: xyz unit normal of plane
