@@ -10,11 +10,11 @@ hair with the Principled Hair BSDF (Chiang) as the extension's hair material mak
 which are the node's defaults), the head a Diffuse BSDF (Lambert) of base colour HEAD_RGB,
 one delta sun, max bounces 0, a black world, a box pixel filter, linear float output. The
 preview: its default settings as tracer.settings.RenderSettings gives them (listed below,
-read when the section runs), with the same sun and two changes so it computes what
-Cycles does: ambient 0 (Cycles' world gives no light), and the head's colour HEAD_RGB / pi
-(the preview shades a mesh as colour × irradiance × cos, Cycles' diffuse surface as
-colour / pi × irradiance × cos). The last table shows what each of those two costs when
-left as the add-on leaves it, on the first preset.
+read when the section runs), with the same sun, the head at the same base colour (under the
+default, physically based shading the preview's meshes are Lambertian as Cycles' diffuse
+surface: colour / pi × irradiance × cos) and one change so it computes what Cycles does:
+ambient 0 (Cycles' world gives no light). The last table shows what that change is worth
+against the add-on's default ambient, on the first preset.
 
 Error (benchmarks/region_error.py): over the hair pixels (where Cycles' hair covers at least
 half the pixel) and over the head pixels (where Cycles' head covers at least half), in
@@ -108,7 +108,6 @@ def run(sec, cfg):
                                           lights=(tracer.Light("directional", tuple(SUN), (1, 1, 1), 0.0),))
                for s in (first, refined)}
     hair = hair_material(defaults)
-    head_rgb_lambert = tuple(c / np.pi for c in HEAD_RGB)
     scalp, head = groom.default_scalp(), groom.default_head()
     sec.text(__doc__.strip())
     sec.settings(image=f"{size[0]}x{size[1]}", strands="each preset's count" if full else "a quarter of each preset's",
@@ -137,7 +136,7 @@ def run(sec, cfg):
 
         renderer = tracer.Renderer()
         renderer.set_strands(strands)
-        renderer.set_meshes([(head.vertices, head.triangles, head_rgb_lambert, "head")])
+        renderer.set_meshes([(head.vertices, head.triangles, HEAD_RGB, "head")])
         timing, img_first = measure(lambda: renderer.render(camera, first), runs=cfg.runs,
                                     budget=max(left(sec) - 30, 1))
         renderer.render(tracer_camera(matrix, (32, 32)), refined)     # compile the refined draw, untimed
@@ -194,22 +193,16 @@ def run(sec, cfg):
                            _cell(e_check["head"]), f"{e_check['iou']:.3f}"])
         numbers[f"{CHECK_SPP}spp"] = _numbers(e_check)
         numbers["preview_seconds"][str(CHECK_SPP)] = t_check
-        # What the add-on leaves as it is: the head at its base colour, the ambient term.
-        renderer.set_meshes([(head.vertices, head.triangles, HEAD_RGB, "head")])
-        e_base = compare(renderer.render(camera, refined), cover_refined, ref, ref_hair, ref_cover)
+        # What the add-on leaves as it is: the ambient term.
         e_amb = compare(renderer.render(camera, dataclasses.replace(refined, ambient=defaults.ambient)),
                         cover_refined, ref, ref_hair, ref_cover)
-        conv_rows = [["as measured above (head colour / pi, ambient 0)", _cell(e_refined["hair"]),
-                      _cell(e_refined["head"])],
-                     ["the head at its base colour, as the add-on passes it", _cell(e_base["hair"]),
-                      _cell(e_base["head"])],
-                     [f"that and the default ambient {defaults.ambient:g}", _cell(e_amb["hair"]),
+        conv_rows = [["as measured above (ambient 0)", _cell(e_refined["hair"]), _cell(e_refined["head"])],
+                     [f"the default ambient {defaults.ambient:g}", _cell(e_amb["hair"]),
                       _cell(e_amb["head"])]]
-        numbers["head_at_base_colour"] = _numbers(e_base)
         numbers["and_default_ambient"] = _numbers(e_amb)
         conv_name = name
     elif kept is not None:
-        sec.not_measured("Cycles' own noise, the convergence check and the two changes' worth",
+        sec.not_measured("Cycles' own noise, the convergence check and the ambient term's worth",
                          f"{fmt_time(left(sec))} of the section's time left")
 
     rows = [r for name in rows for r in rows[name]]
@@ -219,7 +212,7 @@ def run(sec, cfg):
               caption="Each time beside its error against the Cycles image of the same preset:")
     if conv_rows:
         sec.table(["preview", "hair: MAE / RMSE (relative); mean ratio", "head: MAE / RMSE (relative); mean ratio"],
-                  conv_rows, caption=f"What the two changes to the preview are worth ({conv_name}, {REFINED_SPP} spp, "
+                  conv_rows, caption=f"What the ambient term costs ({conv_name}, {REFINED_SPP} spp, "
                                      "against the same Cycles image):")
     if panels:
         _figure(sec, panels, first.spp)
