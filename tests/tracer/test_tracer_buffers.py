@@ -22,6 +22,16 @@ BUILDS = ["gpu", "numpy"] if compute_available(shared_context()) else ["numpy"]
 SETTINGS = RenderSettings(layers=4, shadows=True, count=True)
 PIXEL = RenderSettings(layers=4, shadows=True, spp=16, sampler="pixel")
 COUNTERS = ("cells_visited", "cylinder_tests", "shadow_rays", "layers_traced")
+# The work of primary rays alone: a hard shadow ray stops at the first blocker it meets, so
+# its work depends on the order of a cell's list, which the GPU build fills as its atomics
+# land (the image does not: any blocker darkens). Primary rays order hits by (t, id).
+PRIMARY = RenderSettings(layers=4, shadows=False, count=True)
+
+
+def _work(r, cam):
+    """The counters of a render of `r`'s scene by primary rays alone."""
+    r.render(cam, PRIMARY)
+    return {k: getattr(r.stats, k) for k in COUNTERS}
 
 
 def _camera(s, size=(40, 40)):
@@ -75,6 +85,7 @@ def test_a_scene_split_over_several_buffers_renders_as_the_unsplit_scene(build):
     whole = Renderer(build=build)
     whole.set_strands(s)
     want = whole.render(cam, SETTINGS)
+    want_work = _work(whole, cam)
     assert whole.buffers.parts("tex_cyl") == 1 and whole.buffers.parts("tex_idx") == 1
     assert want[..., 3].max() > 0
     seen = set()
@@ -87,7 +98,7 @@ def test_a_scene_split_over_several_buffers_renders_as_the_unsplit_scene(build):
         assert split.buffers["tex_cyl"].read(n) == whole.buffers["tex_cyl"].read(n)
         np.testing.assert_array_equal(np.sort(split.grid_indices()), np.sort(whole.grid_indices()))
         np.testing.assert_array_equal(split.render(cam, SETTINGS), want)
-        assert {k: getattr(split.stats, k) for k in COUNTERS} == {k: getattr(whole.stats, k) for k in COUNTERS}
+        assert _work(split, cam) == want_work
     # Three different splits were traced, one with the cylinders split too.
     assert {p[1] for p in seen} == {4, 3, 2} and max(p[0] for p in seen) >= 2, seen
 
@@ -187,7 +198,7 @@ def test_buffers_kept_from_a_bigger_scene_render_a_smaller_one_like_fresh_ones(b
     b = fresh.render(_camera(small), SETTINGS)
     assert a[..., 3].max() > 0
     np.testing.assert_array_equal(a, b)
-    assert {k: getattr(reused.stats, k) for k in COUNTERS} == {k: getattr(fresh.stats, k) for k in COUNTERS}
+    assert _work(reused, _camera(small)) == _work(fresh, _camera(small))
 
 
 @pytest.mark.parametrize("build", BUILDS)
