@@ -18,11 +18,10 @@ the pixel's area, as the preview's stratified samples take it).
 
 Only this module (and the one it borrows from) imports bpy, lazily.
 """
-import os
 
 import numpy as np
 
-from benchmarks.blender_hair_shading import _hair_object, _material, _matrix, render_exr
+from benchmarks.blender_hair_shading import _hair_object, _material, direct_light_scene, render_exr
 
 
 def _bpy():
@@ -62,21 +61,6 @@ def _node_material(name, kind, rgb, strength=1.0):
     return mat
 
 
-def _sun(sc, direction, strength):
-    bpy = _bpy()
-    sun = bpy.data.lights.new("sun", 'SUN')
-    sun.energy, sun.angle = float(strength), 0.0
-    obj = bpy.data.objects.new("sun", sun)
-    sc.collection.objects.link(obj)
-    d = np.asarray(direction, np.float64)
-    z = -d / np.linalg.norm(d)                      # a sun shines along its local -Z
-    x = np.cross((0.0, 0.0, 1.0), z) if abs(z[2]) < 0.99 else np.array([1.0, 0.0, 0.0])
-    x /= np.linalg.norm(x)
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2] = x, np.cross(z, x), z
-    obj.matrix_world = _matrix(m)
-
-
 def _render(sc, samples, seed, transparent):
     """(H, W, 4) float64 RGBA, row 0 at the top, and the render's wall time."""
     sc.cycles.samples = int(samples)
@@ -104,49 +88,7 @@ def render_contact(strands, head_vertices, head_triangles, head_rgb, camera_matr
     hair_obj.data.materials.append(hair_mat)
     head_obj.data.materials.append(head_mat)
 
-    cam = bpy.data.cameras.new("camera")
-    cam.lens, cam.sensor_width, cam.sensor_fit = float(lens), float(sensor_width), 'AUTO'
-    cam.clip_start, cam.clip_end = 1e-3, 1e4
-    cam_obj = bpy.data.objects.new("camera", cam)
-    sc.collection.objects.link(cam_obj)
-    cam_obj.matrix_world = _matrix(camera_matrix)
-    sc.camera = cam_obj
-    _sun(sc, sun_direction, sun_strength)
-
-    world = bpy.data.worlds.new("black")
-    sc.world = world
-    if hasattr(world, "use_nodes") and not world.use_nodes:
-        world.use_nodes = True
-    bg = world.node_tree.nodes.get("Background")
-    if bg is not None:
-        bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
-        bg.inputs["Strength"].default_value = 0.0
-
-    sc.render.engine = 'CYCLES'
-    c = sc.cycles
-    c.device = 'CPU'
-    sc.render.threads_mode = 'FIXED'
-    sc.render.threads = int(os.cpu_count())
-    sc.render.resolution_x, sc.render.resolution_y = int(size[0]), int(size[1])
-    sc.render.resolution_percentage = 100
-    c.use_denoising = False
-    c.use_adaptive_sampling = False
-    c.max_bounces = 0
-    c.transparent_max_bounces = 0
-    c.sample_clamp_direct = 0.0
-    c.sample_clamp_indirect = 0.0
-    c.blur_glossy = 0.0
-    c.pixel_filter_type = 'BOX'
-    c.filter_width = 1.0
-    sc.cycles_curves.shape = 'THICK'
-    sc.view_settings.view_transform = 'Standard'
-    sc.view_settings.look = 'None'
-    sc.view_settings.exposure = 0.0
-    sc.view_settings.gamma = 1.0
-    fmt = sc.render.image_settings
-    fmt.file_format = 'OPEN_EXR'
-    fmt.color_depth = '32'
-    fmt.color_mode = 'RGBA'
+    direct_light_scene(sc, camera_matrix, size, sun_direction, sun_strength, lens, sensor_width)
 
     out = {"rgb": [], "seconds": []}
     for seed in seeds:

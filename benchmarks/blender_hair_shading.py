@@ -93,6 +93,22 @@ def render_cycles(strands, camera_matrix, size, sun_direction, sun_strength, hai
     obj = _hair_object(strands)
     obj.data.materials.append(_material(hair))
 
+    direct_light_scene(sc, camera_matrix, size, sun_direction, sun_strength, lens, sensor_width, threads)
+    sc.render.film_transparent = False
+    sc.cycles.samples = int(samples)
+    sc.cycles.seed = int(seed)
+    img, seconds = render_exr(sc)
+    return img[..., :3], seconds
+
+
+def direct_light_scene(sc, camera_matrix, size, sun_direction, sun_strength, lens=50.0, sensor_width=36.0,
+                       threads=None):
+    """Set scene `sc` up for a like-for-like comparison with the preview: the camera
+    (`camera_matrix`, 4x4 world), one delta sun along `sun_direction`, a black world giving
+    no light, Cycles on the CPU with direct light only (no bounces, no clamping, no glossy
+    blur, no denoiser, no adaptive sampling), a box pixel filter one pixel wide, thick
+    curves, the Standard view transform, and a 32-bit float EXR with alpha."""
+    bpy = _bpy()
     cam = bpy.data.cameras.new("camera")
     cam.lens, cam.sensor_width, cam.sensor_fit = float(lens), float(sensor_width), 'AUTO'
     cam.clip_start, cam.clip_end = 1e-3, 1e4
@@ -102,14 +118,11 @@ def render_cycles(strands, camera_matrix, size, sun_direction, sun_strength, hai
     sc.camera = cam_obj
 
     sun = bpy.data.lights.new("sun", 'SUN')
-    sun.energy = float(sun_strength)
-    sun.angle = 0.0
+    sun.energy, sun.angle = float(sun_strength), 0.0
     sun_obj = bpy.data.objects.new("sun", sun)
     sc.collection.objects.link(sun_obj)
-    # A sun shines along its local -Z.
     d = np.asarray(sun_direction, np.float64)
-    d /= np.linalg.norm(d)
-    z = -d
+    z = -d / np.linalg.norm(d)                      # a sun shines along its local -Z
     x = np.cross((0.0, 0.0, 1.0), z) if abs(z[2]) < 0.99 else np.array([1.0, 0.0, 0.0])
     x /= np.linalg.norm(x)
     m = np.eye(4)
@@ -126,34 +139,30 @@ def render_cycles(strands, camera_matrix, size, sun_direction, sun_strength, hai
         bg.inputs["Strength"].default_value = 0.0
 
     sc.render.engine = 'CYCLES'
-    sc.cycles.device = 'CPU'
+    c = sc.cycles
+    c.device = 'CPU'
     sc.render.threads_mode = 'FIXED'
     sc.render.threads = int(threads or os.cpu_count())
     sc.render.resolution_x, sc.render.resolution_y = int(size[0]), int(size[1])
     sc.render.resolution_percentage = 100
-    sc.render.film_transparent = False
-    sc.cycles.samples = int(samples)
-    sc.cycles.use_denoising = False
-    sc.cycles.use_adaptive_sampling = False
-    sc.cycles.max_bounces = 0
-    sc.cycles.transparent_max_bounces = 0
-    sc.cycles.sample_clamp_direct = 0.0
-    sc.cycles.sample_clamp_indirect = 0.0
-    sc.cycles.blur_glossy = 0.0
-    sc.cycles.pixel_filter_type = 'BOX'
-    sc.cycles.filter_width = 1.0
-    sc.cycles.seed = int(seed)
+    c.use_denoising = False
+    c.use_adaptive_sampling = False
+    c.max_bounces = 0
+    c.transparent_max_bounces = 0
+    c.sample_clamp_direct = 0.0
+    c.sample_clamp_indirect = 0.0
+    c.blur_glossy = 0.0
+    c.pixel_filter_type = 'BOX'
+    c.filter_width = 1.0
     sc.cycles_curves.shape = 'THICK'
     sc.view_settings.view_transform = 'Standard'
     sc.view_settings.look = 'None'
     sc.view_settings.exposure = 0.0
     sc.view_settings.gamma = 1.0
-    settings = sc.render.image_settings
-    settings.file_format = 'OPEN_EXR'
-    settings.color_depth = '32'
-    settings.color_mode = 'RGB'
-    img, seconds = render_exr(sc)
-    return img[..., :3], seconds
+    fmt = sc.render.image_settings
+    fmt.file_format = 'OPEN_EXR'
+    fmt.color_depth = '32'
+    fmt.color_mode = 'RGBA'
 
 
 def render_exr(sc):
