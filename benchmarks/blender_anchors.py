@@ -22,6 +22,16 @@ def _bpy():
     return bpy
 
 
+def empty_node_material(name):
+    """(material, its node tree) for a new material `name` with nodes on and none in it yet."""
+    mat = _bpy().data.materials.new(name)
+    if hasattr(mat, "use_nodes") and not mat.use_nodes:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    return mat, nt
+
+
 def reset_scene():
     bpy = _bpy()
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -197,12 +207,7 @@ class CyclesAnchor:
         sc.view_settings.look = 'None'
 
     def _material(self):
-        bpy = _bpy()
-        mat = bpy.data.materials.new("hair")
-        if hasattr(mat, "use_nodes") and not mat.use_nodes:
-            mat.use_nodes = True
-        nt = mat.node_tree
-        nt.nodes.clear()
+        mat, nt = empty_node_material("hair")
         attr = nt.nodes.new("ShaderNodeAttribute")
         attr.attribute_name = "strand_rgba"
         diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")

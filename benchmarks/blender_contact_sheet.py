@@ -21,12 +21,10 @@ Only this module (and the one it borrows from) imports bpy, lazily.
 
 import numpy as np
 
+from benchmarks.blender_anchors import _bpy, empty_node_material
 from benchmarks.blender_hair_shading import _hair_object, _material, direct_light_scene, render_exr
 
 
-def _bpy():
-    import bpy
-    return bpy
 
 
 def _head_object(vertices, triangles):
@@ -41,12 +39,7 @@ def _head_object(vertices, triangles):
 
 def _node_material(name, kind, rgb, strength=1.0):
     """A material of one shader node: "diffuse" (Lambert) or "emission"."""
-    bpy = _bpy()
-    mat = bpy.data.materials.new(name)
-    if hasattr(mat, "use_nodes") and not mat.use_nodes:
-        mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
+    mat, nt = empty_node_material(name)
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     if kind == "diffuse":
         node = nt.nodes.new("ShaderNodeBsdfDiffuse")

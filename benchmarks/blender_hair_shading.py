@@ -20,10 +20,7 @@ import time
 
 import numpy as np
 
-
-def _bpy():
-    import bpy
-    return bpy
+from benchmarks.blender_anchors import _bpy, empty_node_material
 
 
 def _matrix(m):
@@ -53,12 +50,7 @@ def _material(hair):
     """Principled Hair (Chiang). hair: dict with parametrization "melanin" (melanin,
     melanin_redness; the strand colour as Tint) or "color" (the strand colour, Direct
     Coloring), and roughness, radial_roughness, coat, ior, offset (radians)."""
-    bpy = _bpy()
-    mat = bpy.data.materials.new("hair")
-    if hasattr(mat, "use_nodes") and not mat.use_nodes:
-        mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
+    mat, nt = empty_node_material("hair")
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     bsdf = nt.nodes.new("ShaderNodeBsdfHairPrincipled")
     bsdf.model = 'CHIANG'
