@@ -105,6 +105,19 @@ uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
     return trep > 0.0 ? m : 0u;
 }
 
+// The samples with LAYERS hits among the list's cylinders nearer than t (counted with one
+// mask per count: have[k] holds the samples with more than k hits).
+uint samples_full(float t) {
+    uint have[LAYERS];
+    for (int k = 0; k < LAYERS; ++k) have[k] = 0u;
+    for (int j = 0; j < PIX_M; ++j) {
+        uint mj = lt[j] < t ? lm[j] : 0u;
+        for (int k = LAYERS - 1; k > 0; --k) have[k] |= have[k - 1] & mj;
+        have[0] |= mj;
+    }
+    return have[LAYERS - 1];
+}
+
 // Cylinder `id` (its TOP and TIP texels A4, B4) as a candidate of the central ray o + t·d:
 // into the list when any sample hits it, once (a cylinder comes from every cell or leaf
 // that lists it; the list keeps the first).
@@ -112,19 +125,11 @@ void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d) {
     float t;
     uint m = footprint_mask(A4, B4, cyl(id, CYL_N2).xyz, o, d, t);
     // Samples that already have LAYERS nearer hits in the list will never see this one:
-    // their bits go (one mask per count, as in pixel_settled), so the list spends no slot on
-    // what is hidden (thin strands end-on filled it with hidden ones and lost the hits of
-    // samples they did not cover).
-    uint have[LAYERS];
-    for (int k = 0; k < LAYERS; ++k) have[k] = 0u;
+    // their bits go, so the list spends no slot on what is hidden (thin strands end-on
+    // filled it with hidden ones and lost the hits of samples they did not cover).
+    m &= ~samples_full(t);
     bool dup = false;
-    for (int j = 0; j < PIX_M; ++j) {
-        dup = dup || lid[j] == id;
-        uint mj = lt[j] < t ? lm[j] : 0u;
-        for (int k = LAYERS - 1; k > 0; --k) have[k] |= have[k - 1] & mj;
-        have[0] |= mj;
-    }
-    m &= ~have[LAYERS - 1];
+    for (int j = 0; j < PIX_M; ++j) dup = dup || lid[j] == id;
     bool ok = m != 0u && !dup;
     float ct = ok ? t : BIG, ca = B4.w; int cid = ok ? id : NO_ID; uint cm = ok ? m : 0u;
     for (int j = 0; j < PIX_M; ++j) {
@@ -135,16 +140,9 @@ void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d) {
     }
 }
 
-// No farther cylinder can change the pixel: every sample has LAYERS hits in the list
-// (counted with one mask per count: have[k] holds the samples with more than k hits).
+// No farther cylinder can change the pixel: every sample has LAYERS hits in the list.
 bool pixel_settled() {
-    uint have[LAYERS];
-    for (int k = 0; k < LAYERS; ++k) have[k] = 0u;
-    for (int j = 0; j < PIX_M; ++j) {
-        for (int k = LAYERS - 1; k > 0; --k) have[k] |= have[k - 1] & lm[j];
-        have[0] |= lm[j];
-    }
-    return have[LAYERS - 1] == FULL;
+    return samples_full(BIG) == FULL;
 }
 
 // The farthest distance of a cylinder in the list.
