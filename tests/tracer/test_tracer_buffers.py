@@ -78,13 +78,18 @@ def _split_limit(r, idx_parts):
                r.grid.num_cells, len(r.strands.points))
 
 
-@pytest.mark.parametrize("build", BUILDS)
-def test_a_scene_split_over_several_buffers_renders_as_the_unsplit_scene(build):
+def _unsplit(build, settings):
+    """The dense scene, its camera, a renderer holding it in one buffer each, and its image."""
     s = _dense()
     cam = _camera(s, (48, 44))
     whole = Renderer(build=build)
     whole.set_strands(s)
-    want = whole.render(cam, SETTINGS)
+    return s, cam, whole, whole.render(cam, settings)
+
+
+@pytest.mark.parametrize("build", BUILDS)
+def test_a_scene_split_over_several_buffers_renders_as_the_unsplit_scene(build):
+    s, cam, whole, want = _unsplit(build, SETTINGS)
     want_work = _work(whole, cam)
     assert whole.buffers.parts("tex_cyl") == 1 and whole.buffers.parts("tex_idx") == 1
     assert want[..., 3].max() > 0
@@ -105,11 +110,7 @@ def test_a_scene_split_over_several_buffers_renders_as_the_unsplit_scene(build):
 
 @pytest.mark.parametrize("build", BUILDS)
 def test_the_pixel_sampler_renders_a_split_scene_as_the_unsplit_scene(build):
-    s = _dense()
-    cam = _camera(s, (48, 44))
-    whole = Renderer(build=build)
-    whole.set_strands(s)
-    want = whole.render(cam, PIXEL)      # its grid padded for the pixel's reach
+    s, cam, whole, want = _unsplit(build, PIXEL)      # its grid padded for the pixel's reach
     assert want[..., 3].max() > 0
     split = Renderer(max_buffer_texels=_split_limit(whole, 3), build=build)
     split.set_strands(s)
