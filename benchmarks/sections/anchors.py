@@ -23,6 +23,12 @@ textures of the driver) are timed once after one warm-up (the tracer) or once (C
 every render pays sync and BVH build anyway), without the float64 references (numpy over
 61 M cylinders needs more memory than the machine has); the tracer's GPU buffers are given
 back before Cycles renders, so the two never hold the scene at once.
+
+Beside each scene's independent samples (one walk per sample, as Cycles takes them), the
+pixel sampler at the highest sample count (`RenderSettings(sampler="pixel")`: all of a pixel's
+samples share one walk and each distinct strand is shaded once, docs/DECISIONS.md "Samples of
+one pixel share the walk"), compared with Cycles at the same samples, with its error against
+the tracer's own independent image at those samples (RMSE over the pixels either has hair in).
 """
 import os
 import tempfile
@@ -120,21 +126,38 @@ def run(sec, cfg):
     low = min(cfg.anc_spp)
     by_cost = sorted(scenes, key=lambda s: s.strands.num_segments)     # cheapest first
     huge = [sc for sc in by_cost if _huge(sc)]
-    jobs = ([(low, sc) for sc in huge]
-            + [(spp, sc) for spp in sorted(cfg.anc_spp) for sc in by_cost if not _huge(sc)]
-            + [(spp, sc) for spp in sorted(cfg.anc_spp) if spp != low for sc in huge])
-    for spp, sc in jobs:
+    # The pixel sampler's rows (its Cycles figure is the independent row's) come after each
+    # scene's independent ones.
+    top, ind = max(cfg.anc_spp), "independent"
+    jobs = ([(low, ind, sc) for sc in huge]
+            + [(spp, ind, sc) for spp in sorted(cfg.anc_spp) for sc in by_cost if not _huge(sc)]
+            + [(top, PIXEL, sc) for sc in by_cost if not _huge(sc) and top > 1]
+            + [(spp, ind, sc) for spp in sorted(cfg.anc_spp) if spp != low for sc in huge]
+            + [(top, PIXEL, sc) for sc in huge if top > 1])
+    for spp, sampler, sc in jobs:
+        key = _key(spp, sampler)
         try:
-            _tracer_job(sec, cfg, tracer, sc, spp)
-            _cycles_job(sec, cfg, sc, spp, size)
+            _tracer_job(sec, cfg, tracer, sc, spp, sampler)
+            if sampler == ind:
+                _cycles_job(sec, cfg, sc, spp, size)
         except Exception as e:  # noqa: BLE001 — one scene failing must not lose the others
-            sc.ours.setdefault(spp, f"failed: {type(e).__name__}: {e}")
-            if isinstance(sc.ours.get(spp), tuple):
+            sc.ours.setdefault(key, f"failed: {type(e).__name__}: {e}")
+            if isinstance(sc.ours.get(key), tuple) and sampler == ind:
                 sc.cycles[spp] = f"failed: {type(e).__name__}: {e}"
     _report(sec, cfg, scenes, size)
 
 
-def _predicted(sc, spp, cfg):
+# The samplers of the table's rows: independent samples at every count of cfg.anc_spp, the
+# pixel sampler at the highest (see the module text).
+PIXEL = "pixel"
+
+
+def _key(spp, sampler):
+    """The key of a job's results in _Scene.ours / images: the sample count, or (count, sampler)."""
+    return spp if sampler == "independent" else (spp, sampler)
+
+
+def _predicted(sc, spp, cfg, sampler="independent"):
     """Seconds one run of the tracer at `spp` should take, from the lowest-spp figures (render
     time grows with samples, upload does not); None before those exist."""
     low = min(cfg.anc_spp)
@@ -142,17 +165,20 @@ def _predicted(sc, spp, cfg):
     if not isinstance(base, tuple) or spp == low:
         return None
     first, again, _ = base
+    if sampler == PIXEL:    # one walk for all samples: measured at 2-4x one sample's time
+        return first.median + again.median * 4
     return first.median + again.median * (spp / low - 1)
 
 
-def _tracer_job(sec, cfg, tracer, sc, spp):
+def _tracer_job(sec, cfg, tracer, sc, spp, sampler="independent"):
     r = sc.renderer
-    rs = settings(spp=spp, layers=LAYERS, shading="kajiya-kay")
-    guess = _predicted(sc, spp, cfg)
+    rs = settings(spp=spp, layers=LAYERS, shading="kajiya-kay", sampler=sampler)
+    key = _key(spp, sampler)
+    guess = _predicted(sc, spp, cfg, sampler)
     runs = _runs(sc, cfg)
     # first render + re-render, each (runs + 1) times
     if guess is not None and 2 * guess * (runs + 1) > left(sec):
-        sc.ours[spp] = (f"tracer: one run should take about {fmt_time(guess)} (from the {min(cfg.anc_spp)}-spp runs), "
+        sc.ours[key] = (f"tracer: one run should take about {fmt_time(guess)} (from the {min(cfg.anc_spp)}-spp runs), "
                         f"more than the {fmt_time(max(0, left(sec)))} left allows for {runs} run(s)")
         return
     try:
@@ -160,7 +186,7 @@ def _tracer_job(sec, cfg, tracer, sc, spp):
                             budget=left(sec))
         if sc.cold is None:
             sc.cold = first.warmups[0]
-        if spp == min(cfg.anc_spp):
+        if key == min(cfg.anc_spp):
             st = r.stats
             sc.parts = (st.cylinders_s, st.upload_s, st.grid_s, st.render_s, st.grid_build or "numpy")
         flip = {"on": False}
@@ -174,12 +200,12 @@ def _tracer_job(sec, cfg, tracer, sc, spp):
         no_upload = r.stats.bytes_uploaded == uploaded
         if flip["on"]:      # the last run saw the moved camera
             img = r.render(sc.cam, rs)
-        sc.ours[spp] = (first, again, no_upload)
-        sc.images[("ours", spp)] = img
+        sc.ours[key] = (first, again, no_upload)
+        sc.images[("ours", key)] = img
         if _huge(sc):
             sc.parts_split = (r.buffers.parts("tex_cyl"), r.buffers.parts("tex_idx"))
     except TooSlow as e:
-        sc.ours[spp] = f"tracer: {e}"
+        sc.ours[key] = f"tracer: {e}"
         return
     finally:
         if _huge(sc):       # several GB the Cycles render needs more
@@ -188,7 +214,7 @@ def _tracer_job(sec, cfg, tracer, sc, spp):
         sc.error_note = ("not measured: the float64 references (numpy) over "
                          f"{sc.strands.num_segments / 1e6:.0f} M cylinders need more memory than this machine has")
         return
-    if sc.error is None and spp == min(cfg.anc_spp) and left(sec) > 0:
+    if sc.error is None and key == min(cfg.anc_spp) and left(sec) > 0:
         # Error beside the time: both float64 references over the whole image (a random
         # subset of its pixel centres where every pixel would not fit the scene's share of
         # the budget), and the old method's window once for comparison.
@@ -234,16 +260,21 @@ def _report(sec, cfg, scenes, size):
         c1 = sc.cycles.get(min(cfg.anc_spp))
         c1 = c1.median if hasattr(c1, "median") else None
         label = f"{sc.strands.num_strands:,} / {sc.strands.num_segments:,}"
-        for spp in cfg.anc_spp:
-            ours, theirs = sc.ours.get(spp), sc.cycles.get(spp)
+        top = max(cfg.anc_spp)
+        for key in list(cfg.anc_spp) + ([_key(top, PIXEL)] if top > 1 else []):
+            spp = key[0] if isinstance(key, tuple) else key
+            shown = f"{spp}, pixel sampler" if isinstance(key, tuple) else str(spp)
+            ours, theirs = sc.ours.get(key), sc.cycles.get(spp)
             if not isinstance(ours, tuple) or not hasattr(theirs, "median"):
                 why = ours if isinstance(ours, str) else theirs if isinstance(theirs, str) else "time budget"
                 if isinstance(ours, tuple):     # ours measured, Cycles not: still show ours
                     why = f"{why}; tracer first render {ours[0]}, re-render {ours[1]}"
-                rows.append([sc.name, label, str(spp), f"not measured: {why}"] + [""] * 7)
+                rows.append([sc.name, label, shown, f"not measured: {why}"] + [""] * 7)
                 continue
             first, again, no_upload = ours
-            if sc.error and spp == min(cfg.anc_spp):
+            if isinstance(key, tuple):
+                err = _pixel_error(sc, key, spp)
+            elif sc.error and spp == min(cfg.anc_spp):
                 model, solid, side, old = sc.error
                 err = " · ".join(f"{100 * e['iou']:.3f} % / {fmt_num(e['rmse_hair'])} / {fmt_num(e['max_abs'])} "
                                  f"({e['hair_pixels']:,} hair px of {e['rays']:,})" for e in (model, solid))
@@ -251,11 +282,17 @@ def _report(sec, cfg, scenes, size):
             else:
                 err = ("see the lowest-spp row" if sc.error else sc.error_note if sc.error_note
                        else "not measured: time budget")
-            rows.append([sc.name, label, str(spp), str(theirs), str(first), f"{ratio(first.median, theirs.median):.2f}",
+            rows.append([sc.name, label, shown, str(theirs), str(first), f"{ratio(first.median, theirs.median):.2f}",
                          f"{ratio(first.median, c1):.2f}" if c1 else "n/a", str(again),
                          f"{ratio(again.median, c1):.2f}" if c1 else "n/a", "yes" if no_upload else "NO", err])
             sec.data.setdefault("rows", []).append({"scene": sc.name, "spp": spp, "cycles": theirs.median,
+                                                    "sampler": key[1] if isinstance(key, tuple) else "independent",
                                                     "first": first.median, "rerender": again.median})
+            if isinstance(key, tuple):
+                sec.summary.append(f"{sc.name}: {spp} spp with the pixel sampler: first {fmt_time(first.median)} = "
+                                   f"{ratio(first.median, theirs.median):.2f}× Cycles {spp} spp "
+                                   f"({fmt_time(theirs.median)}); re-render {ratio(again.median, theirs.median):.2f}×; "
+                                   + err)
         lowest = sc.ours.get(min(cfg.anc_spp))
         if isinstance(lowest, tuple) and c1:
             f1, a1 = lowest[0].median, lowest[1].median
@@ -281,6 +318,19 @@ def _report(sec, cfg, scenes, size):
               rows, caption=f"The tracer against Cycles at {size[0]}×{size[1]} (medians, same run).")
     if pics:
         _side_by_side(sec, pics)
+
+
+def _pixel_error(sc, key, spp):
+    """The pixel sampler's image against the tracer's independent one at the same samples."""
+    pix, ind = sc.images.get(("ours", key)), sc.images.get(("ours", spp))
+    if pix is None or ind is None:
+        return f"error not measured: no independent {spp}-spp image to compare with"
+    a, b = np.asarray(pix, np.float64), np.asarray(ind, np.float64)
+    hair = (a[..., 3] > 0) | (b[..., 3] > 0)
+    if not hair.any():
+        return "error not measured: neither image has hair"
+    rmse = float(np.sqrt(np.mean((a - b)[hair] ** 2)))
+    return f"vs the independent {spp}-spp image: RMSE (hair) {fmt_num(rmse)} over {int(hair.sum()):,} px"
 
 
 def _side_by_side(sec, pics):
