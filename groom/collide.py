@@ -811,30 +811,6 @@ def resolve_strands(collider, points, counts, radius, margin, threads=None, dtyp
     pays its steps' overhead once; the bound keeps
     its arrays to some 100 MB); each strand's numbers depend only on itself, never on its
     range or part."""
-    return walk_offending(find_offending(collider, points, counts, radius, margin, threads, dtype, in_place), threads)
-
-
-@dataclass
-class _Offending:
-    """find_offending's answer: what walk_offending needs (the strands that must move, their
-    first offending points, their roots' sampled distances) and where it writes."""
-    collider: object
-    points: np.ndarray
-    offsets: np.ndarray
-    counts: np.ndarray
-    radius: np.ndarray
-    margin: float
-    out: np.ndarray
-    moved: np.ndarray
-    stats: CollisionStats
-    strands: np.ndarray
-    k0: np.ndarray
-    root_value: np.ndarray
-
-
-def find_offending(collider, points, counts, radius, margin, threads=None, dtype=np.float32, in_place=False):
-    """resolve_strands's first pass: the strands that must move, as an _Offending for
-    walk_offending (which may run later, on another thread: it touches only these arrays)."""
     counts = np.asarray(counts, np.int64)
     points, radius = np.asarray(points), np.asarray(radius)
     offsets = np.zeros(len(counts), np.int64)
@@ -842,31 +818,20 @@ def find_offending(collider, points, counts, radius, margin, threads=None, dtype
     out = points if in_place else np.array(points, dtype=dtype, copy=True)
     moved = np.zeros(len(counts), bool)
     stats = CollisionStats(strands=len(counts), points=int(counts.sum()))
-    none = np.zeros(0, np.int64)
-    found = _Offending(collider, points, offsets, counts, radius, margin, out, moved, stats, none, none,
-                       np.zeros(0))
     if not len(counts):
-        return found
-    parts = run_jobs([partial(_offending, collider, points, offsets, counts, radius, margin, lo, hi)
+        return out, moved, stats
+    found = run_jobs([partial(_offending, collider, points, offsets, counts, radius, margin, lo, hi)
                       for lo, hi in ranges(len(counts), threads)], threads)
-    found.strands = np.concatenate([f[0] for f in parts])
-    found.k0 = np.concatenate([f[1] for f in parts])
-    found.root_value = np.concatenate([f[2] for f in parts])
-    stats.points_inside_before = sum(f[3] for f in parts)
-    return found
-
-
-def walk_offending(found, threads=None):
-    """resolve_strands's walk of the strands find_offending found: (points, moved, stats)."""
-    f = found
-    out, moved, stats, strands, counts = f.out, f.moved, f.stats, f.strands, f.counts
+    strands = np.concatenate([f[0] for f in found])
+    k0 = np.concatenate([f[1] for f in found])
+    root_value = np.concatenate([f[2] for f in found])
+    stats.points_inside_before = sum(f[3] for f in found)
     if not strands.size:
         return out, moved, stats
-    k0, root_value = f.k0, f.root_value
     n_parts = max(min(-(-len(strands) // _MIN_WALK_PART), threads or cpu_threads()), -(-len(strands) // _WALK_PART))
     parts = np.array_split(np.arange(len(strands)), n_parts)
-    walked = run_jobs([partial(_walk_strands, f.collider, f.points, f.offsets, counts, f.radius, f.margin, strands[p],
-                               k0[p], root_value[p]) for p in parts if len(p)], threads)
+    walked = run_jobs([partial(_walk_strands, collider, points, offsets, counts, radius, margin, strands[p], k0[p],
+                               root_value[p]) for p in parts if len(p)], threads)
     for part, (rows, new, changed, unresolved, largest) in zip([p for p in parts if len(p)], walked):
         ch = _indices(changed)
         out[rows[ch]] = _take(new, ch)
@@ -1335,23 +1300,13 @@ class StrandCollision:
 
     def apply(self, points, counts, radius, sel=None, threads=None):
         """Points (float32) of strands `sel` (None: all) moved out of the collider."""
-        new, moved, stats = walk_offending(self.find(points, counts, radius, threads), threads)
-        self.record(moved, stats, sel)
-        return new
-
-    def find(self, points, counts, radius, threads=None):
-        """apply in two steps: this first pass (find_offending, the points moved in place),
-        then walk_offending of its answer (on any thread: it touches only the points of
-        these strands) and record of what that returns."""
-        return find_offending(self.collider, points, counts, radius, self.margin, threads, in_place=True)
-
-    def record(self, moved, stats, sel=None):
-        """Keep walk_offending's answer for strands `sel` (None: all)."""
-        self.last = stats
+        new, moved, self.last = resolve_strands(self.collider, points, counts, radius, self.margin, threads,
+                                                in_place=True)
         if sel is None:
             self.moved = moved
         else:
             self.moved[sel] = moved
+        return new
 
     def report(self):
         return CollisionReport(self.collider.name, int(self.moved.sum()), self.keys_inside, self.last)

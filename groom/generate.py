@@ -36,8 +36,8 @@ from .keys import KeyStrand
 from .params import GroomParams
 from .sampling import sample_roots
 from .scalp import Scalp
-from .parallel import MIN_SPLIT, background, ranges, run_jobs
-from .collide import CollisionReport, CollisionStats, StrandCollision, walk_offending
+from .parallel import MIN_SPLIT, ranges, run_jobs
+from .collide import CollisionReport, CollisionStats, StrandCollision
 from .shaping import clump_arguments, shape_strands, shaping_bound
 from .wisps import check_groups, guide_weights_by_guide, root_groups_for
 
@@ -297,16 +297,14 @@ class _Grower:
         self._note_resolution(idx, res.met, tol, res.needed)
         return res.sigma, res.counts
 
-    def _grow(self, context, roots, transforms, g, w, frac, ids, idx, report, plan=None, into=None, defer=False):
+    def _grow(self, context, roots, transforms, g, w, frac, ids, idx, report, plan=None, into=None):
         """Points and attributes (points, counts, radius, colour, alpha) of one block of
         strands from their per-strand inputs, component-major: roots (3, n), transforms (9,
         n), guides g (3, n), weights w (3, n), length fractions and ids (n,); idx: where they
         lie among the strands (a slice or indices), for the resolution and collision notes;
         plan: their _plan, made here when None; into: None or (points, radius, colour, alpha)
         arrays of the block's rows of the whole result, written where the work allows (the
-        arrays returned are then those). defer: leave the collision's walk (the strands it
-        found, collide.find_offending's answer, come last, or None without a collider) to
-        the caller."""
+        arrays returned are then those)."""
         p = self.params
         radii, rows = context["radii"], context["rows"]
         report(0.0, "growing strands")
@@ -334,10 +332,8 @@ class _Grower:
         del sigma
         if self._collision is not None:
             report(0.6, "moving hair out of the collider")
-            if defer:
-                return (pts, counts) + tuple(attrs) + (self._collision.find(pts, counts, attrs[0], threads),)
             pts = self._collision.apply(pts, counts, attrs[0], idx, threads)
-        return (pts, counts) + tuple(attrs) + ((None,) if defer else ())
+        return (pts, counts) + tuple(attrs)
 
     def _attributes(self, ids, counts, along, g, w, base_radius, out=None):
         """(radius, colour, alpha) per point (cylinders.strand_attributes) from the guides' colours."""
@@ -516,47 +512,22 @@ class Generator(_Grower):
         total = int(counts.sum())
         out = (_plain_empty((total, 3)), _plain_empty(total), _plain_empty((total, 3)), _plain_empty(total))
         stats, at = CollisionStats(), 0
-        walking = None      # the walk of the block before, and its idx
-
-        def walked():
-            """Wait for the block before's walk, and keep what it did."""
-            if walking is not None:
-                _, moved, block_stats = walking[0].result()
-                self._collision.record(moved, block_stats, walking[1])
-                stats.add(block_stats)
-        try:
-            for i in range(len(blocks)):
-                inputs, idx = block(i)
-                plan, plans[i] = plans[i], None
-                # The block grows straight into its rows of the whole (no copy of some 32 bytes
-                # a point, nor the fresh pages of a block's own arrays).
-                rows = slice(at, at + int(plan[1].sum()))
-                grown = self._grow(context, *inputs, idx, self._block_report(i, len(blocks), 0.35), plan,
-                                   into=tuple(whole[rows] for whole in out), defer=True)
-                del plan
-                found = grown[-1]
-                for whole, part in zip(out, grown[:1] + grown[2:-1]):
-                    if not np.may_share_memory(whole, part):
-                        whole[rows] = part
-                at = rows.stop
-                del grown
-                walked()
-                walking = None
-                if found is not None:
-                    # The collision's walk (a loop of small steps, mostly interpreter time)
-                    # runs on a thread of its own beside the next block's whole-array work,
-                    # which leaves the cores free between its numpy calls; the last block's
-                    # walks on the workers. Each touches only its own block's rows.
-                    if i + 1 < len(blocks):
-                        walking = (background(partial(walk_offending, found, 1)), idx)
-                    else:
-                        self._collision.record(*walk_offending(found)[1:], idx)
-                        stats.add(self._collision.last)
-                del found
-            walked()
-        finally:
-            if walking is not None:
-                walking[0].exception()    # no walk may still be writing when the caller goes on
+        for i in range(len(blocks)):
+            inputs, idx = block(i)
+            plan, plans[i] = plans[i], None
+            # The block grows straight into its rows of the whole (no copy of some 32 bytes a
+            # point, nor the fresh pages of a block's own arrays).
+            rows = slice(at, at + int(plan[1].sum()))
+            grown = self._grow(context, *inputs, idx, self._block_report(i, len(blocks), 0.35), plan,
+                               into=tuple(whole[rows] for whole in out))
+            del plan
+            for whole, part in zip(out, grown[:1] + grown[2:]):
+                if not np.may_share_memory(whole, part):
+                    whole[rows] = part
+            at = rows.stop
+            del grown
+            if self._collision is not None:
+                stats.add(self._collision.last)
         if self._collision is not None:
             self._collision.last = stats
         self._report(0.95, "writing strands")

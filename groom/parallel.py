@@ -59,14 +59,3 @@ def ranges(n, threads=None, size=RANGE_SIZE, min_size=MIN_SPLIT):
     parts = max(parts, min(threads or cpu_threads(), n // max(min_size, 1)))
     edges = [n * i // parts for i in range(parts + 1)]
     return list(zip(edges[:-1], edges[1:]))
-
-
-def background(job):
-    """Start job() on a thread of its own and return its concurrent.futures.Future. Work
-    that job hands to run_jobs runs on that thread itself (it is named as a worker): it
-    overlaps the caller's own run_jobs instead of queueing behind them."""
-    key = (os.getpid(), "background")
-    pool = _POOLS.get(key)
-    if pool is None:
-        pool = _POOLS[key] = ThreadPoolExecutor(max_workers=1, thread_name_prefix=_PREFIX + "-background")
-    return pool.submit(job)
