@@ -117,7 +117,7 @@ def _plain_empty(shape, dtype=np.float32):
 
 
 # Arrays of the whole result from this size on get plain pages (_plain_empty).
-_PLAIN_PAGES_FROM = 64 << 20
+_PLAIN_PAGES_FROM = 128 << 20
 
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)

@@ -78,7 +78,7 @@ def _smallest_rows(d, k):
     sort. Root-major int64 bits (a non-negative double's bits order as it does), each key
     taken marked above any of them (inf included) and the next found by argmin, which keeps
     the first of equal values."""
-    bits = np.ascontiguousarray(d.T).view(np.int64)
+    bits = np.array(d.T, order="C").view(np.int64)     # a copy: d itself is read afterwards
     cols = np.arange(len(bits))
     sel = np.empty((k, len(bits)), np.int64)
     for i in range(k):
