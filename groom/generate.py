@@ -108,8 +108,9 @@ def _block_ranges(n, size):
 def _plain_empty(shape, dtype=np.float32):
     """np.empty, but a large array gets plain pages of its own (an anonymous mapping) rather
     than numpy's, which it advises the kernel to back with 2 MB pages: for the result of a
-    million strands (2 GB) that advice cost 3 to 5 s of system time on a machine whose
-    memory other work had fragmented, against 1 to 2 s without it (measured, same run)."""
+    million strands (2 GB) that advice cost 5 to 7 s of system time a generate, against 1.6
+    to 3.8 s on plain pages (docs/DECISIONS.md). Below _PLAIN_PAGES_FROM the 2 MB pages
+    cost less (fewer faults)."""
     size = int(np.prod(shape)) * np.dtype(dtype).itemsize
     if size < _PLAIN_PAGES_FROM:
         return np.empty(shape, dtype)
