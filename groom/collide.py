@@ -890,7 +890,7 @@ def _offending(collider, points, offsets, counts, radius, margin, lo, hi):
         bad, at_end = _offends(collider, p, lambda j: 0.5 * (_take(p, j) + _take(pts, i[j] - 1)),
                                target[i].astype(np.float64), root_value[w], _take(roots, w))
         inside += int((at_end < -rad[i]).sum())
-        np.minimum.at(first_bad, w[bad], at[sel][bad])
+        _lower_to_first(first_bad, w[bad], at[sel][bad])
     hit = first_bad < np.iinfo(np.int64).max
     return lo + suspect[hit], first_bad[hit], root_value[hit], inside
 
@@ -1220,8 +1220,21 @@ def _offence(collider, pts, half, target, off, start, end, delta, root_value, ro
         sl = s_of[look]
         bad, _ = _offends(collider, _take(p, look), lambda i: middles(look[i]), target[idx[look]], root_value[sl],
                           _take(roots, sl))
-        np.minimum.at(first, sl[bad], (idx[look] - off[sl])[bad])
+        _lower_to_first(first, sl[bad], (idx[look] - off[sl])[bad])
     return first
+
+
+def _lower_to_first(out, strands, values):
+    """np.minimum.at(out, strands, values) where `strands` does not decrease and `values`
+    rises within each strand (points in order): each strand's first value is its least,
+    so one look per strand instead of ufunc.at's slow loop."""
+    if not strands.size:
+        return
+    new = np.empty(len(strands), bool)
+    new[0] = True
+    np.not_equal(strands[1:], strands[:-1], out=new[1:])
+    s, v = strands[new], values[new]
+    out[s] = np.minimum(out[s], v)
 
 
 def _translate(result, pts, off, k, end, delta):

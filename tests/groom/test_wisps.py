@@ -106,3 +106,18 @@ def test_interpolate_mode_weights_are_continuous_across_wisp_borders():
         np.add.at(full, (np.arange(len(x))[:, None], g), w)
         jump = np.abs(np.diff(full, axis=0)).max()
         assert (jump < 0.01) == continuous
+
+
+def test_smallest_rows_is_the_stable_sort_and_leaves_the_distances():
+    # Ties (to the lower key index), another group's keys (inf) and a single root (a (K, 1)
+    # array whose transpose is contiguous) as the stable sort orders them.
+    from groom.wisps import _smallest_rows
+    rng = np.random.default_rng(3)
+    for roots in (1, 2, 257):
+        d = rng.integers(0, 4, (24, roots)).astype(np.float64) ** 2
+        d[rng.random(d.shape) < 0.3] = np.inf
+        d[:, 0] = np.inf
+        before = d.copy()
+        for k in (1, 3, 24):
+            np.testing.assert_array_equal(_smallest_rows(d, k), np.argsort(d, axis=0, kind="stable")[:k])
+        np.testing.assert_array_equal(d, before)
