@@ -242,9 +242,12 @@ void main() {
 
     // Each sample's compositing, entry by entry in depth order: the entry's weight and the
     // middle of the samples it covers.
-    float Ts[PN]; int cnt[PN];
+    float Ts[PN];
+#if LAYERS > 1
+    const int NE = PIX_M;
+    float wgt[NE]; vec2 mid[NE]; int eids[NE]; float ets[NE];
+    int cnt[PN];
     for (int s = 0; s < PN; ++s) { Ts[s] = 1.0; cnt[s] = 0; }
-    float wgt[PIX_M]; vec2 mid[PIX_M];
     for (int j = 0; j < PIX_M; ++j) {
         float a = la[j], wj = 0.0, nj = 0.0;
         vec2 cj = vec2(0.0);
@@ -258,12 +261,33 @@ void main() {
         }
         wgt[j] = wj / float(PN);
         mid[j] = cj / max(nj, 1.0);
+        eids[j] = lid[j]; ets[j] = lt[j];
     }
+#else
+    // One layer: each sample's own nearest hit. The entries are the samples that come first
+    // among those on their cylinder, each with the weight of all of them (the middle is
+    // worked out for the ones shaded). A pixel no sample hits skips the grouping.
+    const int NE = PN;
+    float wgt[NE]; int eids[NE]; float ets[NE];
+    for (int s = 0; s < PN; ++s) { Ts[s] = 1.0 - sa[s]; wgt[s] = 0.0; eids[s] = sid[s]; ets[s] = st[s]; }
+    if (have != 0u) {
+        for (int s = 0; s < PN; ++s) {
+            float wj = 0.0;
+            bool first = sid[s] != NO_ID;
+            for (int k = 0; k < PN; ++k) {
+                bool same = sid[k] == sid[s];
+                first = first && !(same && k < s);
+                wj += same ? sa[k] : 0.0;
+            }
+            wgt[s] = first ? wj / float(PN) : 0.0;
+        }
+    }
+#endif
     // The PIX_SHADE heaviest entries are shaded; the weight of the others (at most a few
     // samples each) goes to them in proportion, so the pixel keeps its brightness.
     float wall = 0.0, wshaded = 0.0;
     int nshade = 0;
-    for (int j = 0; j < PIX_M; ++j) {
+    for (int j = 0; j < NE; ++j) {
         wall += wgt[j];
         nshade += wgt[j] >= SHADE_MIN ? 1 : 0;
     }
@@ -275,12 +299,24 @@ void main() {
     for (int i = 0; i < nshade; ++i) {
         // The heaviest entry not shaded yet, by constant indices (accel.glsl says why).
         int eid = 0, pick = -1; float wi = -1.0, et = 0.0; vec2 mi = vec2(0.0);
-        for (int j = 0; j < PIX_M; ++j) {
+        for (int j = 0; j < NE; ++j) {
             bool here = wgt[j] > wi;
             pick = here ? j : pick;
-            eid = here ? lid[j] : eid; wi = here ? wgt[j] : wi; et = here ? lt[j] : et; mi = here ? mid[j] : mi;
+            eid = here ? eids[j] : eid; wi = here ? wgt[j] : wi; et = here ? ets[j] : et;
+#if LAYERS > 1
+            mi = here ? mid[j] : mi;
+#endif
         }
-        for (int j = 0; j < PIX_M; ++j) wgt[j] = j == pick ? -1.0 : wgt[j];
+#if LAYERS == 1
+        float ni = 0.0;
+        for (int s = 0; s < PN; ++s) {
+            bool same = sid[s] == eid;
+            mi += same ? px_off[s] : vec2(0.0);
+            ni += same ? 1.0 : 0.0;
+        }
+        mi /= max(ni, 1.0);
+#endif
+        for (int j = 0; j < NE; ++j) wgt[j] = j == pick ? -1.0 : wgt[j];
         wshaded += wi;
         vec3 so, sd;
         sample_ray(o, d, mi, so, sd);
