@@ -56,7 +56,8 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint
 int occluder[NUM_LIGHTS];   // per light, the last cylinder that blocked a shadow ray
 #endif
 
-vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
+// The surface of cylinder `id` where the ray o + t·d meets it (surf: which face).
+Surface surface_at(int id, int surf, vec3 o, vec3 d, float t) {
     vec4 A4 = cyl(id, CYL_TOP);
     vec4 B4 = cyl(id, CYL_TIP);
     Surface s;
@@ -66,14 +67,26 @@ vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
     s.V = d;
     // A model that reads no normal (Kajiya-Kay) leaves this to the compiler to drop.
     s.N = cylinder_normal(id, surf, s.p, d, B4.xyz, s.T);
+    return s;
+}
+
+// Light l's direction from p, and how far it is (BIG: directional).
+vec3 light_dir(int l, vec3 p, out float dist) {
+    vec3 L;
+    if (light_vec[l].w > 0.5) { L = light_vec[l].xyz - p; dist = length(L); L /= max(dist, 1e-30); }
+    else { L = -light_vec[l].xyz; dist = BIG; }
+    return L;
+}
+
+vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
+    Surface s = surface_at(id, surf, o, d, t);
     vec3 result = material.x * s.color;
     for (int l = 0; l < NUM_LIGHTS; ++l) {
-        vec3 L; float dist;
-        if (light_vec[l].w > 0.5) { L = light_vec[l].xyz - s.p; dist = length(L); L /= max(dist, 1e-30); }
-        else { L = -light_vec[l].xyz; dist = BIG; }
+        float dist;
+        vec3 L = light_dir(l, s.p, dist);
         float lit = 1.0;
 #if SHADOWS
-        lit = shadow_ray(s.p, L, dist, id, 1e-3 * A4.w, occluder[l]);
+        lit = shadow_ray(s.p, L, dist, id, 1e-3 * cyl(id, CYL_TOP).w, occluder[l]);
         if (lit <= 0.0) continue;
 #endif
         result += lit * light_col[l] * shade_light(s, L);
@@ -291,7 +304,13 @@ void main() {
         wall += wgt[j];
         nshade += wgt[j] >= SHADE_MIN ? 1 : 0;
     }
+#if LAYERS == 1
+    nshade = min(nshade, PIX_SHADE_ONE);
+    float vis[NUM_LIGHTS];
+    for (int l = 0; l < NUM_LIGHTS; ++l) vis[l] = 1.0;
+#else
     nshade = min(nshade, PIX_SHADE);
+#endif
     vec3 C = vec3(0.0);
 #if SHADOWS
     for (int l = 0; l < NUM_LIGHTS; ++l) occluder[l] = -1;
@@ -325,7 +344,24 @@ void main() {
         // The middle of the covered samples lies on the strand but for the linear test's
         // rounding; where the exact test disagrees, the side at the representative distance.
         bool exact = th > 0.0;
+#if LAYERS == 1
+        // One layer: the strands a pixel shows lie side by side in front, lit alike, so the
+        // heaviest one's shadow rays give every shaded strand its lights' visibility (the
+        // shadow walks are what costs; the shading itself little).
+        Surface S = surface_at(eid, exact ? surf : 0, so, sd, exact ? th : et);
+        vec3 c = material.x * S.color;
+        for (int l = 0; l < NUM_LIGHTS; ++l) {
+            float dist;
+            vec3 L = light_dir(l, S.p, dist);
+#if SHADOWS
+            if (i == 0) vis[l] = shadow_ray(S.p, L, dist, eid, 1e-3 * cyl(eid, CYL_TOP).w, occluder[l]);
+#endif
+            c += vis[l] * light_col[l] * shade_light(S, L);
+        }
+        C += wi * c;
+#else
         C += wi * shade(eid, exact ? surf : 0, so, sd, exact ? th : et);
+#endif
 #if COUNT
         counter.y += 1.0;
 #endif
