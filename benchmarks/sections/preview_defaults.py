@@ -14,8 +14,9 @@ Times: the median of the harness's runs for the one-sample settings; the many-sa
 renders, a single run.
 
 The pixel sampler (RenderSettings(sampler="pixel")) takes all of a pixel's samples in one walk
-and shades the strand that covers most of the pixel once (docs/DECISIONS.md, "Samples of one
-pixel share the walk"); its rows beside the 16-spp row give the cost of 16 samples shared
+and shades each of the few strands that cover most of the pixel once, with one set of shadow
+rays per pixel when the hair is opaque, as it is in both scenes (docs/DECISIONS.md, "Samples of
+one pixel share the walk"); its rows beside the 16-spp row give the cost of 16 samples shared
 against 16 separate ones. The default changes only for settings that meet both goals on every
 scene measured.
 
