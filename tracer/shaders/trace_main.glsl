@@ -204,7 +204,8 @@ void camera_ray(float x, float y, out vec3 o, out vec3 d, out float len) {
 // transmittance fell below t_eps past the first, as trace() does per sample), which gives
 // every distinct cylinder its weight in the pixel; the PIX_SHADE heaviest that weigh at least
 // SHADE_MIN are shaded, once each, on the ray through the middle of the samples they cover,
-// with one shadow ray per light. Loops over the samples and the list have constant trip counts and
+// with one shadow ray per light (with one layer the PIX_SHADE_ONE heaviest, all with the
+// heaviest one's shadow rays). Loops over the samples and the list have constant trip counts and
 // are unrolled, so llvmpipe's cap on loop iterations sees one walk and the shading loop.
 const float SHADE_MIN = 1.0 / 512.0;
 
@@ -296,8 +297,9 @@ void main() {
         }
     }
 #endif
-    // The PIX_SHADE heaviest entries are shaded; the weight of the others (at most a few
-    // samples each) goes to them in proportion, so the pixel keeps its brightness.
+    // The PIX_SHADE (one layer: PIX_SHADE_ONE) heaviest entries are shaded; the weight of the
+    // others (at most a few samples each) goes to them in proportion, so the pixel keeps its
+    // brightness.
     float wall = 0.0, wshaded = 0.0;
     int nshade = 0;
     for (int j = 0; j < NE; ++j) {
