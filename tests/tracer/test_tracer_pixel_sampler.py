@@ -79,13 +79,34 @@ def test_pixel_sampler_matches_independent_at_same_samples(renderer, alpha, laye
     da = np.abs(ind[..., 3] - pix[..., 3])
     assert da.mean() < 0.01 and abs(ind[..., 3].mean() - pix[..., 3].mean()) < 0.005
     assert np.quantile(da[(ind[..., 3] > 0) | (pix[..., 3] > 0)], 0.95) <= 0.125 + 1e-6
-    # Colour: each pixel shades its heaviest strand once (tracer/layout.py PIXEL_SHADE) and
-    # gives it the others' weight, where the independent sampler shades every sample; the
-    # strands of one pixel lie side by side in the same light, so the difference is a small
-    # part of the hair's own contrast. An empty image is far off on both counts.
+    # Colour: each pixel shades its heaviest strands once each (tracer/layout.py PIXEL_SHADE,
+    # PIXEL_SHADE_ONE) and gives them the others' weight, where the independent sampler
+    # shades every sample; the strands of one pixel lie side by side in the same light, so
+    # the difference is a small part of the hair's own contrast. An empty image is far off on
+    # both counts.
     assert _iou(pix, ind) > 0.9 and _iou(empty, ind) == 0
     assert _hair_rmse(pix, ind) < 0.03
     assert _hair_rmse(pix, ind) < 0.2 * _hair_rmse(empty, ind)
+
+
+def test_one_layer_path_agrees_with_the_list(renderer):
+    """Opaque hair takes one layer, where each sample keeps its own nearest cylinder and six
+    strands a pixel are shaded under the heaviest one's shadow rays; hair of alpha 0.9995
+    takes four layers and the list, one strand shaded. The samples find the same strands
+    (alpha the same but for the 0.9995), and the six shaded strands come nearer the
+    independent sampler's colour than the list's one."""
+    cam = _tuft_camera()
+    images, layers = {}, {}
+    for alpha in (1.0, 0.9995):
+        renderer.set_strands(curls(60, 12, radius=0.004, alpha=alpha))
+        pix = renderer.render(cam, RenderSettings(sampler="pixel", spp=16))
+        layers[alpha] = renderer.stats.layers_max
+        images[alpha] = pix, renderer.render(cam, RenderSettings(spp=16))
+    assert layers == {1.0: 1, 0.9995: 4}
+    (one, ind_one), (lst, ind_lst) = images[1.0], images[0.9995]
+    assert (one[..., 3] > 0).sum() > 400
+    assert np.abs(one[..., 3] * 0.9995 - lst[..., 3]).max() < 1e-5
+    assert _hair_rmse(one, ind_one) < 0.8 * _hair_rmse(lst, ind_lst)
 
 
 @pytest.mark.parametrize("accel", ["grid", "bvh"])
