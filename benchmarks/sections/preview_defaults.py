@@ -16,7 +16,8 @@ another is no fair ratio, so each candidate timed with runs is timed interleaved
 default (default, candidate, default, candidate, ...; both compiled and warm first), the
 default on a renderer of its own whose grid no candidate pads (minimum pixel width and the
 pixel sampler widen the grid's lists, which would slow the default down); its ratio is the
-candidate's median over that default's median.
+candidate's median over that default's median, beside the same ratio of CPU time (the
+process's, the driver's threads included), which other work on the machine moves less.
 
 The pixel sampler (RenderSettings(sampler="pixel")) takes all of a pixel's samples in one walk
 and shades each of the few strands that cover most of the pixel once, with one set of shadow
