@@ -79,12 +79,15 @@ BVH_NODE = -1
 BVH_SHORT_STACK = 16
 
 # --- Pixel sampler (RenderSettings.sampler "pixel", shaders/sampler_pixel.glsl) -------------
-# Distinct cylinders one pixel keeps (the nearest hit by any of its samples); cylinders shaded
-# per pixel, the heaviest (the others' weight goes to them); the most samples one pixel takes
-# in one walk (a sample is a bit of a 32-bit mask; 5² = 25). Measured choices:
-# docs/DECISIONS.md, "Samples of one pixel share the walk".
+# Distinct cylinders one pixel keeps (the nearest hit by any of its samples; with one layer
+# each sample keeps its own nearest instead); cylinders shaded per pixel, the heaviest (the
+# others' weight goes to them), each with its own shadow rays; with one layer, strands shaded
+# per pixel, all with the heaviest one's shadow rays; the most samples one pixel takes in one
+# walk (a sample is a bit of a 32-bit mask; 5² = 25). Measured choices: docs/DECISIONS.md,
+# "Samples of one pixel share the walk".
 PIXEL_LIST = 24
 PIXEL_SHADE = 1
+PIXEL_SHADE_ONE = 6
 PIXEL_MAX_SPP = 25
 
 # --- Compute passes (GL 4.3) -----------------------------------------------------------------
@@ -116,7 +119,7 @@ def glsl_header():
         "EMPTY_BLOCK": EMPTY_BLOCK,
         "LEAF_MAX": LEAF_MAX, "LEAF_BITS": LEAF_BITS, "PIECE_BITS": PIECE_BITS, "MAX_PIECES": MAX_PIECES,
         "WALK_TEXELS": WALK_TEXELS, "BVH_NODE": BVH_NODE, "BVH_SHORT_STACK": BVH_SHORT_STACK,
-        "PIX_M": PIXEL_LIST, "PIX_SHADE": PIXEL_SHADE, "GROUP": GROUP, "MAX_VISITS": MAX_VISITS, "MAX_REPEATS": MAX_REPEATS,
+        "PIX_M": PIXEL_LIST, "PIX_SHADE": PIXEL_SHADE, "PIX_SHADE_ONE": PIXEL_SHADE_ONE, "GROUP": GROUP, "MAX_VISITS": MAX_VISITS, "MAX_REPEATS": MAX_REPEATS,
     }
     lines = ["// Generated from tracer/layout.py when the program is made: edit the numbers there."]
     lines += [f"#define {k} {_glsl_literal(v)}" for k, v in values.items()]

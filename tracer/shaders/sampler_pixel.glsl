@@ -4,8 +4,9 @@
 // candidate to pixel_offer (accel_pixel_nearest of accel_grid.glsl / accel_bvh.glsl), which
 // tests all the pixel's sample rays against it at once (footprint_mask) and keeps the
 // PIX_M nearest distinct cylinders any sample hits, each with the mask of the samples it
-// covers. trace_main.glsl then composites each sample's own hits (at most LAYERS per
-// sample, as the independent sampler does) and shades each distinct cylinder once.
+// covers (with one layer, each sample's own nearest cylinder instead). trace_main.glsl then
+// composites each sample's own hits (at most LAYERS per sample, as the independent sampler
+// does) and shades the heaviest distinct cylinders once each.
 // docs/DECISIONS.md, "Samples of one pixel share the walk".
 #if PIXEL
 const int PN = SPP_N * SPP_N;               // samples per pixel (settings: at most 25)
@@ -22,15 +23,6 @@ float px_reach_c, px_reach_t;
 #if MESHES
 float px_tm[PN];                            // each sample's nearest mesh hit (BIG: none)
 #endif
-
-// The PIX_M nearest distinct cylinders hit by any sample, sorted by (distance along the
-// central ray, id); empty slots (BIG, NO_ID, mask 0). Constant indices only (accel.glsl says
-// why).
-float lt[PIX_M]; float la[PIX_M]; int lid[PIX_M]; uint lm[PIX_M];
-
-void list_clear() {
-    for (int j = 0; j < PIX_M; ++j) { lt[j] = BIG; la[j] = 0.0; lid[j] = NO_ID; lm[j] = 0u; }
-}
 
 // The point of the line w + s·D nearest the line through the origin along ax (L2 = ax·ax).
 vec3 nearest_on_ray(vec3 w, vec3 D, vec3 ax, float L2) {
@@ -55,6 +47,15 @@ uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
     float r = A4.w, L2 = dot(ax, ax);
     float tc = dot(A + 0.5 * ax - o, d);
     vec3 w = o + tc * d - A;
+    // Most candidates of a cell pass far from the pixel. First the cheapest test: a sample
+    // ray strays from the central one by at most px_reach at its distance (taken half again,
+    // for the normalised directions' sake), so none can come within the cylinder's bounding
+    // sphere when the central ray passes farther than the sphere's radius plus that.
+    float half_len = 0.5 * sqrt(L2);
+    vec3 e = w - 0.5 * ax;
+    float R = half_len + r + 1.5 * (px_reach_c + px_reach_t * (abs(tc) + half_len + r));
+    trep = BIG;
+    if (dot(e, e) > R * R) return 0u;
 #if ORTHO
     vec3 wu = px_du, wv = px_dv, Du = vec3(0.0), Dv = vec3(0.0);
 #else
@@ -66,6 +67,15 @@ uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
     float nu = dot(wu, c) + dot(w, cu);
     float nv = dot(wv, c) + dot(w, cv);
     float lim = r * r * s2;
+    bool along = dot(c, c) < 1e-10 * L2 * dot(d, d);
+    // Then the line's: no sample's ray comes within r of the axis when even the nearest
+    // offset (|q.x|, |q.y| <= 1/2) leaves |n| above the largest r·|D × ax| of any sample.
+    // (On llvmpipe these two tests measured neutral: a group of pixels shaded together
+    // skips the work only when every one of them is rejected.)
+    float nmin = abs(n0) - 0.5 * (abs(nu) + abs(nv));
+    float spread = 0.5 * (length(cu) + length(cv));     // how far |D × ax| can move
+    float rmax = r * (sqrt(s2) + spread);
+    if (!along && nmin > rmax) return 0u;
     vec3 p0 = nearest_on_ray(w, d, ax, L2);
     vec3 pu = nearest_on_ray(w + wu, d + Du, ax, L2) - p0;
     vec3 pv = nearest_on_ray(w + wv, d + Dv, ax, L2) - p0;
@@ -80,23 +90,29 @@ uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
     // Looking exactly along the axis the lines are parallel and the nearest point undefined:
     // then every sample hits where the central ray lies within r of the axis (the entry is a
     // plane, at the middle's distance less half the length), none where it does not.
-    bool along = dot(c, c) < 1e-10 * L2 * dot(d, d);
     vec3 q0 = w - ax * (dot(w, ax) / L2);
     if (along) {
         trep = tc - 0.5 * sqrt(L2);
         n0 = dot(q0, q0) <= r * r ? 0.0 : BIG; nu = 0.0; nv = 0.0;
         f10 = 0.0; f1u = 0.0; f1v = 0.0; f20 = 0.0; f2u = 0.0; f2v = 0.0; hk1 = 0.0; hk2 = 0.0;
     }
+    // The sample's own |D × ax|² (near the axis's direction it changes across a pixel) is
+    // quadratic in its offset; the plane tests are taken times it, so a sample needs no
+    // division.
+    float su = 2.0 * dot(c, cu), sv = 2.0 * dot(c, cv);
+    float suu = dot(cu, cu), svv = dot(cv, cv), suv = 2.0 * dot(cu, cv);
+    float sfloor = 1e-30 * L2;
+    float rr = r * r;
+    hk1 *= s2; hk2 *= s2;
     uint m = 0u;
     for (int i = 0; i < PN; ++i) {
         vec2 q = px_off[i];
         float n = n0 + q.x * nu + q.y * nv;
-        // The sample's own |D × ax|²: near the axis's direction it changes across a pixel.
-        vec3 ci = c + q.x * cu + q.y * cv;
-        float si = max(dot(ci, ci), 1e-30 * L2), li = r * r * si;
-        float root = sqrt(max(li - n * n, 0.0)) * (s2 / si);
-        bool hit = n * n <= li && f10 + q.x * f1u + q.y * f1v + hk1 * root >= 0.0
-                   && f20 + q.x * f2u + q.y * f2v - hk2 * root <= 0.0;
+        float si = max(s2 + q.x * (su + q.x * suu) + q.y * (sv + q.y * svv + q.x * suv), sfloor);
+        float gap = rr * si - n * n;          // >= 0: the sample's ray passes within r
+        float root = sqrt(max(gap, 0.0));
+        bool hit = gap >= 0.0 && (f10 + q.x * f1u + q.y * f1v) * si + hk1 * root >= 0.0
+                   && (f20 + q.x * f2u + q.y * f2v) * si - hk2 * root <= 0.0;
 #if MESHES
         hit = hit && trep < px_tm[i];       // the sample ended on a nearer mesh
 #endif
@@ -105,17 +121,33 @@ uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
     return trep > 0.0 ? m : 0u;
 }
 
-// The samples with LAYERS hits among the list's cylinders nearer than t (counted with one
-// mask per count: have[k] holds the samples with more than k hits).
+#if LAYERS > 1
+// The PIX_M nearest distinct cylinders hit by any sample, sorted by (distance along the
+// central ray, id); empty slots (BIG, NO_ID, mask 0). Constant indices only (accel.glsl says
+// why).
+float lt[PIX_M]; float la[PIX_M]; int lid[PIX_M]; uint lm[PIX_M];
+
+void list_clear() {
+    for (int j = 0; j < PIX_M; ++j) { lt[j] = BIG; la[j] = 0.0; lid[j] = NO_ID; lm[j] = 0u; }
+}
+
+// The samples that see nothing past t: those with LAYERS hits among the list's cylinders
+// nearer than t (counted with one mask per count: have[k] holds the samples with more than k
+// hits), and those behind a nearer cylinder that lets less than t_eps through (compositing
+// stops there, as the independent sampler's walk does: hits_settled). Opaque hair (alpha 1)
+// thus needs one hit a sample, not LAYERS. A product of translucent layers below t_eps is
+// not looked for (that sample only walks on).
 uint samples_full(float t) {
     uint have[LAYERS];
+    uint shut = 0u;
     for (int k = 0; k < LAYERS; ++k) have[k] = 0u;
     for (int j = 0; j < PIX_M; ++j) {
         uint mj = lt[j] < t ? lm[j] : 0u;
         for (int k = LAYERS - 1; k > 0; --k) have[k] |= have[k - 1] & mj;
         have[0] |= mj;
+        shut |= 1.0 - la[j] < t_eps ? mj : 0u;
     }
-    return have[LAYERS - 1];
+    return have[LAYERS - 1] | shut;
 }
 
 // Cylinder `id` (its TOP and TIP texels A4, B4) as a candidate of the central ray o + t·d:
@@ -124,14 +156,16 @@ uint samples_full(float t) {
 void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d) {
     float t;
     uint m = footprint_mask(A4, B4, cyl(id, CYL_N2).xyz, o, d, t);
+    // Most candidates hit no sample: they cost the footprint test only.
+    if (m == 0u) return;
     // Samples that already have LAYERS nearer hits in the list will never see this one:
     // their bits go, so the list spends no slot on what is hidden (thin strands end-on
     // filled it with hidden ones and lost the hits of samples they did not cover).
     m &= ~samples_full(t);
     bool dup = false;
     for (int j = 0; j < PIX_M; ++j) dup = dup || lid[j] == id;
-    bool ok = m != 0u && !dup;
-    float ct = ok ? t : BIG, ca = B4.w; int cid = ok ? id : NO_ID; uint cm = ok ? m : 0u;
+    if (m == 0u || dup) return;
+    float ct = t, ca = B4.w; int cid = id; uint cm = m;
     for (int j = 0; j < PIX_M; ++j) {
         bool sw = ct < lt[j] || (ct == lt[j] && cid < lid[j]);
         float ft = lt[j], fa = la[j]; int fi = lid[j]; uint fm = lm[j];
@@ -151,4 +185,41 @@ float list_far() {
     for (int j = 0; j < PIX_M; ++j) f = lt[j] < BIG ? max(f, lt[j]) : f;
     return f;
 }
+#else
+// One layer (every strand opaque: Renderer.effective_layers): a sample sees only its nearest
+// hit, so instead of the list each sample keeps its own nearest cylinder (distance, id,
+// alpha) and a mask says which samples have one. An offer costs a compare per sample, the
+// walk is settled once every sample has a hit, and no slot can run out (a pixel may see as
+// many strands as it has samples). trace_main.glsl groups the samples by cylinder.
+float st[PN]; int sid[PN]; float sa[PN];
+uint have;
+
+void list_clear() {
+    for (int i = 0; i < PN; ++i) { st[i] = BIG; sid[i] = NO_ID; sa[i] = 0.0; }
+    have = 0u;
+}
+
+void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d) {
+    float t;
+    uint m = footprint_mask(A4, B4, cyl(id, CYL_N2).xyz, o, d, t);
+    if (m == 0u) return;
+    // Nearer wins, equal distances by id (as the list orders them); a cylinder offered again
+    // from another cell changes nothing.
+    for (int i = 0; i < PN; ++i) {
+        bool on = (m & (1u << uint(i))) != 0u && (t < st[i] || (t == st[i] && id < sid[i]));
+        st[i] = on ? t : st[i]; sid[i] = on ? id : sid[i]; sa[i] = on ? B4.w : sa[i];
+    }
+    have |= m;
+}
+
+bool pixel_settled() {
+    return have == FULL;
+}
+
+float list_far() {
+    float f = 0.0;
+    for (int i = 0; i < PN; ++i) f = st[i] < BIG ? max(f, st[i]) : f;
+    return f;
+}
+#endif
 #endif

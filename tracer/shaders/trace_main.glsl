@@ -56,7 +56,8 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint
 int occluder[NUM_LIGHTS];   // per light, the last cylinder that blocked a shadow ray
 #endif
 
-vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
+// The surface of cylinder `id` where the ray o + t·d meets it (surf: which face).
+Surface surface_at(int id, int surf, vec3 o, vec3 d, float t) {
     vec4 A4 = cyl(id, CYL_TOP);
     vec4 B4 = cyl(id, CYL_TIP);
     Surface s;
@@ -66,14 +67,26 @@ vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
     s.V = d;
     // A model that reads no normal (Kajiya-Kay) leaves this to the compiler to drop.
     s.N = cylinder_normal(id, surf, s.p, d, B4.xyz, s.T);
+    return s;
+}
+
+// Light l's direction from p, and how far it is (BIG: directional).
+vec3 light_dir(int l, vec3 p, out float dist) {
+    vec3 L;
+    if (light_vec[l].w > 0.5) { L = light_vec[l].xyz - p; dist = length(L); L /= max(dist, 1e-30); }
+    else { L = -light_vec[l].xyz; dist = BIG; }
+    return L;
+}
+
+vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
+    Surface s = surface_at(id, surf, o, d, t);
     vec3 result = material.x * s.color;
     for (int l = 0; l < NUM_LIGHTS; ++l) {
-        vec3 L; float dist;
-        if (light_vec[l].w > 0.5) { L = light_vec[l].xyz - s.p; dist = length(L); L /= max(dist, 1e-30); }
-        else { L = -light_vec[l].xyz; dist = BIG; }
+        float dist;
+        vec3 L = light_dir(l, s.p, dist);
         float lit = 1.0;
 #if SHADOWS
-        lit = shadow_ray(s.p, L, dist, id, 1e-3 * A4.w, occluder[l]);
+        lit = shadow_ray(s.p, L, dist, id, 1e-3 * cyl(id, CYL_TOP).w, occluder[l]);
         if (lit <= 0.0) continue;
 #endif
         result += lit * light_col[l] * shade_light(s, L);
@@ -191,7 +204,8 @@ void camera_ray(float x, float y, out vec3 o, out vec3 d, out float len) {
 // transmittance fell below t_eps past the first, as trace() does per sample), which gives
 // every distinct cylinder its weight in the pixel; the PIX_SHADE heaviest that weigh at least
 // SHADE_MIN are shaded, once each, on the ray through the middle of the samples they cover,
-// with one shadow ray per light. Loops over the samples and the list have constant trip counts and
+// with one shadow ray per light (with one layer the PIX_SHADE_ONE heaviest, all with the
+// heaviest one's shadow rays). Loops over the samples and the list have constant trip counts and
 // are unrolled, so llvmpipe's cap on loop iterations sees one walk and the shading loop.
 const float SHADE_MIN = 1.0 / 512.0;
 
@@ -242,9 +256,12 @@ void main() {
 
     // Each sample's compositing, entry by entry in depth order: the entry's weight and the
     // middle of the samples it covers.
-    float Ts[PN]; int cnt[PN];
+    float Ts[PN];
+#if LAYERS > 1
+    const int NE = PIX_M;
+    float wgt[NE]; vec2 mid[NE]; int eids[NE]; float ets[NE];
+    int cnt[PN];
     for (int s = 0; s < PN; ++s) { Ts[s] = 1.0; cnt[s] = 0; }
-    float wgt[PIX_M]; vec2 mid[PIX_M];
     for (int j = 0; j < PIX_M; ++j) {
         float a = la[j], wj = 0.0, nj = 0.0;
         vec2 cj = vec2(0.0);
@@ -258,16 +275,44 @@ void main() {
         }
         wgt[j] = wj / float(PN);
         mid[j] = cj / max(nj, 1.0);
+        eids[j] = lid[j]; ets[j] = lt[j];
     }
-    // The PIX_SHADE heaviest entries are shaded; the weight of the others (at most a few
-    // samples each) goes to them in proportion, so the pixel keeps its brightness.
+#else
+    // One layer: each sample's own nearest hit. The entries are the samples that come first
+    // among those on their cylinder, each with the weight of all of them (the middle is
+    // worked out for the ones shaded). A pixel no sample hits skips the grouping.
+    const int NE = PN;
+    float wgt[NE]; int eids[NE]; float ets[NE];
+    for (int s = 0; s < PN; ++s) { Ts[s] = 1.0 - sa[s]; wgt[s] = 0.0; eids[s] = sid[s]; ets[s] = st[s]; }
+    if (have != 0u) {
+        for (int s = 0; s < PN; ++s) {
+            float wj = 0.0;
+            bool first = sid[s] != NO_ID;
+            for (int k = 0; k < PN; ++k) {
+                bool same = sid[k] == sid[s];
+                first = first && !(same && k < s);
+                wj += same ? sa[k] : 0.0;
+            }
+            wgt[s] = first ? wj / float(PN) : 0.0;
+        }
+    }
+#endif
+    // The PIX_SHADE (one layer: PIX_SHADE_ONE) heaviest entries are shaded; the weight of the
+    // others (at most a few samples each) goes to them in proportion, so the pixel keeps its
+    // brightness.
     float wall = 0.0, wshaded = 0.0;
     int nshade = 0;
-    for (int j = 0; j < PIX_M; ++j) {
+    for (int j = 0; j < NE; ++j) {
         wall += wgt[j];
         nshade += wgt[j] >= SHADE_MIN ? 1 : 0;
     }
+#if LAYERS == 1
+    nshade = min(nshade, PIX_SHADE_ONE);
+    float vis[NUM_LIGHTS];
+    for (int l = 0; l < NUM_LIGHTS; ++l) vis[l] = 1.0;
+#else
     nshade = min(nshade, PIX_SHADE);
+#endif
     vec3 C = vec3(0.0);
 #if SHADOWS
     for (int l = 0; l < NUM_LIGHTS; ++l) occluder[l] = -1;
@@ -275,12 +320,24 @@ void main() {
     for (int i = 0; i < nshade; ++i) {
         // The heaviest entry not shaded yet, by constant indices (accel.glsl says why).
         int eid = 0, pick = -1; float wi = -1.0, et = 0.0; vec2 mi = vec2(0.0);
-        for (int j = 0; j < PIX_M; ++j) {
+        for (int j = 0; j < NE; ++j) {
             bool here = wgt[j] > wi;
             pick = here ? j : pick;
-            eid = here ? lid[j] : eid; wi = here ? wgt[j] : wi; et = here ? lt[j] : et; mi = here ? mid[j] : mi;
+            eid = here ? eids[j] : eid; wi = here ? wgt[j] : wi; et = here ? ets[j] : et;
+#if LAYERS > 1
+            mi = here ? mid[j] : mi;
+#endif
         }
-        for (int j = 0; j < PIX_M; ++j) wgt[j] = j == pick ? -1.0 : wgt[j];
+#if LAYERS == 1
+        float ni = 0.0;
+        for (int s = 0; s < PN; ++s) {
+            bool same = sid[s] == eid;
+            mi += same ? px_off[s] : vec2(0.0);
+            ni += same ? 1.0 : 0.0;
+        }
+        mi /= max(ni, 1.0);
+#endif
+        for (int j = 0; j < NE; ++j) wgt[j] = j == pick ? -1.0 : wgt[j];
         wshaded += wi;
         vec3 so, sd;
         sample_ray(o, d, mi, so, sd);
@@ -289,7 +346,24 @@ void main() {
         // The middle of the covered samples lies on the strand but for the linear test's
         // rounding; where the exact test disagrees, the side at the representative distance.
         bool exact = th > 0.0;
+#if LAYERS == 1
+        // One layer: the strands a pixel shows lie side by side in front, lit alike, so the
+        // heaviest one's shadow rays give every shaded strand its lights' visibility (the
+        // shadow walks are what costs; the shading itself little).
+        Surface S = surface_at(eid, exact ? surf : 0, so, sd, exact ? th : et);
+        vec3 c = material.x * S.color;
+        for (int l = 0; l < NUM_LIGHTS; ++l) {
+            float dist;
+            vec3 L = light_dir(l, S.p, dist);
+#if SHADOWS
+            if (i == 0) vis[l] = shadow_ray(S.p, L, dist, eid, 1e-3 * cyl(eid, CYL_TOP).w, occluder[l]);
+#endif
+            c += vis[l] * light_col[l] * shade_light(S, L);
+        }
+        C += wi * c;
+#else
         C += wi * shade(eid, exact ? surf : 0, so, sd, exact ? th : et);
+#endif
 #if COUNT
         counter.y += 1.0;
 #endif
