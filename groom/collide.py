@@ -57,6 +57,8 @@ from hairio import InputError
 from .parallel import cpu_threads, ranges, run_jobs
 from .scalp import Scalp, _closest_on_triangles
 
+# Points _locate takes all three axes of at once (see there).
+_LOCATE_ROWS = 4096
 # Grid nodes of the sampled distance (memory: 3 float32 per node, 24 MB).
 _TARGET_NODES = 2_000_000
 # The band of exact distances, in cells: a point of a cell closer to the surface than its
@@ -465,20 +467,49 @@ class Collider:
         """Cell base index (N,) and fractions (3, N) of points (N,3), float64. Points beyond the
         grid fall in its border cells, whose corners are all `band` outside (the padding), so
         they read as far outside with no gradient."""
-        base = np.zeros(len(p), np.int64)
-        frac = np.empty((3, len(p)))
+        # The cell's coordinates stay floats (whole numbers: trunc of the clamped position,
+        # exact) and make the flat index in float64 (exact below 2**53), cast once: the same
+        # numbers as int64 arithmetic per axis. Up to _LOCATE_ROWS points the three axes go
+        # through each call together (the walk's many small calls pay numpy's per-call cost
+        # a third as often); more points, one axis at a time (the (3, N) temporaries would
+        # outgrow the allocator's reused blocks and pay page faults).
+        n_pts = len(p)
+        frac = np.empty((3, n_pts))
+        for axis in range(3):
+            np.subtract(p[:, axis], self.origin[axis], out=frac[axis])
+        frac *= 1.0 / self.cell
+        if n_pts <= _LOCATE_ROWS:
+            cell = np.maximum(frac, 0)
+            np.minimum(cell, self._upper_cell, out=cell)
+            np.trunc(cell, out=cell)
+            np.subtract(frac, cell, out=frac)
+            np.maximum(frac, 0.0, out=frac)
+            np.minimum(frac, 1.0, out=frac)
+            base = cell[0] * self.shape[1]
+            base += cell[1]
+            base *= self.shape[2]
+            base += cell[2]
+            return base.astype(np.int64), frac
+        cell = np.empty(n_pts)
+        base = np.zeros(n_pts)
         for axis, n in enumerate(self.shape):
-            g = (p[:, axis] - self.origin[axis]) * (1.0 / self.cell)
+            g = frac[axis]
             # np.maximum/np.minimum: np.clip's wrappers cost more than its work on the walk's
             # small arrays (the same numbers).
-            i = np.minimum(np.maximum(g, 0), n - 2).astype(np.int64)
-            f = frac[axis]
-            np.subtract(g, i, out=f)
-            np.maximum(f, 0.0, out=f)
-            np.minimum(f, 1.0, out=f)
+            np.maximum(g, 0, out=cell)
+            np.minimum(cell, n - 2, out=cell)
+            np.trunc(cell, out=cell)
+            np.subtract(g, cell, out=g)
+            np.maximum(g, 0.0, out=g)
+            np.minimum(g, 1.0, out=g)
             base *= n
-            base += i
-        return base, frac
+            base += cell
+        return base.astype(np.int64), frac
+
+    @property
+    def _upper_cell(self):
+        """(3, 1) the last cell's coordinates along each axis (the cells' upper clamp)."""
+        return np.array(self.shape, np.float64)[:, None] - 2
 
     def clear_of(self, points, clearance):
         """True where a point is certainly at least `clearance` outside: one look-up per point
@@ -501,7 +532,21 @@ class Collider:
         origin = self.origin.astype(dt)
         inv = dt.type(1.0 / self.cell)
         n = len(p)
-        itype = np.int32 if np.prod(self.shape) < 2 ** 31 else np.int64
+        itype = np.int32 if len(self.phi) < 2 ** 31 else np.int64
+        if n <= _LOCATE_ROWS:
+            # The three axes through each call together (as in _locate), the same numbers.
+            col = np.empty((3, n), dt)
+            for axis in range(3):
+                np.subtract(p[:, axis], origin[axis], out=col[axis], dtype=dt)
+            col *= inv
+            np.maximum(col, 0, out=col)
+            np.minimum(col, self._upper_cell.astype(dt), out=col)
+            i = col.astype(itype)   # truncation = floor, col >= 0
+            idx = i[0] * itype(self.shape[1])
+            idx += i[1]
+            idx *= itype(self.shape[2])
+            idx += i[2]
+            return idx
         idx, i, col = np.empty(n, itype), np.empty(n, itype), np.empty(n, dt)
         for axis, m in enumerate(self.shape):
             np.subtract(p[:, axis], origin[axis], out=col, dtype=dt)
@@ -542,21 +587,26 @@ class Collider:
     def value(self, points, gradient=False):
         """The sampled signed distance less its error bound (N,) float64: the true distance is
         at least this within the band. With gradient: also the interpolant's gradient (N,3)."""
-        base, (fx, fy, fz) = self._locate(np.asarray(points, dtype=np.float64))
-        # The 8 corners (dx, dy, dz) at 4dx+2dy+dz, each a contiguous array (one (N, 8) gather
-        # and its transposed rows took twice as long).
-        c = [self.phi[base + o].astype(np.float64) for o in self._corner_offsets]
-        # Along z, then y, then x.
-        c00, c01 = c[0] + fz * (c[1] - c[0]), c[2] + fz * (c[3] - c[2])
-        c10, c11 = c[4] + fz * (c[5] - c[4]), c[6] + fz * (c[7] - c[6])
-        c0, c1 = c00 + fy * (c01 - c00), c10 + fy * (c11 - c10)
-        val = c0 + fx * (c1 - c0) - self.cell_error[base]
+        base, f = self._locate(np.asarray(points, dtype=np.float64))
+        fx, fy, fz = f
+        # The 8 corners (dx, dy, dz) in rows 4dx+2dy+dz, gathered in one take of (8, N)
+        # indices: contiguous rows, and the interpolation along z (then y) runs on the four
+        # (two) pairs of rows at once: the same numbers as pair by pair, in fewer calls.
+        idx = np.add.outer(self._corner_offsets, base)
+        c = self.phi.take(idx).astype(np.float64)
+        lo = c[0::2]
+        dz = c[1::2] - lo               # c1-c0, c3-c2, c5-c4, c7-c6
+        cz = lo + fz * dz               # c00, c01, c10, c11
+        dy = cz[1::2] - cz[0::2]        # c01-c00, c11-c10
+        cy = cz[0::2] + fy * dy         # c0, c1
+        gx = cy[1] - cy[0]
+        val = cy[0] + fx * gx
+        val -= self.cell_error.take(base)
         if not gradient:
             return val
-        gx = c1 - c0
-        gy = (1 - fx) * (c01 - c00) + fx * (c11 - c10)
-        d0 = (1 - fy) * (c[1] - c[0]) + fy * (c[3] - c[2])
-        d1 = (1 - fy) * (c[5] - c[4]) + fy * (c[7] - c[6])
+        gy = (1 - fx) * dy[0] + fx * dy[1]
+        d0 = (1 - fy) * dz[0] + fy * dz[1]
+        d1 = (1 - fy) * dz[2] + fy * dz[3]
         gz = (1 - fx) * d0 + fx * d1
         return val, np.stack([gx, gy, gz], 1) * (1.0 / self.cell)
 
@@ -1013,50 +1063,66 @@ def _walk(collider, pts, target, cnt, k0, root_value):
     n = len(cnt)
     off = np.cumsum(cnt) - cnt
     result = pts.copy()
-    roots = _take(pts, off)
-    cos_lim, sin_lim = _turn_limits(pts, off, cnt)
     half = _half_segments(collider, pts, off)
-    k = k0.copy()
-    prev = _take(pts, off + k - 1).copy()          # the last point placed
-    u_prev = np.zeros((n, 3))               # the direction of the segment ending there
-    have = k >= 2
-    u_prev[have] = _unit(pts[off[have] + k[have] - 1] - pts[off[have] + k[have] - 2])
-    aligned = np.ones(n, bool)   # the strand so far is its original, translated
-    check = np.zeros(n, bool)    # aligned after a step: is the translated rest clear?
-    active = k < cnt
+    # The strands still walking, in order, each step all of them: their numbers packed in
+    # rows (one take drops the finished ones) instead of gathered from and scattered back to
+    # per-strand arrays by index every step. state: the last point placed, the direction of
+    # the segment ending there, the root, the turn limits' cos and sin, the root's value.
+    state = np.empty((n, _STATE))
+    state[:, _ROOT] = _take(pts, off)
+    state[:, _COS], state[:, _SIN] = _turn_limits(pts, off, cnt)
+    state[:, _RV] = root_value
+    state[:, _PREV] = _take(pts, off + k0 - 1)
+    u_prev = np.zeros((n, 3))
+    have = k0 >= 2
+    u_prev[have] = _unit(pts[off[have] + k0[have] - 1] - pts[off[have] + k0[have] - 2])
+    state[:, _UPREV] = u_prev
+    ints = np.stack([off, cnt, k0])     # first point, points, the point to place next
+    # aligned: the strand so far is its original, translated; check: aligned after a step,
+    # is the translated rest clear?
+    flags = np.zeros((2, n), bool)
+    flags[0] = True
+    state, ints, flags = _still_walking(state, ints, flags)
     unresolved = 0
-    while True:
-        al = _indices(active & check)
+    while len(ints[0]):
+        off, cnt, k = ints
+        prev, rv, roots = state[:, _PREV], state[:, _RV], state[:, _ROOT]
+        al = _indices(flags[1])
         if al.size:
-            jump = _first_offence(collider, pts, half, target, off[al], cnt[al], k[al], _take(prev, al), root_value[al],
-                                  _take(roots, al))
-            delta = _take(prev, al) - _take(pts, off[al] + k[al] - 1)
-            _translate(result, pts, off[al], k[al], jump, delta)
+            o, c, ka, p_al = off[al], cnt[al], k[al], _take(prev, al)
+            jump = _first_offence(collider, pts, half, target, o, c, ka, p_al, rv[al], _take(roots, al))
+            delta = p_al - _take(pts, o + ka - 1)
+            _translate(result, pts, o, ka, jump, delta)
             k[al] = jump
-            going = jump < cnt[al]
-            active[al] = going
+            going = jump < c
             go = al[going]
-            prev[go] = _take(pts, off[go] + k[go] - 1) + delta[going]
-            u_prev[go] = _unit(_take(pts, off[go] + k[go] - 1) - _take(pts, off[go] + k[go] - 2))
-            check[al] = False
-        act = _indices(active)
-        if not act.size:
-            break
-        at = off[act] + k[act]
+            last = o[going] + jump[going] - 1
+            _put(prev, go, _take(pts, last) + delta[going])
+            _put(state[:, _UPREV], go, _unit(_take(pts, last) - _take(pts, last - 1)))
+            flags[1] = False
+            if not going.all():
+                state, ints, flags = _still_walking(state, ints, flags)
+                if not len(ints[0]):
+                    break
+                off, cnt, k = ints
+                prev, rv, roots = state[:, _PREV], state[:, _RV], state[:, _ROOT]
+        at = off + k
         d = _take(pts, at) - _take(pts, at - 1)
         length = np.sqrt(_dot(d, d))
         u = d / np.where(length > 0, length, 1.0)[:, None]
-        up = _take(u_prev, act)
+        up = state[:, _UPREV]
         c = _dot(u, up)
         # Back toward the strand's own direction, by no more than its sharpest bend.
-        limited = ~aligned[act] & (c < cos_lim[act]) & (length > 0)
+        cos_lim = state[:, _COS]
+        limited = ~flags[0] & (c < cos_lim) & (length > 0)
         u_new = u   # u is not needed after the limited turns are written
         if limited.any():
             li = _indices(limited)
-            w = _perpendicular_toward(_take(up, li), _take(u, li), c[li])
-            u_new[li] = cos_lim[act[li], None] * _take(up, li) + sin_lim[act[li], None] * w
-        p0 = _take(prev, act)
-        need, rv, rt = target[at], root_value[act], _take(roots, act)
+            up_li = _take(up, li)
+            w = _perpendicular_toward(up_li, _take(u, li), c[li])
+            _put(u_new, li, cos_lim[li, None] * up_li + state[li, _SIN, None] * w)
+        p0 = prev
+        need = target[at]
         end = p0 + length[:, None] * u_new
 
         def mid(i):
@@ -1064,26 +1130,56 @@ def _walk(collider, pts, target, cnt, k0, root_value):
             return _take(p0, i) + 0.5 * length[i, None] * _take(u_new, i)
         # Only segments the cells' lower bounds do not clear get the closer look (the bound
         # clears a point for its target, so for the smaller clearance near a root too).
-        short = np.full(len(act), -1.0)
+        short = np.full(len(at), -1.0)
         near = _indices(~_clear_with_middles(collider, end, length * (0.5 / collider.cell), need, mid))
         if near.size:
-            short[near] = _shortfall(collider, _take(end, near), mid(near), need[near], rv[near], rt[near])
+            short[near] = _shortfall(collider, _take(end, near), mid(near), need[near], rv[near], _take(roots, near))
         push = (short > 0) & (length > 0)
         if push.any():
             pi = _indices(push)
-            u_new[pi], left = _push_out(collider, _take(p0, pi), _take(u_new, pi), length[pi], need[pi], rv[pi],
-                                        _take(rt, pi), short[pi])
+            p0_pi, len_pi = _take(p0, pi), length[pi]
+            u_pi, left = _push_out(collider, p0_pi, _take(u_new, pi), len_pi, need[pi], rv[pi], _take(roots, pi),
+                                   short[pi])
+            _put(u_new, pi, u_pi)
             unresolved += left
-            end[pi] = _take(p0, pi) + length[pi, None] * _take(u_new, pi)
+            _put(end, pi, p0_pi + len_pi[:, None] * u_pi)
         placed = end   # the segments' ends as they now point
-        result[at] = placed
-        prev[act] = placed
-        u_prev[act] = np.where((length > 0)[:, None], u_new, up)
-        aligned[act] = ~push & ~limited
-        check[act] = aligned[act]
-        k[act] += 1
-        active[act] = k[act] < cnt[act]
+        _put(result, at, placed)
+        state[:, _UPREV] = np.where((length > 0)[:, None], u_new, up)
+        state[:, _PREV] = placed
+        np.logical_not(push, out=flags[0])
+        flags[0] &= ~limited
+        flags[1] = flags[0]
+        k += 1
+        if (k >= cnt).any():
+            state, ints, flags = _still_walking(state, ints, flags)
     return result, unresolved
+
+
+# Columns of _walk's per-strand state.
+_PREV, _UPREV, _ROOT = slice(0, 3), slice(3, 6), slice(6, 9)
+_COS, _SIN, _RV = 9, 10, 11
+_STATE = 12
+
+
+def _still_walking(state, ints, flags):
+    """The rows of the walk's state, ints (first point, points, next point) and flags of the
+    strands with points left to place."""
+    keep = _indices(ints[2] < ints[1])
+    if len(keep) == len(ints[1]):
+        return state, ints, flags
+    return state.take(keep, axis=0), ints.take(keep, axis=1), flags.take(keep, axis=1)
+
+
+def _put(a, i, v):
+    """a[i] = v for rows of a C-contiguous (N, k) array `a` (or a column slice of one): as
+    one put of whole rows (viewed as single items), three times faster than numpy's fancy
+    indexing, which copies short rows item by item."""
+    if not a.flags.c_contiguous:
+        a[i] = v
+        return
+    row = np.dtype((np.void, a.itemsize * a.shape[1]))
+    a.view(row).reshape(-1).put(i, np.ascontiguousarray(v, a.dtype).view(row).reshape(-1))
 
 
 def _take(a, i):
@@ -1242,7 +1338,7 @@ def _translate(result, pts, off, k, end, delta):
     n_rest = end - k
     if n_rest.sum():
         rows = _flat_points(off + k, n_rest)
-        result[rows] = _take(pts, rows) + np.repeat(delta, n_rest, axis=0)
+        _put(result, rows, _take(pts, rows) + np.repeat(delta, n_rest, axis=0))
 
 
 # StrandCollision.check_keys's answers for recent key sets (by the collider's id, which a
