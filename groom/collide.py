@@ -587,7 +587,24 @@ class Collider:
     def value(self, points, gradient=False):
         """The sampled signed distance less its error bound (N,) float64: the true distance is
         at least this within the band. With gradient: also the interpolant's gradient (N,3)."""
-        base, f = self._locate(np.asarray(points, dtype=np.float64))
+        p = np.asarray(points, dtype=np.float64)
+        if len(p) <= _LOCATE_ROWS:
+            return self._value(p, gradient)
+        # Blocks of at most _LOCATE_ROWS points (of equal size): larger (8, N) temporaries
+        # outgrow the allocator's reused blocks and pay page faults (3 times slower at 8,000).
+        val, grad = np.empty(len(p)), np.empty((len(p), 3)) if gradient else None
+        step = -(-len(p) // -(-len(p) // _LOCATE_ROWS))
+        for lo in range(0, len(p), step):
+            part = self._value(p[lo:lo + step], gradient)
+            if gradient:
+                val[lo:lo + step], grad[lo:lo + step] = part
+            else:
+                val[lo:lo + step] = part
+        return (val, grad) if gradient else val
+
+    def _value(self, p, gradient):
+        """value of at most _LOCATE_ROWS points p (float64)."""
+        base, f = self._locate(p)
         fx, fy, fz = f
         # The 8 corners (dx, dy, dz) in rows 4dx+2dy+dz, gathered in one take of (8, N)
         # indices: contiguous rows, and the interpolation along z (then y) runs on the four
@@ -1032,6 +1049,29 @@ def _offends(collider, end, middles, target, root_value, root):
     return bad, at_end
 
 
+# Points _strand_measures takes at a time.
+_MEASURE_POINTS = 16384
+
+
+def _strand_measures(collider, pts, off, cnt):
+    """_half_segments and _turn_limits of strands (pts strand after strand, off, cnt), made
+    in blocks of whole strands of some _MEASURE_POINTS points: each strand's numbers are its
+    own, and the blocks' temporaries stay in cache instead of passing over the whole part's
+    points some twenty times (a third of the time)."""
+    half = np.empty(len(pts))
+    cos, sin = np.empty(len(cnt)), np.empty(len(cnt))
+    ends = off + cnt
+    cuts = np.unique(np.searchsorted(ends, np.arange(_MEASURE_POINTS, int(ends[-1]), _MEASURE_POINTS)))
+    for s0, s1 in zip(np.concatenate([[0], cuts + 1]).tolist(), np.concatenate([cuts + 1, [len(cnt)]]).tolist()):
+        if s0 >= s1:
+            continue
+        p0, p1 = int(off[s0]), int(ends[s1 - 1])
+        block, o = pts[p0:p1], off[s0:s1] - p0
+        half[p0:p1] = _half_segments(collider, block, o)
+        cos[s0:s1], sin[s0:s1] = _turn_limits(block, o, cnt[s0:s1])
+    return half, cos, sin
+
+
 def _turn_limits(pts, off, cnt):
     """Per strand (cos, sin) of the largest turn a segment may make from the one before:
     the strand's sharpest original bend, at least 20°. pts holds the strands one after
@@ -1063,14 +1103,14 @@ def _walk(collider, pts, target, cnt, k0, root_value):
     n = len(cnt)
     off = np.cumsum(cnt) - cnt
     result = pts.copy()
-    half = _half_segments(collider, pts, off)
+    half, cos_lim, sin_lim = _strand_measures(collider, pts, off, cnt)
     # The strands still walking, in order, each step all of them: their numbers packed in
     # rows (one take drops the finished ones) instead of gathered from and scattered back to
     # per-strand arrays by index every step. state: the last point placed, the direction of
     # the segment ending there, the root, the turn limits' cos and sin, the root's value.
     state = np.empty((n, _STATE))
     state[:, _ROOT] = _take(pts, off)
-    state[:, _COS], state[:, _SIN] = _turn_limits(pts, off, cnt)
+    state[:, _COS], state[:, _SIN] = cos_lim, sin_lim
     state[:, _RV] = root_value
     state[:, _PREV] = _take(pts, off + k0 - 1)
     u_prev = np.zeros((n, 3))
