@@ -485,11 +485,9 @@ class Collider:
             np.subtract(frac, cell, out=frac)
             np.maximum(frac, 0.0, out=frac)
             np.minimum(frac, 1.0, out=frac)
-            base = cell[0] * self.shape[1]
-            base += cell[1]
-            base *= self.shape[2]
-            base += cell[2]
-            return base.astype(np.int64), frac
+            # The flat index as one product with the strides: whole numbers below 2**53,
+            # so exact in any order of summing.
+            return np.dot(self._strides.astype(np.float64), cell).astype(np.int64), frac
         cell = np.empty(n_pts)
         base = np.zeros(n_pts)
         for axis, n in enumerate(self.shape):
@@ -991,12 +989,14 @@ def _clear_with_middles(collider, p, half, clearance, middles):
     a callable giving the middles of the points at the indices it is given)."""
     thr = collider._threshold(clearance)
     cells = collider._cells(p)
-    ok = collider.lower_within(_REACH)[cells] >= thr
+    # take: 1-D gathers by take cost less than by indexing.
+    ok = collider.lower_within(_REACH).take(cells) >= thr
     ok &= half < _REACH - 0.01
     rest = _indices(~ok)
     if rest.size:
-        rest = rest[collider.cell_lower[cells[rest]] >= thr[rest]]   # the others are not clear (ok is False)
-        ok[rest] = collider.cell_lower[collider._cells(middles(rest))] >= thr[rest]
+        lower = collider.cell_lower
+        rest = rest[lower.take(cells.take(rest)) >= thr.take(rest)]   # the others are not clear (ok is False)
+        ok[rest] = lower.take(collider._cells(middles(rest))) >= thr.take(rest)
     return ok
 
 
@@ -1162,7 +1162,7 @@ def _walk(collider, pts, target, cnt, k0, root_value):
             w = _perpendicular_toward(up_li, _take(u, li), c[li])
             _put(u_new, li, cos_lim[li, None] * up_li + state[li, _SIN, None] * w)
         p0 = prev
-        need = target[at]
+        need = target.take(at)
         end = p0 + length[:, None] * u_new
 
         def mid(i):
@@ -1350,7 +1350,7 @@ def _offence(collider, pts, half, target, off, start, end, delta, root_value, ro
 
     def middles(i):
         return 0.5 * (_take(pts, idx[i]) + _take(pts, idx[i] - 1)) + _take(d, i)
-    look = _indices(~_clear_with_middles(collider, p, half[idx], target[idx], middles))
+    look = _indices(~_clear_with_middles(collider, p, half.take(idx), target.take(idx), middles))
     first = end.copy()
     if look.size:
         sl = s_of[look]
