@@ -485,9 +485,11 @@ class Collider:
             np.subtract(frac, cell, out=frac)
             np.maximum(frac, 0.0, out=frac)
             np.minimum(frac, 1.0, out=frac)
-            # The flat index as one product with the strides: whole numbers below 2**53,
-            # so exact in any order of summing.
-            return np.dot(self._strides.astype(np.float64), cell).astype(np.int64), frac
+            base = cell[0] * self.shape[1]
+            base += cell[1]
+            base *= self.shape[2]
+            base += cell[2]
+            return base.astype(np.int64), frac
         cell = np.empty(n_pts)
         base = np.zeros(n_pts)
         for axis, n in enumerate(self.shape):
@@ -507,7 +509,10 @@ class Collider:
     @property
     def _upper_cell(self):
         """(3, 1) the last cell's coordinates along each axis (the cells' upper clamp)."""
-        return np.array(self.shape, np.float64)[:, None] - 2
+        upper = self.__dict__.get("_upper")
+        if upper is None:
+            upper = self.__dict__["_upper"] = np.array(self.shape, np.float64)[:, None] - 2
+        return upper
 
     def clear_of(self, points, clearance):
         """True where a point is certainly at least `clearance` outside: one look-up per point
@@ -1378,7 +1383,9 @@ def _translate(result, pts, off, k, end, delta):
     n_rest = end - k
     if n_rest.sum():
         rows = _flat_points(off + k, n_rest)
-        _put(result, rows, _take(pts, rows) + np.repeat(delta, n_rest, axis=0))
+        moved = _take(pts, rows)
+        moved += _take(delta, np.arange(len(delta)).repeat(n_rest))
+        _put(result, rows, moved)
 
 
 # StrandCollision.check_keys's answers for recent key sets (by the collider's id, which a
