@@ -1034,10 +1034,11 @@ def _clearance(target, root_value, p, root):
 def _shortfall(collider, end, mid, target, root_value, root):
     """How far the end (or twice how far the middle) of a segment falls short of its
     clearance; <= 0 where it is clear (_offends: only whether it is)."""
-    both = collider.value(np.concatenate([end, mid]))
-    n = len(end)
-    return np.maximum(_clearance(target, root_value, end, root) - both[:n],
-                      2.0 * (_clearance(target, root_value, mid, root) - both[n:]))
+    both = np.concatenate([end, mid]).reshape(2, len(end), 3)
+    # The ends' and middles' clearances together (rows 0 and 1), the same numbers.
+    lack = _clearance(target, root_value, both, root)
+    lack -= collider.value(both.reshape(-1, 3)).reshape(2, -1)
+    return np.maximum(lack[0], 2.0 * lack[1])
 
 
 def _offends(collider, end, middles, target, root_value, root):
