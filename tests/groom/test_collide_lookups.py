@@ -1,0 +1,125 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The collider's look-ups and the walk's bookkeeping give the same numbers whichever way a
+call is split: small and large calls, blocks of strands, one part or several."""
+import numpy as np
+import pytest
+
+from groom import default_collider
+from groom import collide
+from groom.collide import _half_segments, _put, _strand_measures, _turn_limits, _walk
+
+
+@pytest.fixture(scope="module")
+def head():
+    return default_collider()
+
+
+def _points_around(head, n, seed=0):
+    """Points over the grid's box and a little beyond it on every side (the clamped cells)."""
+    rng = np.random.default_rng(seed)
+    lo = head.origin - 3 * head.cell
+    hi = head.origin + (np.array(head.shape) + 2) * head.cell
+    return lo + rng.random((n, 3)) * (hi - lo)
+
+
+def _value_plain(head, p):
+    """The trilinear look-up written out corner by corner in int64 (the form the fast one
+    must equal bit for bit)."""
+    base = np.zeros(len(p), np.int64)
+    frac = []
+    for axis, n in enumerate(head.shape):
+        g = (p[:, axis] - head.origin[axis]) * (1.0 / head.cell)
+        i = np.clip(g, 0, n - 2).astype(np.int64)
+        frac.append(np.clip(g - i, 0.0, 1.0))
+        base = base * n + i
+    fx, fy, fz = frac
+    c = [head.phi[base + o].astype(np.float64) for o in head._corner_offsets]
+    c00, c01 = c[0] + fz * (c[1] - c[0]), c[2] + fz * (c[3] - c[2])
+    c10, c11 = c[4] + fz * (c[5] - c[4]), c[6] + fz * (c[7] - c[6])
+    c0, c1 = c00 + fy * (c01 - c00), c10 + fy * (c11 - c10)
+    return c0 + fx * (c1 - c0) - head.cell_error[base], base
+
+
+def _cells_plain(head, p):
+    """The cell index in the points' own precision, one axis at a time in int64."""
+    dt = p.dtype.type
+    idx = np.zeros(len(p), np.int64)
+    for axis, m in enumerate(head.shape):
+        col = np.clip((p[:, axis] - dt(head.origin[axis])) * dt(1.0 / head.cell), 0, m - 2)
+        idx = idx * m + col.astype(np.int64)
+    return idx
+
+
+@pytest.mark.parametrize("n", [7, 3000, 4097, 20000])
+def test_value_and_cells_equal_the_plain_look_up_at_every_size(head, n):
+    p = _points_around(head, n, seed=n)
+    plain, base = _value_plain(head, p)
+    assert np.array_equal(head.value(p), plain)
+    assert np.array_equal(head._cells(p), base)
+    # float32 points: the cells found in float32 arithmetic, at any split
+    p32 = p.astype(np.float32)
+    assert np.array_equal(head._cells(p32), _cells_plain(head, p32))
+    # with the gradient, the value is the same and the gradient is the same at any split
+    val, grad = head.value(p, gradient=True)
+    assert np.array_equal(val, plain)
+    parts = [head.value(p[i:i + 1000], gradient=True)[1] for i in range(0, n, 1000)]
+    assert np.array_equal(grad, np.concatenate(parts))
+
+
+def _strands(n, seed):
+    rng = np.random.default_rng(seed)
+    cnt = rng.integers(2, 60, n)
+    steps = rng.normal(size=(int(cnt.sum()), 3)) * 0.002
+    return np.cumsum(steps, axis=0), cnt, np.cumsum(cnt) - cnt
+
+
+def test_half_segments_and_turn_limits_in_blocks_equal_the_whole(head):
+    pts, cnt, off = _strands(3000, 1)     # some 90,000 points: several blocks
+    assert len(pts) > 4 * collide._MEASURE_POINTS
+    half, cos, sin = _strand_measures(head, pts, off, cnt)
+    whole_cos, whole_sin = _turn_limits(pts, off, cnt)
+    assert np.array_equal(half, _half_segments(head, pts, off))
+    assert np.array_equal(cos, whole_cos) and np.array_equal(sin, whole_sin)
+
+
+def test_put_writes_rows_as_indexing_does():
+    rng = np.random.default_rng(2)
+    a = rng.random((50, 3))
+    rows, v = np.array([3, 7, 49, 0]), rng.random((4, 3))
+    want = a.copy()
+    want[rows] = v
+    _put(a, rows, v)
+    assert np.array_equal(a, want)
+    packed = rng.random((50, 12))
+    want = packed.copy()
+    want[rows, 3:6] = v
+    _put(packed[:, 3:6], rows, v)      # a column slice: not contiguous rows
+    assert np.array_equal(packed, want)
+
+
+def test_a_strand_walks_to_the_same_points_alone_or_with_others(head):
+    """The walk keeps its strands' state in packed rows and drops finished ones: each
+    strand's points must not depend on the others walked with it."""
+    from groom import default_scalp, generate, load_preset
+    scalp = default_scalp()
+    placement = load_preset("wavy").place_keys(scalp)
+    result = generate(scalp, placement.keys, placement.params.replace(count=600, collision=False))
+    s = result.strands
+    counts = s.counts.astype(np.int64)
+    off = np.cumsum(counts) - counts
+    collider = collide.with_clearance(head, float(s.radius.max()) + placement.params.collision_margin)
+    found = collide._offending(collider, s.points, off, counts, s.radius, placement.params.collision_margin,
+                               0, len(counts))
+    strands, k0, root_value = found[0], found[1], found[2]
+    assert len(strands) > 20
+    rows = [np.arange(off[i], off[i] + counts[i]) for i in strands]
+    pts = [s.points[r].astype(np.float64) for r in rows]
+    target = [s.radius[r].astype(np.float64) + placement.params.collision_margin for r in rows]
+
+    def walk(sel):
+        return _walk(collider, np.concatenate([pts[i] for i in sel]), np.concatenate([target[i] for i in sel]),
+                     counts[strands[sel]], k0[sel], root_value[sel])[0]
+    together = walk(np.arange(len(strands)))
+    alone = np.concatenate([walk(np.array([i])) for i in range(len(strands))])
+    assert np.array_equal(together, alone)
+    assert not np.array_equal(together, np.concatenate(pts))    # the walk moved something
