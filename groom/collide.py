@@ -475,10 +475,9 @@ class Collider:
         # outgrow the allocator's reused blocks and pay page faults).
         n_pts = len(p)
         frac = np.empty((3, n_pts))
-        for axis in range(3):
-            np.subtract(p[:, axis], self.origin[axis], out=frac[axis])
-        frac *= 1.0 / self.cell
         if n_pts <= _LOCATE_ROWS:
+            np.subtract(p.T, self._origin_column, out=frac)
+            frac *= 1.0 / self.cell
             cell = np.maximum(frac, 0)
             np.minimum(cell, self._upper_cell, out=cell)
             np.trunc(cell, out=cell)
@@ -490,6 +489,9 @@ class Collider:
             base *= self.shape[2]
             base += cell[2]
             return base.astype(np.int64), frac
+        for axis in range(3):
+            np.subtract(p[:, axis], self.origin[axis], out=frac[axis])
+        frac *= 1.0 / self.cell
         cell = np.empty(n_pts)
         base = np.zeros(n_pts)
         for axis, n in enumerate(self.shape):
@@ -505,6 +507,14 @@ class Collider:
             base *= n
             base += cell
         return base.astype(np.int64), frac
+
+    @property
+    def _origin_column(self):
+        """(3, 1) the grid's origin."""
+        column = self.__dict__.get("_origin_col")
+        if column is None:
+            column = self.__dict__["_origin_col"] = self.origin[:, None].copy()
+        return column
 
     @property
     def _upper_cell(self):
@@ -539,8 +549,7 @@ class Collider:
         if n <= _LOCATE_ROWS:
             # The three axes through each call together (as in _locate), the same numbers.
             col = np.empty((3, n), dt)
-            for axis in range(3):
-                np.subtract(p[:, axis], origin[axis], out=col[axis], dtype=dt)
+            np.subtract(p.T, origin[:, None], out=col, dtype=dt)
             col *= inv
             np.maximum(col, 0, out=col)
             np.minimum(col, self._upper_cell.astype(dt), out=col)
