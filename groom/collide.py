@@ -470,9 +470,9 @@ class Collider:
         # The cell's coordinates stay floats (whole numbers: trunc of the clamped position,
         # exact) and make the flat index in float64 (exact below 2**53), cast once: the same
         # numbers as int64 arithmetic per axis. Up to _LOCATE_ROWS points the three axes go
-        # through each call together (the walk's many small calls pay numpy's per-call cost
-        # a third as often); more points, one axis at a time (the (3, N) temporaries would
-        # outgrow the allocator's reused blocks and pay page faults).
+        # through each call together, as (3, N) rows (the walk's many small calls pay numpy's
+        # per-call cost a third as often); more points, one axis at a time (value hands it no
+        # more than _LOCATE_ROWS).
         n_pts = len(p)
         frac = np.empty((3, n_pts))
         if n_pts <= _LOCATE_ROWS:
@@ -538,8 +538,9 @@ class Collider:
 
     def _cells(self, points):
         """Flat index (N,) of the cell each point falls in (clear_of), in int32 (the grid has
-        some 2 M nodes), one coordinate column at a time: a whole (N, 3) array less an (3,)
-        origin runs numpy's loops 3 items long, several times slower."""
+        some 2 M nodes), on coordinate rows: the three as (3, N) up to _LOCATE_ROWS points
+        (fewer calls), one column at a time beyond (a whole (N, 3) array less a (3,) origin
+        runs numpy's loops 3 items long, several times slower)."""
         p = np.asarray(points)
         dt = p.dtype if p.dtype in (np.float32, np.float64) else np.float64
         origin = self.origin.astype(dt)
