@@ -20,6 +20,12 @@ sample of pass k by the same sub-pixel offset (`pass_offset`, a low-discrepancy 
 over the pixel, or over one stratum of it with several samples), so the passes the
 progressive preview (progressive.py) averages are new samples of the pixel's area, not the
 same ones again.
+
+The refinement passes after the first image (`refine=True`) take their samples with the
+pixel sampler (tracer.RenderSettings(sampler="pixel"): a pixel's samples share one walk), as
+many as it keeps without losing layers (`refine_settings`): on opaque hair 5² = 25 samples a
+pass for about three times one sample's time, so the image has no dust after one refinement
+pass instead of fifteen (docs/DECISIONS.md, "The preview refines with the pixel sampler").
 """
 import contextlib
 import hashlib
@@ -51,6 +57,7 @@ class RendererDied(Exception):
 _renderer = None
 _renderer_in_process = None
 _uploaded = None
+_uploaded_opaque = False     # every alpha of the uploaded strands is 1 (refine_settings)
 _uploaded_meshes = None
 _revisions = {}
 
@@ -203,6 +210,24 @@ def pass_offset(k):
     return tuple(float((0.5 + k * a) % 1.0 - 0.5) for a in _R2)
 
 
+def refine_settings(rs, opaque):
+    """The settings of a refinement pass: `rs` with the pixel sampler and the most samples it
+    takes a pass without losing layers (opaque hair, one layer: layout.PIXEL_MAX_SPP; see-through
+    hair: n² samples with n² × layers within the pixel's list, layout.PIXEL_LIST), or `rs`
+    itself where that would not be more samples than rs's own, or rs asks for minimum pixel
+    width (which the pixel sampler does not take) or a sampler of its own."""
+    import math
+    from tracer import layout
+    if rs.sampler != "independent" or rs.min_pixel_width:
+        return rs
+    layers = 1 if opaque else rs.layers
+    most = layout.PIXEL_MAX_SPP if layers == 1 else layout.PIXEL_LIST // layers
+    n = math.isqrt(min(most, layout.PIXEL_MAX_SPP))
+    if n * n <= rs.spp:
+        return rs
+    return replace(rs, sampler="pixel", spp=n * n)
+
+
 def _shifted(camera, k, spp_n):
     """The camera of pass k. With n x n stratified samples a pass moves them by the offset
     over one stratum (1/n of a pixel), so every sample stays near its own stratum and the
@@ -214,25 +239,26 @@ def _shifted(camera, k, spp_n):
     return replace(camera, shift_px=np.asarray(camera.shift_px, np.float64) + (ox, -oy))
 
 
-def render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass=0):
+def render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass=0, refine=False):
     """Render the preview; returns ((H, W, 4) float32 linear RGBA, row 0 = top; timings).
     meshes: scene_data.SceneMeshes shown beside the hair (None: the hair alone);
-    sample_pass: which pass of samples (see pass_offset). Raises hairio.InputError for bad
-    settings and RendererDied when the renderer failed (it is then closed, so the next call
-    starts a fresh one)."""
-    return begin_render(scene, hair_obj, camera_obj, settings, meshes, sample_pass).result()
+    sample_pass: which pass of samples (see pass_offset); refine: a refinement pass
+    (refine_settings; timings["spp"] says how many samples it took). Raises
+    hairio.InputError for bad settings and RendererDied when the renderer failed (it is then
+    closed, so the next call starts a fresh one)."""
+    return begin_render(scene, hair_obj, camera_obj, settings, meshes, sample_pass, refine=refine).result()
 
 
-def begin_render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass=0, wait=True):
+def begin_render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass=0, wait=True, refine=False):
     """As render, but returns a PendingImage. With wait=False and the renderer process, the
     render runs while Blender goes on (uploads, rare, are still waited for); in process it
     is done on return either way."""
-    global _uploaded, _uploaded_meshes
+    global _uploaded, _uploaded_meshes, _uploaded_opaque
     t0 = time.perf_counter()
     size = preview_size(scene, settings)
     rs = render_settings(scene, settings, hair_obj)
     rs.check()
-    camera = _shifted(camera_for(scene, camera_obj, size), sample_pass, rs.spp_n)
+    view = camera_for(scene, camera_obj, size)
     mesh_list = [] if meshes is None else meshes.meshes
     if meshes is not None and meshes.digest is None:
         meshes.digest = _meshes_key(mesh_list)     # once per reading, not once per refinement pass
@@ -243,8 +269,10 @@ def begin_render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass
         key = upload_key(hair_obj)
         uploaded = False
         if key != _uploaded:
-            renderer.set_strands(world_strands(hair_obj))
+            strands = world_strands(hair_obj)
+            renderer.set_strands(strands)
             _uploaded = key
+            _uploaded_opaque = bool(strands.alpha is None or not len(strands.alpha) or strands.alpha.min() >= 1.0)
             uploaded = True
         if mesh_key != _uploaded_meshes:
             # Forgotten first: a refused mesh leaves the renderer's meshes unknown.
@@ -252,8 +280,11 @@ def begin_render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass
             renderer.set_meshes(mesh_list or None)
             _uploaded_meshes = mesh_key
             uploaded = True
+        if refine:
+            rs = refine_settings(rs, _uploaded_opaque)
+        camera = _shifted(view, sample_pass, rs.spp_n)
         t2 = time.perf_counter()
-        timings = {"prepare_s": t1 - t0, "upload_s": t2 - t1, "uploaded": uploaded}
+        timings = {"prepare_s": t1 - t0, "upload_s": t2 - t1, "uploaded": uploaded, "spp": rs.spp}
         if not wait and hasattr(renderer, "render_begin"):
             renderer.render_begin(camera, rs)
             return PendingImage(size, timings, renderer=renderer)

@@ -1,8 +1,9 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The progressive preview: Render Preview shows its first image at once, then a timer adds
 one pass of samples at a time (preview.begin_render with sample_pass = 1, 2, ...: new
-sub-pixel positions each pass) and shows the running mean in the image, until TARGET_SAMPLES samples
-per pixel; a change of what the image shows (the hair, a key's regrown wisps, the camera, a
+sub-pixel positions each pass; refine=True: the pixel sampler's many samples a pass where
+the settings allow, preview.refine_settings) and shows the running mean in the image, each
+pass weighted by its samples, until TARGET_SAMPLES samples per pixel; a change of what the image shows (the hair, a key's regrown wisps, the camera, a
 preview setting, the meshes, the lights) starts it over from a first image.
 
 With the renderer process (the default) a tick never waits for it: it sends a pass
@@ -129,15 +130,15 @@ def _restart(context, session, wait=True):
 
 def _begin_pass(context, session, k, wait=False):
     return preview.begin_render(context.scene, session.hair, session.camera, session.scalp.keystrand_hair,
-                                meshes=session.meshes, sample_pass=k, wait=wait)
+                                meshes=session.meshes, sample_pass=k, wait=wait, refine=k > 0)
 
 
 def _collect(session):
     """Add the finished pass to the sums (or start them with it) and show the mean."""
     pending, first = session.pending, session.pending_first
     session.pending = None
-    pixels, _t = pending.result()
-    spp = _spp(session)
+    pixels, timings = pending.result()
+    spp = timings["spp"]        # the pass's own: refinement passes may take more (preview.refine_settings)
     if first:
         session.sum, session.samples, session.passes = pixels.astype(np.float64) * spp, spp, 1
         preview.write_image(pixels)
@@ -146,10 +147,6 @@ def _collect(session):
         session.samples += spp
         session.passes += 1
         preview.write_image(session.image())
-
-
-def _spp(session):
-    return int(session.scalp.keystrand_hair.preview_samples)
 
 
 def step(context=None):

@@ -180,13 +180,38 @@ def test_the_preview_refines_towards_the_many_sample_image(clean, samples):
         states.append(state)
         errors.append(rmse(image_pixels(), reference))
     assert state == "converged" and session.samples >= progressive.TARGET_SAMPLES
-    assert len(states) == -(-progressive.TARGET_SAMPLES // spp) - 1
+    # The refinement passes take the pixel sampler's 25 samples (the hair is opaque).
+    refine = preview.refine_settings(rs, True)
+    assert (refine.sampler, refine.spp) == ("pixel", 25)
+    total, passes = spp, 0
+    while total < progressive.TARGET_SAMPLES:
+        total, passes = total + refine.spp, passes + 1
+    assert len(states) == passes and session.samples == total
     assert errors[0] > 0.01, "the first image is already the reference: nothing to refine"
     # The passes' mean approaches the reference: both estimate the same pixel areas.
     assert errors[-1] < 0.5 * errors[0], errors     # passes of the same samples again would stay at 1.0
     assert errors[len(errors) // 4] < errors[0]
     assert progressive.step() == "converged"
     assert progressive.status(scalp) == f"Refined: {session.samples} samples per pixel"
+
+
+def test_refinement_passes_take_as_many_samples_as_the_pixel_sampler_keeps(clean):
+    from dataclasses import replace
+    from tracer import RenderSettings, layout
+    preview = ext_module(clean, "preview")
+    rs = RenderSettings()
+    # Opaque hair (one layer): the most samples a pixel takes in one walk.
+    assert preview.refine_settings(rs, True) == replace(rs, sampler="pixel", spp=layout.PIXEL_MAX_SPP)
+    # See-through hair: samples x layers within the pixel's list (4 layers: 2 x 2 samples).
+    see = preview.refine_settings(rs, False)
+    assert (see.sampler, see.spp) == ("pixel", 4) and see.spp * rs.layers <= layout.PIXEL_LIST
+    assert preview.refine_settings(replace(rs, layers=2), False).spp == 9
+    # Where the pixel sampler would take no more samples than the settings' own, or cannot
+    # take the settings (minimum pixel width), the pass is the settings' own.
+    eight_layers, many, widened = replace(rs, layers=8), replace(rs, spp=25), replace(rs, min_pixel_width=True)
+    assert preview.refine_settings(eight_layers, False) is eight_layers     # 24 // 8: one sample
+    assert preview.refine_settings(many, True) is many
+    assert preview.refine_settings(widened, True) is widened
 
 
 def test_the_preview_starts_over_when_the_camera_a_setting_or_the_hair_changes(clean):
@@ -260,9 +285,12 @@ def test_with_the_renderer_process_a_step_does_not_wait_for_the_pass(clean, monk
             time.sleep(0.02)
             state = progressive.step()
         assert state == "refined" and session.passes == 2
+        # The mean of the first image and the refinement pass, each weighted by its samples.
         passes = [preview.render(scene, hair, scene.camera, scalp.keystrand_hair, meshes=session.meshes,
-                                 sample_pass=k)[0] for k in (0, 1)]
-        np.testing.assert_allclose(image_pixels(), (passes[0] + passes[1]) / 2, atol=1e-6)
+                                 sample_pass=k, refine=k > 0) for k in (0, 1)]
+        (p0, t0), (p1, t1) = passes
+        assert (t0["spp"], t1["spp"]) == (1, 25) and session.samples == 26
+        np.testing.assert_allclose(image_pixels(), (p0 * t0["spp"] + p1 * t1["spp"]) / 26, atol=1e-6)
         # A change while a pass is drawn: the owed image is dropped, the new first image shown.
         os.kill(worker.pid, signal.SIGSTOP)
         try:
