@@ -16,7 +16,7 @@ They are uploaded when their arrays changed; a scene of more than MESH_TRIANGLE_
 triangles shows only the scalp and collider, and the operator says so.
 
 One image is one pass of the settings' samples; `render(..., sample_pass=k)` shifts every
-sample of pass k by the same sub-pixel offset (`pass_offset`, a low-discrepancy sequence
+sample of pass k by the same sub-pixel offset (tracer.Camera.for_pass, a low-discrepancy sequence
 over the pixel, or over one stratum of it with several samples), so the passes the
 progressive preview (progressive.py) averages are new samples of the pixel's area, not the
 same ones again.
@@ -45,9 +45,6 @@ IMAGE_NAME = "Hair Preview"
 # A million triangles take about a second to grid and upload on a CPU driver, and a scene
 # that big (a character, a set) is rarely what the hair preview is for.
 MESH_TRIANGLE_BUDGET = 1_000_000
-# The R2 sequence's steps (1/g, 1/g^2 for the plastic number g): the best-spread 2-D
-# low-discrepancy sequence for any number of points (Roberts 2018).
-_R2 = (0.7548776662466927, 0.5698402909980532)
 
 
 class RendererDied(Exception):
@@ -202,14 +199,6 @@ def _meshes_key(meshes):
     return h.hexdigest()
 
 
-def pass_offset(k):
-    """Sub-pixel offset (x right, y down; each in [-0.5, 0.5)) of sample pass k: 0 for the
-    first pass, then the R2 sequence, so any number of passes covers the pixel evenly."""
-    if k == 0:
-        return 0.0, 0.0
-    return tuple(float((0.5 + k * a) % 1.0 - 0.5) for a in _R2)
-
-
 def refine_settings(rs, opaque):
     """The settings of a refinement pass: `rs` with the pixel sampler and the most samples it
     takes a pass without losing layers (opaque hair, one layer: layout.PIXEL_MAX_SPP; see-through
@@ -228,21 +217,10 @@ def refine_settings(rs, opaque):
     return replace(rs, sampler="pixel", spp=n * n)
 
 
-def _shifted(camera, k, spp_n):
-    """The camera of pass k. With n x n stratified samples a pass moves them by the offset
-    over one stratum (1/n of a pixel), so every sample stays near its own stratum and the
-    passes' mean keeps the pixel's footprint (shifted by whole pixels it would blur)."""
-    if k == 0:
-        return camera
-    ox, oy = (c / spp_n for c in pass_offset(k))
-    # shift_px moves the image centre: x as the samples' x, y up (the samples' y runs down).
-    return replace(camera, shift_px=np.asarray(camera.shift_px, np.float64) + (ox, -oy))
-
-
 def render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass=0, refine=False):
     """Render the preview; returns ((H, W, 4) float32 linear RGBA, row 0 = top; timings).
     meshes: scene_data.SceneMeshes shown beside the hair (None: the hair alone);
-    sample_pass: which pass of samples (see pass_offset); refine: a refinement pass
+    sample_pass: which pass of samples (tracer.Camera.for_pass); refine: a refinement pass
     (refine_settings; timings["spp"] says how many samples it took). Raises
     hairio.InputError for bad settings and RendererDied when the renderer failed (it is then
     closed, so the next call starts a fresh one)."""
@@ -282,7 +260,7 @@ def begin_render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass
             uploaded = True
         if refine:
             rs = refine_settings(rs, _uploaded_opaque)
-        camera = _shifted(view, sample_pass, rs.spp_n)
+        camera = view.for_pass(sample_pass, rs.spp_n)
         t2 = time.perf_counter()
         timings = {"prepare_s": t1 - t0, "upload_s": t2 - t1, "uploaded": uploaded, "spp": rs.spp}
         if not wait and hasattr(renderer, "render_begin"):

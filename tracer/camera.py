@@ -26,12 +26,28 @@ of a larger image: the same pixel size, the shift moved so its pixels are that i
 `pixel_origin` = (x0, y0) in that image. The tracers place a pixel's samples by its
 coordinates in the whole image (pixel_origin + its own) and the sample index, so a window's
 pixels are the whole image's, samples and all.
+
+A pass (`Camera.for_pass`, the progressive preview's passes) moves every sample of the image by
+one sub-pixel offset of the R2 sequence, so passes averaged together are new samples of each
+pixel's area, not the same ones again.
 """
 from dataclasses import dataclass
 
 import numpy as np
 
 from hairio import InputError
+
+# The R2 sequence's steps (1/g, 1/g^2 for the plastic number g): the best-spread 2-D
+# low-discrepancy sequence for any number of points (Roberts 2018).
+_R2 = (0.7548776662466927, 0.5698402909980532)
+
+
+def pass_offset(k):
+    """Sub-pixel offset (x right, y down; each in [-0.5, 0.5)) of sample pass k: 0 for the
+    first pass, then the R2 sequence, so any number of passes covers the pixel evenly."""
+    if k == 0:
+        return 0.0, 0.0
+    return tuple(float((0.5 + k * a) % 1.0 - 0.5) for a in _R2)
 
 
 @dataclass(frozen=True, eq=False)
@@ -161,6 +177,18 @@ class Camera:
         shift = np.asarray(self.shift_px, np.float64) + [x0 + w / 2 - W / 2, H / 2 - h / 2 - y0]
         origin = (int(self.pixel_origin[0]) + x0, int(self.pixel_origin[1]) + y0)
         return Camera(self.type, self.position, self.rotation, (w, h), self.pixel_size, shift, origin)
+
+    def for_pass(self, k, spp_n):
+        """The camera of sample pass k (pass_offset) for n x n stratified samples: the samples
+        move by the offset over one stratum (1/n of a pixel), so every sample stays near its
+        own stratum and the passes' mean keeps the pixel's footprint (shifted by whole pixels
+        it would blur). Pass 0 is this camera."""
+        if k == 0:
+            return self
+        ox, oy = (c / spp_n for c in pass_offset(k))
+        # shift_px moves the image centre: x as the samples' x, y up (the samples' y runs down).
+        shift = np.asarray(self.shift_px, np.float64) + (ox, -oy)
+        return Camera(self.type, self.position, self.rotation, self.size, self.pixel_size, shift, self.pixel_origin)
 
     # --- rays and projection ------------------------------------------------------------
     def rays(self, x, y):

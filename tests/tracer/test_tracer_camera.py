@@ -76,3 +76,22 @@ def test_bad_camera_input_is_rejected():
         Camera.from_blender(np.full((4, 4), np.nan), (10, 10))
     with pytest.raises(InputError, match="PANO"):
         Camera.from_blender(_matrix(), (10, 10), type="PANO")
+
+
+def test_a_pass_moves_every_sample_by_its_offset_within_one_stratum():
+    from tracer.camera import pass_offset
+    cam = Camera.look_at((0.0, -2.0, 0.0), (0.0, 0.0, 0.0), size=(40, 30))
+    assert cam.for_pass(0, 3) is cam
+    offsets = np.array([pass_offset(k) for k in range(1, 65)])
+    assert np.all(offsets >= -0.5) and np.all(offsets < 0.5)
+    # The passes spread over the pixel: no two alike, every quarter of it visited.
+    assert len({tuple(np.round(o, 9)) for o in offsets}) == 64
+    assert len({(o[0] >= 0, o[1] >= 0) for o in offsets}) == 4
+    # Pixel centres of pass 5 lie where the first pass's lie moved by its offset over n = 3
+    # (x right, y down), for a perspective camera seen through its own rays.
+    x, y = np.meshgrid(np.arange(40) + 0.5, np.arange(30) + 0.5)
+    ox, oy = pass_offset(5)
+    o1, d1 = cam.for_pass(5, 3).rays(x, y)
+    o0, d0 = cam.rays(x + ox / 3, y + oy / 3)
+    np.testing.assert_allclose(d1, d0, atol=1e-12)
+    np.testing.assert_allclose(o1, o0, atol=1e-12)
