@@ -23,9 +23,9 @@ same ones again.
 
 The refinement passes after the first image (`refine=True`) take their samples with the
 pixel sampler (tracer.RenderSettings(sampler="pixel"): a pixel's samples share one walk), as
-many as it keeps without losing layers (`refine_settings`): on opaque hair 5² = 25 samples a
-pass for about three times one sample's time, so the image has no dust after one refinement
-pass instead of fifteen (docs/DECISIONS.md, "The preview refines with the pixel sampler").
+many as it keeps without losing layers (tracer.RenderSettings.refinement): on opaque hair
+5² = 25 samples a pass for about three times one sample's time, so the image has no dust
+after one refinement pass instead of fifteen (docs/DECISIONS.md, "The preview refines with the pixel sampler").
 """
 import contextlib
 import hashlib
@@ -54,7 +54,7 @@ class RendererDied(Exception):
 _renderer = None
 _renderer_in_process = None
 _uploaded = None
-_uploaded_opaque = False     # every alpha of the uploaded strands is 1 (refine_settings)
+_uploaded_opaque = False     # every alpha of the uploaded strands is 1 (RenderSettings.refinement)
 _uploaded_meshes = None
 _revisions = {}
 
@@ -199,29 +199,11 @@ def _meshes_key(meshes):
     return h.hexdigest()
 
 
-def refine_settings(rs, opaque):
-    """The settings of a refinement pass: `rs` with the pixel sampler and the most samples it
-    takes a pass without losing layers (opaque hair, one layer: layout.PIXEL_MAX_SPP; see-through
-    hair: n² samples with n² × layers within the pixel's list, layout.PIXEL_LIST), or `rs`
-    itself where that would not be more samples than rs's own, or rs asks for minimum pixel
-    width (which the pixel sampler does not take) or a sampler of its own."""
-    import math
-    from tracer import layout
-    if rs.sampler != "independent" or rs.min_pixel_width:
-        return rs
-    layers = 1 if opaque else rs.layers
-    most = layout.PIXEL_MAX_SPP if layers == 1 else layout.PIXEL_LIST // layers
-    n = math.isqrt(min(most, layout.PIXEL_MAX_SPP))
-    if n * n <= rs.spp:
-        return rs
-    return replace(rs, sampler="pixel", spp=n * n)
-
-
 def render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass=0, refine=False):
     """Render the preview; returns ((H, W, 4) float32 linear RGBA, row 0 = top; timings).
     meshes: scene_data.SceneMeshes shown beside the hair (None: the hair alone);
     sample_pass: which pass of samples (tracer.Camera.for_pass); refine: a refinement pass
-    (refine_settings; timings["spp"] says how many samples it took). Raises
+    (RenderSettings.refinement; timings["spp"] says how many samples it took). Raises
     hairio.InputError for bad settings and RendererDied when the renderer failed (it is then
     closed, so the next call starts a fresh one)."""
     return begin_render(scene, hair_obj, camera_obj, settings, meshes, sample_pass, refine=refine).result()
@@ -259,7 +241,7 @@ def begin_render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass
             _uploaded_meshes = mesh_key
             uploaded = True
         if refine:
-            rs = refine_settings(rs, _uploaded_opaque)
+            rs = rs.refinement(_uploaded_opaque)
         camera = view.for_pass(sample_pass, rs.spp_n)
         t2 = time.perf_counter()
         timings = {"prepare_s": t1 - t0, "upload_s": t2 - t1, "uploaded": uploaded, "spp": rs.spp}

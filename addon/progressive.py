@@ -2,9 +2,10 @@
 """The progressive preview: Render Preview shows its first image at once, then a timer adds
 one pass of samples at a time (preview.begin_render with sample_pass = 1, 2, ...: new
 sub-pixel positions each pass; refine=True: the pixel sampler's many samples a pass where
-the settings allow, preview.refine_settings) and shows the running mean in the image, each
-pass weighted by its samples, until TARGET_SAMPLES samples per pixel; a change of what the image shows (the hair, a key's regrown wisps, the camera, a
-preview setting, the meshes, the lights) starts it over from a first image.
+the settings allow, tracer.RenderSettings.refinement) and shows the running mean in the
+image, each pass weighted by its samples, until TARGET_SAMPLES samples per pixel; a change
+of what the image shows (the hair, a key's regrown wisps, the camera, a preview setting, the
+meshes, the lights) starts it over from a first image.
 
 With the renderer process (the default) a tick never waits for it: it sends a pass
 (WorkerClient.render_begin) and returns, and a later tick collects the image once it has
@@ -138,7 +139,7 @@ def _collect(session):
     pending, first = session.pending, session.pending_first
     session.pending = None
     pixels, timings = pending.result()
-    spp = timings["spp"]        # the pass's own: refinement passes may take more (preview.refine_settings)
+    spp = timings["spp"]        # the pass's own: refinement passes may take more (RenderSettings.refinement)
     if first:
         session.sum, session.samples, session.passes = pixels.astype(np.float64) * spp, spp, 1
         preview.write_image(pixels)

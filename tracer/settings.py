@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Lights and render settings shared by the GPU tracer and the reference tracer."""
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -86,6 +87,23 @@ class RenderSettings:
     @property
     def spp_n(self):
         return int(round(np.sqrt(self.spp)))
+
+    def refinement(self, opaque):
+        """The settings of a refinement pass (passes averaged after a first image, as the
+        Blender preview's): the pixel sampler with the most samples one walk of a pixel keeps
+        without losing layers (opaque hair, one layer: layout.PIXEL_MAX_SPP; see-through hair:
+        n² samples with n² × layers within the pixel's list, layout.PIXEL_LIST), or these
+        settings themselves where that would not be more samples than their own, or they ask
+        for minimum pixel width (which the pixel sampler does not take) or the pixel sampler
+        already. `opaque`: every alpha of the strands is 1 (Renderer.all_opaque)."""
+        if self.sampler != "independent" or self.min_pixel_width:
+            return self
+        layers = 1 if opaque else self.layers
+        most = layout.PIXEL_MAX_SPP if layers == 1 else layout.PIXEL_LIST // layers
+        n = math.isqrt(min(most, layout.PIXEL_MAX_SPP))
+        if n * n <= self.spp:
+            return self
+        return replace(self, sampler="pixel", spp=n * n)
 
     def check(self):
         if self.spp < 1 or self.spp_n ** 2 != self.spp:

@@ -181,7 +181,7 @@ def test_the_preview_refines_towards_the_many_sample_image(clean, samples):
         errors.append(rmse(image_pixels(), reference))
     assert state == "converged" and session.samples >= progressive.TARGET_SAMPLES
     # The refinement passes take the pixel sampler's 25 samples (the hair is opaque).
-    refine = preview.refine_settings(rs, True)
+    refine = rs.refinement(True)
     assert (refine.sampler, refine.spp) == ("pixel", 25)
     total, passes = spp, 0
     while total < progressive.TARGET_SAMPLES:
@@ -193,25 +193,6 @@ def test_the_preview_refines_towards_the_many_sample_image(clean, samples):
     assert errors[len(errors) // 4] < errors[0]
     assert progressive.step() == "converged"
     assert progressive.status(scalp) == f"Refined: {session.samples} samples per pixel"
-
-
-def test_refinement_passes_take_as_many_samples_as_the_pixel_sampler_keeps(clean):
-    from dataclasses import replace
-    from tracer import RenderSettings, layout
-    preview = ext_module(clean, "preview")
-    rs = RenderSettings()
-    # Opaque hair (one layer): the most samples a pixel takes in one walk.
-    assert preview.refine_settings(rs, True) == replace(rs, sampler="pixel", spp=layout.PIXEL_MAX_SPP)
-    # See-through hair: samples x layers within the pixel's list (4 layers: 2 x 2 samples).
-    see = preview.refine_settings(rs, False)
-    assert (see.sampler, see.spp) == ("pixel", 4) and see.spp * rs.layers <= layout.PIXEL_LIST
-    assert preview.refine_settings(replace(rs, layers=2), False).spp == 9
-    # Where the pixel sampler would take no more samples than the settings' own, or cannot
-    # take the settings (minimum pixel width), the pass is the settings' own.
-    eight_layers, many, widened = replace(rs, layers=8), replace(rs, spp=25), replace(rs, min_pixel_width=True)
-    assert preview.refine_settings(eight_layers, False) is eight_layers     # 24 // 8: one sample
-    assert preview.refine_settings(many, True) is many
-    assert preview.refine_settings(widened, True) is widened
 
 
 def test_the_preview_starts_over_when_the_camera_a_setting_or_the_hair_changes(clean):

@@ -187,3 +187,37 @@ def test_sampler_settings_are_checked(change, words):
 def test_sampler_settings_accepted():
     RenderSettings(sampler="pixel", spp=25).check()
     RenderSettings(sampler="independent", spp=64).check()
+
+
+# --- Refinement passes ----------------------------------------------------------------------------
+def test_refinement_takes_as_many_samples_as_one_walk_keeps():
+    from dataclasses import replace
+    from tracer import layout
+    rs = RenderSettings()
+    # Opaque hair (one layer): the most samples a pixel takes in one walk.
+    assert rs.refinement(True) == replace(rs, sampler="pixel", spp=layout.PIXEL_MAX_SPP)
+    # See-through hair: samples x layers within the pixel's list (4 layers: 2 x 2 samples).
+    see = rs.refinement(False)
+    assert (see.sampler, see.spp) == ("pixel", 4) and see.spp * rs.layers <= layout.PIXEL_LIST
+    assert replace(rs, layers=2).refinement(False).spp == 9
+    # Where the pixel sampler would take no more samples than the settings' own, or cannot
+    # take the settings (minimum pixel width), a pass is the settings' own.
+    eight_layers, many, widened = replace(rs, layers=8), replace(rs, spp=25), replace(rs, min_pixel_width=True)
+    assert eight_layers.refinement(False) is eight_layers      # 24 // 8: one sample
+    assert many.refinement(True) is many
+    assert widened.refinement(True) is widened
+
+
+@pytest.mark.parametrize("alpha", [1.0, 0.5])
+def test_a_refinement_pass_keeps_the_pixel_sampler(renderer, alpha):
+    """The refinement's samples never make the renderer fall back to the independent sampler
+    (Renderer.sampler_for), opaque or see-through, and its image agrees with the independent
+    sampler's at as many samples."""
+    renderer.set_strands(curls(n_strands=40, alpha=alpha))
+    cam = Camera.look_at((0.0, -2.5, 0.3), (0.0, 0.0, 0.3), size=(48, 48))
+    rs = RenderSettings().refinement(renderer.all_opaque)
+    assert rs.sampler == "pixel" and renderer.sampler_for(rs) == rs
+    assert rs.spp == (25 if alpha == 1.0 else 4)
+    img = renderer.render(cam, rs)
+    ref = renderer.render(cam, RenderSettings(spp=rs.spp))
+    assert img[..., 3].max() > 0.5 and _iou(img, ref) > 0.9
