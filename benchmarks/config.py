@@ -88,7 +88,7 @@ QUICK = Config(
     limits={"generation": 150, "geometry": 35, "rendering": 45, "anchors": 90, "scaling": 45,
             "skips": 30, "stress": 25, "gpu": 10, "integration": 40, "export": 40,
             "versions": 300, "preview_defaults": 600, "contact_sheet": 600, "accel": 120,
-            "hair_shading": 300, "meshes": 60},
+            "hair_shading": 300, "meshes": 60, "preview_refinement": 240},
 )
 
 FULL = Config(
@@ -98,7 +98,7 @@ FULL = Config(
     limits={"generation": 520, "geometry": 300, "rendering": 240, "anchors": 2200, "scaling": 300,
             "skips": 180, "stress": 100, "gpu": 20, "integration": 240,
             "export": 420, "versions": 600, "preview_defaults": 1800, "contact_sheet": 1500,
-            "accel": 1300, "hair_shading": 1200, "meshes": 300},
+            "accel": 1300, "hair_shading": 1200, "meshes": 300, "preview_refinement": 900},
 )
 
 GPU = Config(

@@ -23,6 +23,7 @@ SECTIONS = [
     ("contact_sheet", "Contact sheet: each preset with the head, Cycles beside the preview"),
     ("meshes", "Meshes in the preview: the cost of a head and a body"),
     ("hair_shading", "Hair shading: the preview's fibre model against Cycles' Principled Hair (Chiang)"),
+    ("preview_refinement", "Preview refinement: how soon the progressive preview has no dust"),
 ]
 
 
