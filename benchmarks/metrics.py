@@ -47,6 +47,14 @@ def image_error(image, reference, coverage_alpha=COVERAGE_ALPHA):
     }
 
 
+def hair_rmse(image, reference):
+    """RMSE of linear RGBA over the pixels where either image has any hair (alpha > 0): dust
+    and haze both count; nan where neither has any."""
+    a, b = np.asarray(image, np.float64), np.asarray(reference, np.float64)
+    mask = (a[..., 3] > 0) | (b[..., 3] > 0)
+    return float(np.sqrt(np.mean((a - b)[mask] ** 2))) if mask.any() else float("nan")
+
+
 def whole_image_error(image, reference_of, max_rays=None, seed=0, coverage_alpha=COVERAGE_ALPHA):
     """image_error of a whole image (H,W,4) against a reference that `reference_of(pixels)`
     traces: pixels None for every pixel (returns (H,W,4)), else (P,2) int columns x, y

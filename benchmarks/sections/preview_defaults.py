@@ -31,13 +31,13 @@ most of it the 64-sample references of `wavy`; the quick run's time limit stops 
 `wavy`).
 """
 import os
-
-import numpy as np
-
 import statistics
 import time
 
+import numpy as np
+
 from benchmarks.harness import MIN_RUNS, NotMeasured, Timing, fmt_num, fmt_time, measure, once
+from benchmarks.metrics import hair_rmse
 from benchmarks.scenes import DATA, groom_scene, tracer_api, tracer_camera, view_matrix
 from benchmarks.sections import left
 
@@ -57,13 +57,6 @@ CANDIDATES = (
     ("pixel sampler, 3² samples", {"sampler": "pixel", "spp": 9}),
     ("pixel sampler, 2² samples", {"sampler": "pixel", "spp": 4}),
 )
-
-
-def hair_rmse(image, reference):
-    """RMSE of RGBA over the pixels where either image has any hair."""
-    a, b = np.asarray(image, np.float64), np.asarray(reference, np.float64)
-    mask = (a[..., 3] > 0) | (b[..., 3] > 0)
-    return float(np.sqrt(np.mean((a - b)[mask] ** 2))) if mask.any() else float("nan")
 
 
 def paired(default, job, runs):

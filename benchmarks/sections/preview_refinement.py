@@ -22,7 +22,8 @@ import numpy as np
 from benchmarks.harness import fmt_num, fmt_time, once
 from benchmarks.scenes import tracer_api, tracer_camera, view_matrix
 from benchmarks.sections import left
-from benchmarks.sections.preview_defaults import REF_SPP, TARGET_SPP, _scenes, hair_rmse
+from benchmarks.metrics import hair_rmse
+from benchmarks.sections.preview_defaults import REF_SPP, TARGET_SPP, _scenes
 
 SIZE = (512, 512)
 MAX_SAMPLES = 64                 # the preview's TARGET_SAMPLES
