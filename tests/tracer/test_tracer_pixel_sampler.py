@@ -221,3 +221,22 @@ def test_a_refinement_pass_keeps_the_pixel_sampler(renderer, alpha):
     img = renderer.render(cam, rs)
     ref = renderer.render(cam, RenderSettings(spp=rs.spp))
     assert img[..., 3].max() > 0.5 and _iou(img, ref) > 0.9
+
+
+def test_new_strands_drop_the_pixel_samplers_padding_unless_minimum_pixel_width_asked_for_it(renderer):
+    """After a pixel-sampler pass the grid is padded; new strands get an unpadded one again
+    (the next default render is a fresh renderer's), but not after minimum pixel width."""
+    from tracer.settings import GRID_WIDEN_CAP
+    cam = Camera.look_at((0.0, -2.5, 0.3), (0.0, 0.0, 0.3), size=(40, 40))
+    hair = curls(n_strands=30)
+    renderer.set_strands(hair)
+    renderer.render(cam, RenderSettings(sampler="pixel", spp=4))
+    assert renderer.scene.grid_pad == GRID_WIDEN_CAP
+    renderer.set_strands(hair)
+    assert renderer.scene.grid_pad == 1.0
+    fresh = Renderer(build=renderer.build)
+    fresh.set_strands(hair)
+    np.testing.assert_array_equal(renderer.render(cam, RenderSettings()), fresh.render(cam, RenderSettings()))
+    renderer.render(cam, RenderSettings(min_pixel_width=True))
+    renderer.set_strands(hair)
+    assert renderer.scene.grid_pad == GRID_WIDEN_CAP
