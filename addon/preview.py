@@ -16,8 +16,8 @@ They are uploaded when their arrays changed; a scene of more than MESH_TRIANGLE_
 triangles shows only the scalp and collider, and the operator says so.
 
 One image is one pass of the settings' samples; `render(..., sample_pass=k)` shifts every
-sample of pass k by the same sub-pixel offset (tracer.Camera.for_pass, a low-discrepancy sequence
-over the pixel, or over one stratum of it with several samples), so the passes the
+sample of pass k by the same sub-pixel offset (tracer.Camera.for_pass, a low-discrepancy
+sequence over the pixel, or over one stratum of it with several samples), so the passes the
 progressive preview (progressive.py) averages are new samples of the pixel's area, not the
 same ones again.
 
@@ -25,7 +25,8 @@ The refinement passes after the first image (`refine=True`) take their samples w
 pixel sampler (tracer.RenderSettings(sampler="pixel"): a pixel's samples share one walk), as
 many as it keeps without losing layers (tracer.RenderSettings.refinement): on opaque hair
 5² = 25 samples a pass for about three times one sample's time, so the image has no dust
-after one refinement pass instead of fifteen (docs/DECISIONS.md, "The preview refines with the pixel sampler").
+after one refinement pass instead of fifteen (docs/DECISIONS.md, "The preview refines with
+the pixel sampler").
 """
 import contextlib
 import hashlib

@@ -298,8 +298,8 @@ def _report(sec, cfg, scenes, size):
             if isinstance(key, tuple):
                 sec.summary.append(f"{sc.name}: {spp} spp with the pixel sampler: first {fmt_time(first.median)} = "
                                    f"{ratio(first.median, theirs.median):.2f}× Cycles {spp} spp "
-                                   f"({fmt_time(theirs.median)}); re-render {ratio(again.median, theirs.median):.2f}×; "
-                                   + err)
+                                   f"({fmt_time(theirs.median)}); re-render "
+                                   f"{ratio(again.median, theirs.median):.2f}×; " + err)
         lowest = sc.ours.get(min(cfg.anc_spp))
         if isinstance(lowest, tuple) and c1:
             f1, a1 = lowest[0].median, lowest[1].median
