@@ -46,13 +46,18 @@ bool box_entered(vec3 lo, vec3 hi, vec3 inv, vec3 oi, float t0, float t1) {
 // The next leaf the ray enters within [0, t1] from entry i on: its code (i left on it), or
 // -1 at the end. Boxes are walked until a leaf is reached, and only then is a leaf tested:
 // llvmpipe runs 8 pixels in lock-step, so a loop that tests a leaf in the same pass as a
-// node step makes every lane pay for a leaf whenever any lane is at one.
-int next_leaf(inout int i, vec3 o, vec3 inv, float t1) {
+// node step makes every lane pay for a leaf whenever any lane is at one. `wide` (the pixel
+// sampler's walk): every box grown by how far a sample ray strays from this one at the box's
+// far side, reach.x + reach.y · distance; callers pass a constant, so a plain walk compiles
+// without it.
+int next_leaf(inout int i, vec3 o, vec3 inv, float t1, bool wide, vec2 reach) {
     int code = -1;
     vec3 oi = o * inv;
     for (int it = 0; it < bvh_entries && i < bvh_entries; ++it) {
         ivec4 a = texelFetch(tex_node, WALK_TEXELS * i), b = texelFetch(tex_node, WALK_TEXELS * i + 1);
-        bool enter = box_entered(intBitsToFloat(a.xyz), intBitsToFloat(b.xyz), inv, oi, 0.0, t1);
+        vec3 lo = intBitsToFloat(a.xyz), hi = intBitsToFloat(b.xyz);
+        float pad = wide ? reach.x + reach.y * (length(0.5 * (lo + hi) - o) + 0.5 * length(hi - lo)) : 0.0;
+        bool enter = box_entered(lo - pad, hi + pad, inv, oi, 0.0, t1);
 #if COUNT
         counter.z += 1.0;
 #endif
@@ -112,7 +117,7 @@ void nearest_in_order(vec3 o, vec3 d, float tmax, float widen_per_t, float widen
     vec3 inv = safe_inverse(d);
     int i = 0;
     for (int it = 0; it < bvh_entries; ++it) {
-        int code = next_leaf(i, o, inv, cut);
+        int code = next_leaf(i, o, inv, cut, false, vec2(0.0));
         if (code < 0) break;
         ++i;     // a leaf's subtree is itself
         offer_leaf(code, o, d, tmax, widen_per_t, widen_const);
@@ -188,7 +193,7 @@ float accel_transmittance(vec3 p, vec3 d, float tmax, int own, float tmin, inout
     float trans = 1.0;
     int i = 0;
     for (int it = 0; it < bvh_entries; ++it) {
-        int code = next_leaf(i, p, inv, tmax);
+        int code = next_leaf(i, p, inv, tmax, false, vec2(0.0));
         if (code < 0) break;
         int count = code & ((1 << LEAF_BITS) - 1), first = code >> LEAF_BITS;
         ++i;
@@ -222,30 +227,13 @@ float accel_transmittance(vec3 p, vec3 d, float tmax, int own, float tmin, inout
 // ray, every box grown by how far a sample ray strays from that ray at the box's far side,
 // so that every cylinder a sample hits is offered (pixel_offer takes each once, whichever of
 // its pieces comes first). Once every sample has its LAYERS hits, boxes starting past the
-// farthest of them are skipped. Boxes are walked until a leaf is reached, as next_leaf does.
-int next_leaf_wide(inout int i, vec3 o, vec3 inv, float t1) {
-    int code = -1;
-    vec3 oi = o * inv;
-    for (int it = 0; it < bvh_entries && i < bvh_entries; ++it) {
-        ivec4 a = texelFetch(tex_node, WALK_TEXELS * i), b = texelFetch(tex_node, WALK_TEXELS * i + 1);
-        vec3 lo = intBitsToFloat(a.xyz), hi = intBitsToFloat(b.xyz);
-        float pad = px_reach_c + px_reach_t * (length(0.5 * (lo + hi) - o) + 0.5 * length(hi - lo));
-        bool enter = box_entered(lo - pad, hi + pad, inv, oi, 0.0, t1);
-#if COUNT
-        counter.z += 1.0;
-#endif
-        if (enter && b.w != BVH_NODE) { code = b.w; break; }
-        i = enter ? i + 1 : a.w;
-    }
-    return code;
-}
-
+// farthest of them are skipped (next_leaf's wide walk).
 void accel_pixel_nearest(vec3 o, vec3 d, float tmax) {
     vec3 inv = safe_inverse(d);
     float cut = tmax;
     int i = 0;
     for (int it = 0; it < bvh_entries; ++it) {
-        int code = next_leaf_wide(i, o, inv, cut);
+        int code = next_leaf(i, o, inv, cut, true, vec2(px_reach_c, px_reach_t));
         if (code < 0) break;
         ++i;
         int count = code & ((1 << LEAF_BITS) - 1), first = code >> LEAF_BITS;
