@@ -27,7 +27,7 @@ from .mesh_upload import upload_meshes
 from .scene_buffers import SceneBuffers
 from .scene_bvh import build_scene_bvh, bvh_bounds
 from .scene_grid import build_scene_grid, grid_indices
-from .settings import ACCELS, DEFAULT_ACCEL, GRID_WIDEN_CAP, RenderSettings
+from .settings import ACCELS, DEFAULT_ACCEL, GRID_WIDEN_CAP, RenderSettings, pixel_list_holds
 from .stats import RenderStats
 from .strand_upload import GpuUpload, NumpyUpload, Scene, select_strands
 
@@ -223,7 +223,7 @@ class Renderer:
         against 0.90; a longer list runs into llvmpipe's loop cap). Opaque hair (one layer)
         keeps a nearest hit per sample and never runs over."""
         layers = self.effective_layers(settings)
-        if settings.sampler == "pixel" and layers > 1 and settings.spp * layers > layout.PIXEL_LIST:
+        if settings.sampler == "pixel" and not pixel_list_holds(settings.spp, layers):
             return dataclasses.replace(settings, sampler="independent")
         return settings
 

@@ -54,6 +54,13 @@ class Light:
             raise InputError(f"light color/intensity: {self.color}, {self.intensity}; expected finite values")
 
 
+def pixel_list_holds(spp, layers):
+    """Whether the pixel sampler keeps every layer of `spp` samples: with one layer (opaque
+    hair) each sample keeps its own nearest hit; with more, a pixel keeps layout.PIXEL_LIST
+    distinct cylinders, which spp × layers hits can outgrow (Renderer.sampler_for)."""
+    return layers == 1 or spp * layers <= layout.PIXEL_LIST
+
+
 @dataclass(frozen=True)
 class RenderSettings:
     spp: int = 1                      # samples per pixel, a square (1, 4, 9, 16, ...)
@@ -99,8 +106,7 @@ class RenderSettings:
         if self.sampler != "independent" or self.min_pixel_width:
             return self
         layers = 1 if opaque else self.layers
-        most = layout.PIXEL_MAX_SPP if layers == 1 else layout.PIXEL_LIST // layers
-        n = math.isqrt(min(most, layout.PIXEL_MAX_SPP))
+        n = max(n for n in range(1, math.isqrt(layout.PIXEL_MAX_SPP) + 1) if pixel_list_holds(n * n, layers))
         if n * n <= self.spp:
             return self
         return replace(self, sampler="pixel", spp=n * n)
