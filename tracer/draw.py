@@ -15,6 +15,7 @@ from .gpu_build import set_uniforms
 from .grid import Grid
 from .mesh_upload import MESH_BUFFERS
 from .scene_buffers import split_part_names
+from .scene_grid import WIDE
 from .shader_source import shader_source
 from .shading import shading_model
 
@@ -26,6 +27,9 @@ TRACE_BUFFERS = {"grid": ("tex_cyl", "tex_idx", "tex_cell"), "bvh": ("tex_cyl", 
 # Then, on units 6, 7, ..., the parts past the first of buffers split over the driver's limit
 # (tracer/scene_buffers.py); a scene within it binds none of them.
 SPLIT_PARTS = split_part_names()
+# Then the pixel sampler's wide grid (tracer/scene_grid.py, build_wide_grid), when it walks
+# one beside the scene's grid.
+WIDE_BUFFERS = WIDE
 
 _VERTEX = """#version 330 core
 void main() {   // one triangle that covers the screen; the scissor picks the pixels
@@ -54,12 +58,13 @@ class Drawer:
         self._programs = {}
         self._fbos = {}
 
-    def program(self, settings, camera, layers, meshes=False, accel="grid", parts=(1, 1)):
-        """`parts`: buffer textures holding the cylinders and the cell lists (tracer/scene_buffers.py)."""
+    def program(self, settings, camera, layers, meshes=False, accel="grid", parts=(1, 1), wide=False):
+        """`parts`: buffer textures holding the cylinders and the cell lists (tracer/scene_buffers.py);
+        `wide`: the pixel sampler walks a grid of its own (WIDE_BUFFERS)."""
         key = (layers, settings.shadows and (1 if settings.shadow_mode == "hard" else 2),
                settings.shading, len(settings.lights), settings.spp_n, settings.min_pixel_width,
                camera.type, settings.count, bool(meshes), layout.glsl_header(), accel, settings.sampler,
-               tuple(parts))
+               tuple(parts), bool(wide))
         prog = self._programs.get(key)
         if prog is None:
             defines = {
@@ -74,12 +79,13 @@ class Drawer:
                 "PIXEL": int(settings.sampler == "pixel"),
                 "CYL_PARTS": parts[0],
                 "IDX_PARTS": parts[1],
+                "WIDE_GRID": int(bool(wide)),
             }
             program = self.ctx.program(vertex_shader=_VERTEX,
                                        fragment_shader=shader_source(330, trace_files(settings, meshes, accel),
                                                                      defines))
             set_samplers(program, **{name: unit for unit, name in
-                                     enumerate(TRACE_BUFFERS[accel] + MESH_BUFFERS + SPLIT_PARTS)})
+                                     enumerate(TRACE_BUFFERS[accel] + MESH_BUFFERS + SPLIT_PARTS + WIDE_BUFFERS)})
             prog = (program, self.ctx.vertex_array(program, []))
             self._programs[key] = prog
         return prog
@@ -123,11 +129,12 @@ class Drawer:
         check_memory(f"camera size {w}x{h}", (RENDER_COPIES + settings.count) * w * h * 16,
                      "render a smaller image, or in tiles (python -m tracer render writes any size band by band)")
 
-    def draw(self, buffers, structure, camera, settings, layers, box, mesh_grid=None, mesh_offset=0.0):
+    def draw(self, buffers, structure, camera, settings, layers, box, mesh_grid=None, mesh_offset=0.0, wide=None):
         """The image (H, W, 4) float32, row 0 = top, and the summed work counters (4,):
         pixels in `box` (x0, y0, x1, y1; None: none) traced, the rest background.
         `structure`: the scene's Grid, or its BVH (tracer/bvh.py). With `mesh_grid` the
-        meshes uploaded with it are traced too."""
+        meshes uploaded with it are traced too. `wide`: the Grid the pixel sampler walks, in
+        WIDE_BUFFERS unless it is `structure` itself."""
         import moderngl
         w, h = camera.size
         fbo = self.framebuffer(w, h, settings.count)
@@ -139,9 +146,14 @@ class Drawer:
             meshes = mesh_grid is not None
             accel = "grid" if isinstance(structure, Grid) else "bvh"
             parts = (buffers.parts("tex_cyl"), buffers.parts("tex_idx") if accel == "grid" else 1)
-            prog, vao = self.program(settings, camera, layers, meshes, accel, parts)
+            own = settings.sampler == "pixel" and wide is not None and wide is not structure
+            prog, vao = self.program(settings, camera, layers, meshes, accel, parts, own)
             buffers.bind(TRACE_BUFFERS[accel] + (MESH_BUFFERS if meshes else ("",) * len(MESH_BUFFERS))
-                         + SPLIT_PARTS)
+                         + SPLIT_PARTS + (WIDE_BUFFERS if own else ()))
+            if own:
+                set_uniforms(prog, wide_lo=tuple(float(x) for x in wide.lo),
+                             wide_cell_size=tuple(float(x) for x in wide.cell_size),
+                             wide_dims=tuple(int(x) for x in wide.dims))
             set_uniforms(prog, cyl_split=buffers.part_size("tex_cyl"), idx_split=buffers.part_size("tex_idx"))
             if accel == "grid":
                 set_uniforms(prog, grid_lo=tuple(float(x) for x in structure.lo),

@@ -26,7 +26,7 @@ from .meshes import mesh_set
 from .mesh_upload import upload_meshes
 from .scene_buffers import SceneBuffers
 from .scene_bvh import build_scene_bvh, bvh_bounds
-from .scene_grid import build_scene_grid, grid_indices
+from .scene_grid import build_scene_grid, build_wide_grid, grid_indices, grid_refs
 from .settings import ACCELS, DEFAULT_ACCEL, GRID_WIDEN_CAP, RenderSettings, pixel_list_holds
 from .stats import RenderStats
 from .strand_upload import GpuUpload, NumpyUpload, Scene, select_strands
@@ -116,10 +116,9 @@ class Renderer:
         check_gpu_range(strands)
         plan = plan_cylinders(strands, drop_repeats=self._upload.drops_repeats)
         plan_s = time.perf_counter() - t0
-        # New strands get a grid without the pixel sampler's padding: the default's renders
-        # on a padded grid cost 15-30 % more, and the preview draws its first image of new
-        # hair with the default sampler (its refinement passes pad it again, one rebuild).
-        # Minimum pixel width pads every one of its renders, so after one the padding stays.
+        # New strands get an unpadded grid: renders on one padded for minimum pixel width
+        # cost 15-30 % more. Minimum pixel width pads every one of its renders, so after one
+        # the padding stays.
         if not self._widened_last:
             self.scene.grid_pad = 1.0
         try:
@@ -202,6 +201,26 @@ class Renderer:
         self.scene.grid = None
         return build_scene_bvh(self.scene, self.buffers, refit)
 
+    def _wide_grid(self):
+        """The grid the pixel sampler walks: the scene's own when that is padded already
+        (after minimum pixel width), else its wide grid beside it, built on first use after
+        new strands (tracer/scene_grid.py, build_wide_grid), so the renders of the other
+        samplers and every shadow ray keep the shorter lists. None (pad the scene's grid
+        instead) when the wide lists outgrow one buffer texture."""
+        scene = self.scene
+        if scene.grid_pad >= GRID_WIDEN_CAP or not scene.num_cylinders:
+            return scene.grid
+        if scene.wide_grid is None:
+            t0 = time.perf_counter()
+            try:
+                build_wide_grid(scene, self.buffers, self.build == "gpu", GRID_WIDEN_CAP)
+            except InputError:
+                return None
+            self.stats.grid_rebuilds += 1
+            self.stats.wide_grid_s = time.perf_counter() - t0
+            self.stats.wide_grid_refs = grid_refs(scene.wide_grid)
+        return scene.wide_grid
+
     @property
     def structure(self):
         """The scene's grid or BVH, whichever `accel` asked for."""
@@ -250,16 +269,20 @@ class Renderer:
         t0 = time.perf_counter()
         settings = self.sampler_for(settings)
         self._widened_last = settings.min_pixel_width
+        pixel = settings.sampler == "pixel"
+        wide = self._wide_grid() if pixel and self.accel == "grid" else None
         # Minimum pixel width widens strands, and the pixel sampler's samples stray up to a pixel
-        # from the ray it walks: both want every cylinder listed where its widened capsule reaches.
-        if (settings.min_pixel_width or settings.sampler == "pixel") and self.scene.grid_pad < GRID_WIDEN_CAP:
+        # from the ray it walks: both want every cylinder listed where its widened capsule
+        # reaches. The pixel sampler gets a grid of its own beside the scene's (_wide_grid),
+        # unless that does not fit one buffer; the BVH widens its boxes.
+        if (settings.min_pixel_width or (pixel and wide is None)) and self.scene.grid_pad < GRID_WIDEN_CAP:
             self.scene.grid_pad = GRID_WIDEN_CAP
             self._build_structure(refit=True)      # a BVH keeps its tree: wider boxes only
             self.stats.grid_rebuilds += 1
         box = self.screen_bounds(camera)
         layers = self.effective_layers(settings)
         img, counts = self._drawer.draw(self.buffers, self.structure, camera, settings, layers, box, self.mesh_grid,
-                                        0.0 if self.meshes is None else self.meshes.shadow_offset())
+                                        0.0 if self.meshes is None else self.meshes.shadow_offset(), wide)
         st = self.stats
         st.render_s = time.perf_counter() - t0
         st.renders += 1

@@ -13,52 +13,78 @@ from hairio import InputError
 from . import layout
 from .grid import Grid, build_grid, plan_frame
 from .gl_state import gpu_builder
+from .scene_buffers import SplitBuffer
 
 
 def build_scene_grid(scene, buffers, use_gpu, bounds=None):
     """Builds and uploads the grid of `scene` (tracer/strand_upload.py's Scene) with the
     compute passes when `use_gpu` (falling back to numpy for a scene they cannot list),
     else in numpy. `bounds`: column_bounds of the plan's points when the caller has them
-    already. Sets scene.grid and the grid's stats; returns the seconds spent uploading."""
+    already. Sets scene.grid and the grid's stats (the pixel sampler's wide grid, built from
+    the old cylinders, goes); returns the seconds spent uploading."""
     stats = buffers.stats
     t0 = time.perf_counter()
-    scene.grid = None
-    upload_s = 0.0      # the GPU build uploads only counters (bytes counted in it)
-    frame = plan_frame(scene.plan, scene.grid_pad, bounds) if scene.num_cylinders else None
-    if use_gpu and scene.num_cylinders:
-        scene.grid = _build_gpu(scene, buffers, frame)
-    stats.grid_build = "gpu" if scene.grid is not None else "numpy"
-    if scene.grid is None:      # the numpy build, or a scene the GPU passes cannot list
-        scene.grid = build_grid(scene.cylinders, pad_factor=scene.grid_pad, frame=frame)
-        t1 = time.perf_counter()
-        buffers.upload("tex_idx", scene.grid.indices, 1, "i4", slack=layout.IDX_SLACK)
-        upload_s = time.perf_counter() - t1
+    scene.grid = scene.wide_grid = None
+    scene.grid, stats.grid_build, upload_s, table_s = _build(scene, buffers, use_gpu, bounds, scene.grid_pad, MAIN)
     g = scene.grid
-    t2 = time.perf_counter()
-    # An empty cell's start is unused; EMPTY_BLOCK there says its whole block of BLOCK³
-    # cells is empty, so the DDA learns "skip the block" from the one texel it reads per cell.
-    nx, ny, nz = (int(x) for x in g.dims)
-    B = layout.BLOCK
-    occupied = block_occupancy(g).astype(bool)
-    in_full_block = occupied.repeat(B, 0).repeat(B, 1).repeat(B, 2)[:nz, :ny, :nx].ravel()
-    buffers.upload("tex_cell", layout.cell_table(g.cell_start, g.cell_count, in_full_block), 2, "i4")
-    t3 = time.perf_counter()
-    stats.grid_s = (t3 - t0) - upload_s - (t3 - t2)
+    stats.grid_s = (time.perf_counter() - t0) - upload_s - table_s
     stats.grid_dims = tuple(int(x) for x in g.dims)
     stats.grid_refs = grid_refs(g)
     stats.cylinders_per_full_cell, stats.full_cell_fraction = g.occupancy()
-    return upload_s + (t3 - t2)
+    return upload_s + table_s
+
+
+def build_wide_grid(scene, buffers, use_gpu, pad):
+    """The pixel sampler's grid of `scene` beside its own (buffers WIDE): every cylinder
+    listed where its capsule widened `pad` times reaches, so the cells of a pixel's central
+    ray list what its samples hit (shaders/accel_grid.glsl, accel_pixel_nearest). Shadow
+    rays and the other samplers keep walking the scene's grid, whose shorter lists they
+    test faster. Sets scene.wide_grid; InputError when its lists outgrow one buffer texture
+    (the caller then pads the scene's grid instead)."""
+    scene.wide_grid = None
+    scene.wide_grid = _build(scene, buffers, use_gpu, None, pad, WIDE)[0]
+    return scene.wide_grid
+
+
+# The buffers of the scene's grid (its lists may be split: tracer/scene_buffers.py) and of
+# the pixel sampler's wide grid (one buffer texture each).
+MAIN = ("tex_idx", "tex_cell")
+WIDE = ("tex_idx_w", "tex_cell_w")
+
+
+def _build(scene, buffers, use_gpu, bounds, pad, names):
+    """(Grid, where it was built: "gpu" or "numpy", seconds uploading its lists, seconds
+    making and uploading its cell table) of the scene's cylinders bounded `pad` times their radius,
+    into buffers `names` (MAIN or WIDE)."""
+    grid, upload_s = None, 0.0      # the GPU build uploads only counters (bytes counted in it)
+    frame = plan_frame(scene.plan, pad, bounds) if scene.num_cylinders else None
+    if use_gpu and scene.num_cylinders:
+        grid = _build_gpu(scene, buffers, frame, pad, names[0])
+    build = "gpu" if grid is not None else "numpy"
+    if grid is None:      # the numpy build, or a scene the GPU passes cannot list
+        grid = build_grid(scene.cylinders, pad_factor=pad, frame=frame)
+        t1 = time.perf_counter()
+        buffers.upload(names[0], grid.indices, 1, "i4", slack=layout.IDX_SLACK)
+        upload_s = time.perf_counter() - t1
+    t2 = time.perf_counter()
+    # An empty cell's start is unused; EMPTY_BLOCK there says its whole block of BLOCK³
+    # cells is empty, so the DDA learns "skip the block" from the one texel it reads per cell.
+    nx, ny, nz = (int(x) for x in grid.dims)
+    B = layout.BLOCK
+    occupied = block_occupancy(grid).astype(bool)
+    in_full_block = occupied.repeat(B, 0).repeat(B, 1).repeat(B, 2)[:nz, :ny, :nx].ravel()
+    buffers.upload(names[1], layout.cell_table(grid.cell_start, grid.cell_count, in_full_block), 2, "i4")
+    return grid, build, upload_s, time.perf_counter() - t2
 
 
 def grid_refs(grid):
     return int(grid.cell_count.sum(dtype=np.int64))
 
 
-def _build_gpu(scene, buffers, frame):
-    """Grid with indices None, or None when a cylinder spans more cells than one
-    invocation may list (the caller builds in numpy)."""
+def _build_gpu(scene, buffers, frame, pad, name):
+    """Grid with indices None, its lists in buffer `name`, or None when a cylinder spans
+    more cells than one invocation may list (the caller builds in numpy)."""
     lo, cs, dims = frame
-    pad = scene.grid_pad
     builder = gpu_builder()
     n, tex_cyl = scene.num_cylinders, buffers["tex_cyl"]
     counted = builder.count(n, tex_cyl, lo, cs, dims, pad)
@@ -69,10 +95,12 @@ def _build_gpu(scene, buffers, frame):
     total = int(start[-1])
     start = (start - counts).astype(np.int32)      # fewer than 2^31: a buffer holds them
     try:
-        tex_idx = buffers.store("tex_idx", total + layout.IDX_SLACK, 1, "i4")
+        tex_idx = buffers.store(name, total + layout.IDX_SLACK, 1, "i4")
     except InputError:
         cells.release()
         raise
+    if not isinstance(tex_idx, SplitBuffer):        # the wide grid's one buffer
+        tex_idx = SplitBuffer([tex_idx], buffers.part_texels("tex_idx"))
     builder.fill(n, tex_cyl, lo, cs, dims, pad, cells, start, tex_idx)
     tex_idx.write(np.zeros(layout.IDX_SLACK, np.int32), first=total)
     # Counted as uploads: the zeroed counters, the cursors the two passes start from and

@@ -13,7 +13,8 @@ class RenderStats:
     full_cell_fraction, or the BVH's accel_s (build or refit), bvh_refit, bvh_entries (nodes
     and leaves), bvh_pieces; accel ("grid" or "bvh") and accel_bytes (the structure's
     buffers; for the grid its lists and cell table). Of the last set_meshes: num_triangles,
-    mesh_s. Of the last render: render_s, layers_max (layers the shader was
+    mesh_s. Of the pixel sampler's wide grid (built on its first render of new strands,
+    beside the scene's grid): wide_grid_s, wide_grid_refs. Of the last render: render_s, layers_max (layers the shader was
     compiled for), screen_box and traversed_pixels (the projected bounds that were traced),
     and with RenderSettings(count=True) the counters shadow_rays, layers_traced,
     cells_visited, cylinder_tests (summed over samples). gl_backend: the shared context's
@@ -41,6 +42,8 @@ class RenderStats:
     bvh_refit: Optional[bool] = None
     bvh_entries: Optional[int] = None
     bvh_pieces: Optional[int] = None
+    wide_grid_s: Optional[float] = None
+    wide_grid_refs: Optional[int] = None
     layers_max: Optional[int] = None
     screen_box: Optional[tuple] = None
     traversed_pixels: Optional[int] = None

@@ -45,6 +45,9 @@ class Scene:
     # The grid lists cylinders with their true radius until a render asks for minimum
     # pixel width; then it is rebuilt once with radii widened by GRID_WIDEN_CAP and kept.
     grid_pad: float = 1.0
+    # The pixel sampler's own grid (radii widened by GRID_WIDEN_CAP) beside an unpadded one,
+    # built on its first render of these strands (tracer/scene_grid.py, build_wide_grid).
+    wide_grid: Optional[Grid] = None
 
     @property
     def cylinders(self):
@@ -53,7 +56,8 @@ class Scene:
         return self.cylinders_
 
     def forget(self):
-        self.strands = self.grid = self.bvh = self.plan = self.cylinders_ = self.num_cylinders = None
+        self.strands = self.grid = self.wide_grid = self.bvh = self.plan = self.cylinders_ = None
+        self.num_cylinders = None
 
     def set_plan(self, strands, plan):
         self.strands, self.plan, self.num_cylinders = strands, plan, len(plan)

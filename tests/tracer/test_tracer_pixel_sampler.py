@@ -223,15 +223,74 @@ def test_a_refinement_pass_keeps_the_pixel_sampler(renderer, alpha):
     assert img[..., 3].max() > 0.5 and _iou(img, ref) > 0.9
 
 
-def test_new_strands_drop_the_pixel_samplers_padding_unless_minimum_pixel_width_asked_for_it(renderer):
-    """After a pixel-sampler pass the grid is padded; new strands get an unpadded one again
-    (the next default render is a fresh renderer's), but not after minimum pixel width."""
+def _padded(build, hair, cam, max_buffer_texels=None):
+    """A renderer of `hair` whose own grid is padded (minimum pixel width asked for it)."""
+    from tracer.settings import GRID_WIDEN_CAP
+    r = Renderer(build=build, max_buffer_texels=max_buffer_texels)
+    r.set_strands(hair)
+    r.render(cam, RenderSettings(min_pixel_width=True))
+    assert r.scene.grid_pad == GRID_WIDEN_CAP and r.scene.wide_grid is None
+    return r
+
+
+def test_the_pixel_sampler_walks_a_wide_grid_beside_the_scenes_own(renderer):
+    """The pixel sampler walks a grid of its own, padded for its samples' reach, built on its
+    first render of new strands; the scene's grid stays unpadded, so later default renders
+    (and every shadow ray) are a fresh renderer's. The image is the one it gives on a scene
+    grid padded by minimum pixel width, bit for bit; new strands drop the wide grid."""
+    cam = Camera.look_at((0.0, -2.5, 0.3), (0.0, 0.0, 0.3), size=(40, 40))
+    hair = curls(n_strands=30)
+    renderer.set_strands(hair)
+    refs = renderer.stats.grid_refs
+    rebuilds = renderer.stats.grid_rebuilds
+    img = renderer.render(cam, RenderSettings(sampler="pixel", spp=4))
+    assert renderer.scene.grid_pad == 1.0 and renderer.scene.wide_grid is not None
+    assert renderer.stats.wide_grid_refs > refs == renderer.stats.grid_refs
+    assert renderer.stats.grid_rebuilds == rebuilds + 1
+    np.testing.assert_array_equal(img, _padded(renderer.build, hair, cam).render(cam, RenderSettings(sampler="pixel",
+                                                                                                     spp=4)))
+    assert img[..., 3].max() > 0.5
+    renderer.render(cam, RenderSettings(sampler="pixel", spp=9))      # the same wide grid
+    assert renderer.stats.grid_rebuilds == rebuilds + 1
+    fresh = Renderer(build=renderer.build)
+    fresh.set_strands(hair)
+    np.testing.assert_array_equal(renderer.render(cam, RenderSettings()), fresh.render(cam, RenderSettings()))
+    renderer.set_strands(hair)
+    assert renderer.scene.wide_grid is None and renderer.scene.grid_pad == 1.0
+
+
+def test_after_minimum_pixel_width_the_pixel_sampler_walks_the_scenes_padded_grid(renderer):
+    """Minimum pixel width pads the scene's grid, and new strands keep the padding: the
+    pixel sampler then walks that grid and builds no wide one."""
     from tracer.settings import GRID_WIDEN_CAP
     cam = Camera.look_at((0.0, -2.5, 0.3), (0.0, 0.0, 0.3), size=(40, 40))
     hair = curls(n_strands=30)
     renderer.set_strands(hair)
-    renderer.render(cam, RenderSettings(sampler="pixel", spp=4))
+    renderer.render(cam, RenderSettings(min_pixel_width=True))
+    renderer.set_strands(hair)
     assert renderer.scene.grid_pad == GRID_WIDEN_CAP
+    img = renderer.render(cam, RenderSettings(sampler="pixel", spp=4))
+    assert renderer.scene.wide_grid is None and img[..., 3].max() > 0.5
+
+
+def test_a_wide_grid_past_one_buffer_pads_the_scenes_grid_instead(renderer):
+    """The wide grid's lists live in one buffer texture; past it the scene's own grid is
+    padded (its lists may be split over several), and the image is the same."""
+    from tracer.settings import GRID_WIDEN_CAP
+    cam = Camera.look_at((0.0, -2.5, 0.3), (0.0, 0.0, 0.3), size=(40, 40))
+    hair = curls(n_strands=30)
+    probe = Renderer(build=renderer.build)
+    probe.set_strands(hair)
+    probe.render(cam, RenderSettings(sampler="pixel", spp=4))
+    wide, own = probe.stats.wide_grid_refs, probe.stats.grid_refs
+    limit = (own + wide) // 2           # the scene's lists fit, the wide ones do not
+    assert own < limit < wide
+    small = Renderer(build=renderer.build, max_buffer_texels=limit)
+    small.set_strands(hair)
+    img = small.render(cam, RenderSettings(sampler="pixel", spp=4))
+    assert small.scene.wide_grid is None and small.scene.grid_pad == GRID_WIDEN_CAP
+    assert small.buffers.parts("tex_idx") > 1
+    np.testing.assert_array_equal(img, probe.render(cam, RenderSettings(sampler="pixel", spp=4)))
     renderer.set_strands(hair)
     assert renderer.scene.grid_pad == 1.0
     fresh = Renderer(build=renderer.build)

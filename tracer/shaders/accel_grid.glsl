@@ -19,8 +19,41 @@ uniform isamplerBuffer tex_cell;  // per cell: x = first slot (EMPTY_BLOCK: the 
 uniform vec3 grid_lo;
 uniform vec3 cell_size;
 uniform ivec3 dims;
+#if PIXEL && WIDE_GRID
+// The pixel sampler's own grid (tracer/scene_grid.py, build_wide_grid): its cylinders listed
+// wherever their capsule widened GRID_WIDEN_CAP times reaches, its lists in one buffer.
+uniform isamplerBuffer tex_idx_w;
+uniform isamplerBuffer tex_cell_w;
+uniform vec3 wide_lo;
+uniform vec3 wide_cell_size;
+uniform ivec3 wide_dims;
+#endif
 
-int list_entry(int i) {
+// The frame of the scene's grid, or with `wide` of the pixel sampler's (callers pass a
+// constant, so a build without the wide grid compiles to the scene's alone).
+vec3 frame_lo(bool wide) {
+#if PIXEL && WIDE_GRID
+    if (wide) return wide_lo;
+#endif
+    return grid_lo;
+}
+vec3 frame_cell(bool wide) {
+#if PIXEL && WIDE_GRID
+    if (wide) return wide_cell_size;
+#endif
+    return cell_size;
+}
+ivec3 frame_dims(bool wide) {
+#if PIXEL && WIDE_GRID
+    if (wide) return wide_dims;
+#endif
+    return dims;
+}
+
+int list_entry(int i, bool wide) {
+#if PIXEL && WIDE_GRID
+    if (wide) return texelFetch(tex_idx_w, i).x;
+#endif
 #if IDX_PARTS > 1
     if (i >= idx_split) {
 #if IDX_PARTS > 2
@@ -36,7 +69,14 @@ int list_entry(int i) {
 #endif
     return texelFetch(tex_idx, i).x;
 }
-ivec2 cell_entry(ivec3 c) { return texelFetch(tex_cell, c.x + dims.x * (c.y + dims.y * c.z)).xy; }
+ivec2 cell_entry(ivec3 c, bool wide) {
+    ivec3 n = frame_dims(wide);
+    int i = c.x + n.x * (c.y + n.y * c.z);
+#if PIXEL && WIDE_GRID
+    if (wide) return texelFetch(tex_cell_w, i).xy;
+#endif
+    return texelFetch(tex_cell, i).xy;
+}
 
 // Most cells a ray crosses are empty (hair is a thin shell with air inside and around).
 // When the whole block of BLOCK^3 cells around `cell` is empty, move the DDA state to
@@ -47,7 +87,7 @@ ivec2 cell_entry(ivec3 c) { return texelFetch(tex_cell, c.x + dims.x * (c.y + di
 // leaves the grid inside the block. Nothing coarser pays for its fetch on every step
 // (docs/DECISIONS.md, "No empty-space skipping beyond one block of cells").
 bool skip_empty_block(inout ivec3 cell, inout vec3 tnext, inout float tcur, vec3 tdelta,
-                      ivec3 stp, float t1) {
+                      ivec3 stp, float t1, bool wide) {
     ivec3 b0 = (cell / BLOCK) * BLOCK;
     ivec3 lastc = b0 + ivec3(greaterThan(stp, ivec3(0))) * (BLOCK - 1);
     ivec3 nsteps = abs(lastc - cell);
@@ -63,7 +103,7 @@ bool skip_empty_block(inout ivec3 cell, inout vec3 tnext, inout float tcur, vec3
         tnext[i] += float(k) * tdelta[i];
     }
     tcur = tb;
-    return all(greaterThanEqual(cell, ivec3(0))) && all(lessThan(cell, dims));
+    return all(greaterThanEqual(cell, ivec3(0))) && all(lessThan(cell, frame_dims(wide)));
 }
 
 // A grid walk (primary and shadow rays alike): the current cell, where the ray leaves it
@@ -76,6 +116,7 @@ struct Walk {
     ivec2 sc;       // the cell's first slot (-1: empty block) and count
     int id, id2;
     vec4 A, B;
+    bool wide;      // the pixel sampler's wide grid (a constant of each walk)
 };
 
 // The cell's entry, its first two list entries and the first candidate's texels, read before
@@ -84,22 +125,25 @@ struct Walk {
 // empty block's cell (start EMPTY_BLOCK) reads from 0, and the host gives the lists two texels of
 // zeros past their end.
 void read_cell(inout Walk w) {
-    w.sc = cell_entry(clamp(w.cell, ivec3(0), dims - 1));
+    w.sc = cell_entry(clamp(w.cell, ivec3(0), frame_dims(w.wide) - 1), w.wide);
     int first = max(w.sc.x, 0);
-    w.id = list_entry(first);
-    w.id2 = list_entry(first + 1);
+    w.id = list_entry(first, w.wide);
+    w.id2 = list_entry(first + 1, w.wide);
     w.A = cyl(w.id, CYL_TOP);
     w.B = cyl(w.id, CYL_TIP);
 }
 
-// The walk from o along d where it enters the grid at t0; stp and tdelta stay fixed.
-Walk begin_walk(vec3 o, vec3 d, vec3 inv, float t0, out ivec3 stp, out vec3 tdelta) {
+// The walk from o along d where it enters the grid (`wide`: the pixel sampler's) at t0; stp
+// and tdelta stay fixed.
+Walk begin_walk(vec3 o, vec3 d, vec3 inv, float t0, out ivec3 stp, out vec3 tdelta, bool wide) {
     Walk w;
-    vec3 pe = (o + t0 * d - grid_lo) / cell_size;
-    w.cell = clamp(ivec3(floor(pe)), ivec3(0), dims - 1);
+    w.wide = wide;
+    vec3 lo = frame_lo(wide), cs = frame_cell(wide);
+    vec3 pe = (o + t0 * d - lo) / cs;
+    w.cell = clamp(ivec3(floor(pe)), ivec3(0), frame_dims(wide) - 1);
     stp = ivec3(sign(d));
-    tdelta = abs(cell_size * inv);
-    w.tnext = (grid_lo + (vec3(w.cell) + step(0.0, d)) * cell_size - o) * inv;
+    tdelta = abs(cs * inv);
+    w.tnext = (lo + (vec3(w.cell) + step(0.0, d)) * cs - o) * inv;
     w.tcur = t0;
     read_cell(w);
     return w;
@@ -113,12 +157,12 @@ bool next_cell(Walk w, bool empty, bool last, float texit, vec3 tdelta, ivec3 st
     next.tcur = texit;
     bool inside;
     if (empty) {
-        inside = skip_empty_block(next.cell, next.tnext, next.tcur, tdelta, stp, t1);
+        inside = skip_empty_block(next.cell, next.tnext, next.tcur, tdelta, stp, t1, w.wide);
     } else {
         if (w.tnext.x <= w.tnext.y && w.tnext.x <= w.tnext.z) { next.cell.x += stp.x; next.tnext.x += tdelta.x; }
         else if (w.tnext.y <= w.tnext.z) { next.cell.y += stp.y; next.tnext.y += tdelta.y; }
         else { next.cell.z += stp.z; next.tnext.z += tdelta.z; }
-        inside = !last && all(greaterThanEqual(next.cell, ivec3(0))) && all(lessThan(next.cell, dims));
+        inside = !last && all(greaterThanEqual(next.cell, ivec3(0))) && all(lessThan(next.cell, frame_dims(w.wide)));
     }
     read_cell(next);
     return inside;
@@ -132,14 +176,16 @@ int take_candidate(inout Walk w, int k, out vec4 A, out vec4 B) {
     w.id = w.id2;
     w.A = cyl(w.id, CYL_TOP);
     w.B = cyl(w.id, CYL_TIP);
-    w.id2 = list_entry(w.sc.x + k + 2);
+    w.id2 = list_entry(w.sc.x + k + 2, w.wide);
     return id;
 }
 
-// Slab test against the grid box; false when the ray misses it within [tmin, tmax].
-bool enter_grid(vec3 o, vec3 inv, inout float t0, inout float t1) {
-    vec3 hi = grid_lo + cell_size * vec3(dims);
-    vec3 ta = (grid_lo - o) * inv, tb = (hi - o) * inv;
+// Slab test against the grid box (`wide`: the pixel sampler's); false when the ray misses it
+// within [tmin, tmax].
+bool enter_grid(vec3 o, vec3 inv, inout float t0, inout float t1, bool wide) {
+    vec3 lo = frame_lo(wide);
+    vec3 hi = lo + frame_cell(wide) * vec3(frame_dims(wide));
+    vec3 ta = (lo - o) * inv, tb = (hi - o) * inv;
     vec3 tn = min(ta, tb), tf = max(ta, tb);
     t0 = max(t0, max(tn.x, max(tn.y, tn.z)));
     t1 = min(t1, min(tf.x, min(tf.y, tf.z)));
@@ -151,9 +197,9 @@ bool enter_grid(vec3 o, vec3 inv, inout float t0, inout float t1) {
 void accel_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_const) {
     vec3 inv = safe_inverse(d);
     float t0 = 0.0, t1 = tmax;
-    if (enter_grid(o, inv, t0, t1)) {
+    if (enter_grid(o, inv, t0, t1, false)) {
         ivec3 stp; vec3 tdelta;
-        Walk w = begin_walk(o, d, inv, t0, stp, tdelta);
+        Walk w = begin_walk(o, d, inv, t0, stp, tdelta, false);
         int guard = dims.x + dims.y + dims.z + 3;
         for (int it = 0; it < guard; ++it) {
             bool empty = w.sc.x < 0;
@@ -195,9 +241,9 @@ void accel_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_co
 float accel_transmittance(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint) {
     vec3 inv = safe_inverse(d);
     float t0 = 0.0, t1 = tmax;
-    if (!enter_grid(p, inv, t0, t1)) return 1.0;
+    if (!enter_grid(p, inv, t0, t1, false)) return 1.0;
     ivec3 stp; vec3 tdelta;
-    Walk w = begin_walk(p, d, inv, t0, stp, tdelta);
+    Walk w = begin_walk(p, d, inv, t0, stp, tdelta, false);
     float trans = 1.0;
     int guard = dims.x + dims.y + dims.z + 3;
     // The walk of accel_nearest: the next cell and the next candidate read one step ahead.
@@ -236,18 +282,22 @@ float accel_transmittance(vec3 p, vec3 d, float tmax, int own, float tmin, inout
 #if PIXEL
 // The pixel sampler's walk (sampler_pixel.glsl): the cells of the pixel's central ray, every
 // candidate offered to pixel_offer, which tests all the pixel's samples. A sample ray lies
-// within a pixel of the central one, and the grid lists each cylinder in every cell its
-// capsule widened GRID_WIDEN_CAP times touches, so where a cylinder is as wide as an eighth of
-// a pixel or more, the cells of the central ray list every cylinder a sample hits. No cell
-// range decides where a hit counts (the list takes a cylinder once, by id): a sample's hit
-// need not lie in a cell of the central ray.
+// within a pixel of the central one, and the grid it walks (with WIDE_GRID its own, else the
+// scene's, padded then) lists each cylinder in every cell its capsule widened GRID_WIDEN_CAP
+// times touches, so where a cylinder is as wide as an eighth of a pixel or more, the cells of
+// the central ray list every cylinder a sample hits. No cell range decides where a hit counts
+// (the list takes a cylinder once, by id): a sample's hit need not lie in a cell of the
+// central ray. (Walking the scene's unpadded lists instead, through every cell within the
+// samples' reach of the central ray, visited 8 times the cells: docs/DECISIONS.md.)
 void accel_pixel_nearest(vec3 o, vec3 d, float tmax) {
     vec3 inv = safe_inverse(d);
     float t0 = 0.0, t1 = tmax;
-    if (enter_grid(o, inv, t0, t1)) {
+    const bool wide = WIDE_GRID != 0;
+    if (enter_grid(o, inv, t0, t1, wide)) {
         ivec3 stp; vec3 tdelta;
-        Walk w = begin_walk(o, d, inv, t0, stp, tdelta);
-        int guard = dims.x + dims.y + dims.z + 3;
+        Walk w = begin_walk(o, d, inv, t0, stp, tdelta, wide);
+        ivec3 n = frame_dims(wide);
+        int guard = n.x + n.y + n.z + 3;
         for (int it = 0; it < guard; ++it) {
             bool empty = w.sc.x < 0;
             float texit = min(min(w.tnext.x, w.tnext.y), min(w.tnext.z, t1));
