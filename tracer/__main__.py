@@ -196,8 +196,8 @@ def build_parser():
                         f"sampling (default %(default)s)")
     r.add_argument("--sampler", choices=SAMPLERS, default=RenderSettings().sampler,
                    help="how a pixel's samples are taken: independent (each its own ray, one pass per sample) "
-                        f"or pixel (all of them in one walk, each strand shaded once a pixel: 16 samples for "
-                        f"a fraction of 16 passes' time; at most {PIXEL_MAX_SPP}) (default %(default)s)")
+                        f"or pixel (up to {PIXEL_MAX_SPP} of them in one walk, each strand shaded once a walk: "
+                        f"16 samples for a fraction of 16 passes' time) (default %(default)s)")
     r.add_argument("--shadows", dest="shadows", action="store_true", default=True,
                    help="trace shadow rays toward the lights (the default)")
     r.add_argument("--no-shadows", dest="shadows", action="store_false", help="no shadow rays: faster, flatter")

@@ -17,6 +17,7 @@ from .mesh_upload import MESH_BUFFERS
 from .scene_buffers import split_part_names
 from .scene_grid import WIDE
 from .shader_source import shader_source
+from .settings import pixel_group
 from .shading import shading_model
 
 # Host memory of one render: the framebuffer (a driver like llvmpipe keeps it in host memory),
@@ -61,10 +62,11 @@ class Drawer:
     def program(self, settings, camera, layers, meshes=False, accel="grid", parts=(1, 1), wide=False):
         """`parts`: buffer textures holding the cylinders and the cell lists (tracer/scene_buffers.py);
         `wide`: the pixel sampler walks a grid of its own (WIDE_BUFFERS)."""
+        group = pixel_group(settings.spp, layers) if settings.sampler == "pixel" else 1
         key = (layers, settings.shadows and (1 if settings.shadow_mode == "hard" else 2),
                settings.shading, len(settings.lights), settings.spp_n, settings.min_pixel_width,
                camera.type, settings.count, bool(meshes), layout.glsl_header(), accel, settings.sampler,
-               tuple(parts), bool(wide))
+               tuple(parts), bool(wide), group)
         prog = self._programs.get(key)
         if prog is None:
             defines = {
@@ -77,6 +79,7 @@ class Drawer:
                 "COUNT": int(settings.count),
                 "MESHES": int(bool(meshes)),
                 "PIXEL": int(settings.sampler == "pixel"),
+                "PIX_GROUP": group,
                 "CYL_PARTS": parts[0],
                 "IDX_PARTS": parts[1],
                 "WIDE_GRID": int(bool(wide)),
@@ -171,6 +174,8 @@ class Drawer:
             self.ctx.blend_equation = moderngl.FUNC_ADD
             x0, y0, x1, y1 = box
             step = settings.tile
+            draws = (settings.spp // pixel_group(settings.spp, layers) if settings.sampler == "pixel"
+                     else settings.spp)
             for ty in range(y0, y1, step):
                 for tx in range(x0, x1, step):
                     tw, th = min(step, x1 - tx), min(step, y1 - ty)
@@ -178,8 +183,8 @@ class Drawer:
                     self.ctx.scissor = (tx, h - ty - th, tw, th)
                     # One sample per draw (the shader's main says why): the first replaces the
                     # cleared background, the others add to it (colour and counters alike).
-                    # The pixel sampler takes all of a pixel's samples in one draw.
-                    for s in range(1 if settings.sampler == "pixel" else settings.spp):
+                    # The pixel sampler takes a group of a pixel's samples a draw.
+                    for s in range(draws):
                         set_uniforms(prog, sample_index=s)
                         if s == 1:
                             self.ctx.enable(moderngl.BLEND)

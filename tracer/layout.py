@@ -79,14 +79,15 @@ BVH_NODE = -1
 BVH_SHORT_STACK = 16
 
 # --- Pixel sampler (RenderSettings.sampler "pixel", shaders/sampler_pixel.glsl) -------------
-# Distinct cylinders one pixel keeps (the nearest hit by any of its samples; with one layer
-# each sample keeps its own nearest instead); cylinders shaded per pixel, the heaviest (the
+# Distinct cylinders one walk keeps (the nearest hit by any of its samples; with one layer
+# each sample keeps its own nearest instead); cylinders shaded per walk, the heaviest (the
 # others' weight goes to them), each with its own shadow rays; with one layer, strands shaded
-# per pixel, all with the heaviest one's shadow rays; the most samples one pixel takes in one
-# walk (a sample is a bit of a 32-bit mask; 5² = 25). Measured choices: docs/DECISIONS.md,
+# per walk, all with the heaviest one's shadow rays; the most samples one walk takes (a
+# sample is a bit of a 32-bit mask; 5² = 25; a pixel with more takes several walks:
+# settings.pixel_group). Measured choices: docs/DECISIONS.md,
 # "Samples of one pixel share the walk".
 PIXEL_LIST = 24
-PIXEL_SHADE = 1
+PIXEL_SHADE = 4
 PIXEL_SHADE_ONE = 6
 PIXEL_MAX_SPP = 25
 

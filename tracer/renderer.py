@@ -27,7 +27,7 @@ from .mesh_upload import upload_meshes
 from .scene_buffers import SceneBuffers
 from .scene_bvh import build_scene_bvh, bvh_bounds
 from .scene_grid import build_scene_grid, build_wide_grid, grid_indices, grid_refs
-from .settings import ACCELS, DEFAULT_ACCEL, GRID_WIDEN_CAP, RenderSettings, pixel_list_holds
+from .settings import ACCELS, DEFAULT_ACCEL, GRID_WIDEN_CAP, RenderSettings, pixel_group
 from .stats import RenderStats
 from .strand_upload import GpuUpload, NumpyUpload, Scene, select_strands
 
@@ -234,15 +234,17 @@ class Renderer:
         return settings.layers
 
     def sampler_for(self, settings):
-        """`settings`, or where the pixel sampler would lose layers, the same with the
-        independent sampler. With more than one layer (see-through hair) the pixel sampler keeps
-        a list of layout.PIXEL_LIST distinct cylinders a pixel, and its samples may need up to
-        spp × layers of them: on dense see-through hair the list ran over and samples lost
-        their far layers (straight.hair, alpha 0.64, 16 samples × 4 layers: mean alpha 0.75
-        against 0.90; a longer list runs into llvmpipe's loop cap). Opaque hair (one layer)
-        keeps a nearest hit per sample and never runs over."""
+        """`settings`, or where the pixel sampler cannot keep one sample's layers, the same
+        with the independent sampler. With more than one layer (see-through hair) one walk
+        of the pixel sampler keeps a list of layout.PIXEL_LIST distinct cylinders, and its
+        samples may need up to samples × layers of them, so a pixel's samples are walked in
+        groups small enough for the list (settings.pixel_group: 16 samples × 4 layers in four
+        walks of 4); one list ran over on dense see-through hair and samples lost their far
+        layers (straight.hair, alpha 0.64, 16 samples × 4 layers: mean alpha 0.75 against
+        0.90; a longer list runs into llvmpipe's loop cap). Opaque hair (one layer) keeps a
+        nearest hit per sample and never runs over."""
         layers = self.effective_layers(settings)
-        if settings.sampler == "pixel" and not pixel_list_holds(settings.spp, layers):
+        if settings.sampler == "pixel" and not pixel_group(settings.spp, layers):
             return dataclasses.replace(settings, sampler="independent")
         return settings
 

@@ -55,10 +55,19 @@ class Light:
 
 
 def pixel_list_holds(spp, layers):
-    """Whether the pixel sampler keeps every layer of `spp` samples: with one layer (opaque
-    hair) each sample keeps its own nearest hit; with more, a pixel keeps layout.PIXEL_LIST
-    distinct cylinders, which spp × layers hits can outgrow (Renderer.sampler_for)."""
+    """Whether one walk of the pixel sampler keeps every layer of `spp` samples: with one
+    layer (opaque hair) each sample keeps its own nearest hit; with more, a walk keeps
+    layout.PIXEL_LIST distinct cylinders, which spp × layers hits can outgrow."""
     return layers == 1 or spp * layers <= layout.PIXEL_LIST
+
+
+def pixel_group(spp, layers):
+    """The samples of a pixel that share one walk of the pixel sampler: the most that divide
+    `spp`, fit a walk's sample mask (layout.PIXEL_MAX_SPP) and keep all their `layers`
+    (pixel_list_holds); a pixel takes spp / group walks, one draw each. 0 when not even one
+    sample's layers fit (the renderer then takes the independent sampler)."""
+    return next((g for g in range(min(spp, layout.PIXEL_MAX_SPP), 0, -1)
+                 if spp % g == 0 and pixel_list_holds(g, layers)), 0)
 
 
 @dataclass(frozen=True)
@@ -121,9 +130,6 @@ class RenderSettings:
         if self.sampler not in SAMPLERS:
             raise InputError(f"sampler: {self.sampler!r}; use one of {', '.join(map(repr, SAMPLERS))}")
         if self.sampler == "pixel":
-            if self.spp > layout.PIXEL_MAX_SPP:
-                raise InputError(f"spp: {self.spp} with sampler 'pixel', which takes a pixel's samples in one walk, "
-                                 f"at most {layout.PIXEL_MAX_SPP}; use fewer samples or sampler 'independent'")
             if self.min_pixel_width:
                 raise InputError("min_pixel_width with sampler 'pixel': the pixel sampler finds a pixel's coverage "
                                  "from its samples, so widening strands would count them twice; turn one off")

@@ -70,7 +70,7 @@ def test_cli_sampler_pixel_gives_the_coverage_one_pass_per_sample_gives(tmp_path
 
 
 @pytest.mark.parametrize("case", ["missing", "garbage", "nan", "size", "spp", "camera", "truncated-hair",
-                                  "sampler-spp"])
+                                  "sampler-width"])
 def test_cli_errors_exit_2_and_write_nothing(tmp_path, capsys, case):
     src = tmp_path / "in.npz"
     curls(3, 4).save_npz(src)
@@ -87,8 +87,8 @@ def test_cli_errors_exit_2_and_write_nothing(tmp_path, capsys, case):
         args += ["--spp", "3"]
     elif case == "camera":
         args += ["--camera", "1,2:3"]
-    elif case == "sampler-spp":
-        args += ["--sampler", "pixel", "--spp", "36"]
+    elif case == "sampler-width":
+        args += ["--sampler", "pixel", "--spp", "16", "--min-pixel-width"]
     elif case == "truncated-hair":
         bad = tmp_path / "in.hair"
         bad.write_bytes(b"HAIR\x01\x00")

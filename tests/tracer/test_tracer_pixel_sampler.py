@@ -66,7 +66,7 @@ def _tuft_camera(size=72):
 
 
 # Opaque hair takes one layer, each sample its own nearest hit; see-through hair the list of
-# distinct cylinders, which holds enough for 9 samples of 2 layers (Renderer.sampler_for).
+# distinct cylinders, which holds enough for 9 samples of 2 layers in one walk.
 @pytest.mark.parametrize("alpha, layers, spp", [(1.0, 4, 16), (0.45, 2, 9)], ids=["opaque", "layers"])
 def test_pixel_sampler_matches_independent_at_same_samples(renderer, alpha, layers, spp):
     renderer.set_strands(curls(60, 12, radius=0.004, alpha=alpha))
@@ -95,9 +95,10 @@ def test_pixel_sampler_matches_independent_at_same_samples(renderer, alpha, laye
 def test_one_layer_path_agrees_with_the_list(renderer):
     """Opaque hair takes one layer, where each sample keeps its own nearest cylinder and six
     strands a pixel are shaded under the heaviest one's shadow rays; hair of alpha 0.9995
-    takes two layers and the list, one strand shaded. The samples find the same strands
-    (alpha the same but for the 0.9995), and the six shaded strands come nearer the
-    independent sampler's colour than the list's one."""
+    takes two layers and the list, layout.PIXEL_SHADE strands shaded, each with its own shadow
+    rays. The samples find the same strands (alpha the same but for the 0.9995), and the
+    shared shadow rays keep the colour about as near the independent sampler's as the
+    list's own rays do."""
     cam = _tuft_camera()
     images, layers = {}, {}
     for alpha in (1.0, 0.9995):
@@ -109,7 +110,7 @@ def test_one_layer_path_agrees_with_the_list(renderer):
     (one, ind_one), (lst, ind_lst) = images[1.0], images[0.9995]
     assert (one[..., 3] > 0).sum() > 400
     assert np.abs(one[..., 3] * 0.9995 - lst[..., 3]).max() < 1e-5
-    assert _hair_rmse(one, ind_one) < 0.8 * _hair_rmse(lst, ind_lst)
+    assert _hair_rmse(one, ind_one) < 1.25 * _hair_rmse(lst, ind_lst) < 0.02
 
 
 @pytest.mark.parametrize("accel", ["grid", "bvh"])
@@ -158,25 +159,47 @@ def test_dense_scene_keeps_every_hit(renderer):
     assert np.abs(ind[..., 3] - pix[..., 3]).mean() < 0.02
 
 
-def test_see_through_hair_past_the_list_takes_the_independent_sampler(renderer):
-    """16 samples of 4 layers can need 64 distinct cylinders a pixel, more than the pixel
-    sampler's list holds (tracer/layout.py PIXEL_LIST): on dense see-through hair it lost
-    far layers (mean alpha 0.75 against 0.90 on straight.hair). Such a render is the
-    independent sampler's, pixel for pixel; 4 samples of 4 layers fit and stay shared."""
+def test_see_through_hair_past_one_list_walks_each_pixel_in_groups(renderer):
+    """16 samples of 4 layers can need 64 distinct cylinders a pixel, more than one walk's
+    list holds (tracer/layout.py PIXEL_LIST): on dense see-through hair one walk lost far
+    layers (mean alpha 0.75 against 0.90 on straight.hair). Such a pixel is walked in groups
+    of samples whose layers fit (settings.pixel_group: four walks of 4 samples), one draw
+    each: the coverage is the independent sampler's. Past even one sample's layers (more
+    layers than the list) the renderer takes the independent sampler, pixel for pixel."""
+    from tracer.settings import pixel_group
     renderer.set_strands(curls(300, 12, radius=0.004, alpha=0.3))
     cam = _tuft_camera(48)
+    assert pixel_group(16, 4) == 4
     ind = renderer.render(cam, RenderSettings(spp=16))
     assert renderer.stats.layers_max == 4
-    assert np.array_equal(renderer.render(cam, RenderSettings(sampler="pixel", spp=16)), ind)
-    ind4 = renderer.render(cam, RenderSettings(spp=4))
-    pix4 = renderer.render(cam, RenderSettings(sampler="pixel", spp=4))
-    assert not np.array_equal(pix4, ind4) and abs(ind4[..., 3].mean() - pix4[..., 3].mean()) < 0.01
+    pix = renderer.render(cam, RenderSettings(sampler="pixel", spp=16))
+    assert renderer.sampler_for(RenderSettings(sampler="pixel", spp=16)).sampler == "pixel"
+    assert (ind[..., 3] > 0.5).sum() > 200, "not dense enough to prove anything"
+    assert abs(ind[..., 3].mean() - pix[..., 3].mean()) < 0.003
+    assert np.abs(ind[..., 3] - pix[..., 3]).mean() < 0.01
+    assert _hair_rmse(pix, ind) < 0.02 < _hair_rmse(np.zeros_like(ind), ind)
+    many = RenderSettings(sampler="pixel", spp=4, layers=25)
+    assert pixel_group(4, 25) == 0 and renderer.sampler_for(many).sampler == "independent"
+    assert np.array_equal(renderer.render(cam, many), renderer.render(cam, RenderSettings(spp=4, layers=25)))
+
+
+def test_more_samples_than_one_mask_take_several_walks(renderer):
+    """A walk's samples are bits of a 32-bit mask (at most layout.PIXEL_MAX_SPP): 64 samples
+    of opaque hair take four walks of 16, and give the independent sampler's coverage."""
+    from tracer.settings import pixel_group
+    renderer.set_strands(curls(60, 12, radius=0.004))
+    cam = _tuft_camera(40)
+    assert pixel_group(64, 1) == 16
+    pix = renderer.render(cam, RenderSettings(sampler="pixel", spp=64))
+    ind = renderer.render(cam, RenderSettings(spp=64))
+    assert (ind[..., 3] > 0).sum() > 200
+    assert abs(ind[..., 3].mean() - pix[..., 3].mean()) < 0.002
+    assert _hair_rmse(pix, ind) < 0.02 < _hair_rmse(np.zeros_like(ind), ind)
 
 
 # --- Settings -----------------------------------------------------------------------------------
 @pytest.mark.parametrize("change, words", [
     (dict(sampler="stratified"), "sampler"),
-    (dict(sampler="pixel", spp=36), "at most 25"),
     (dict(sampler="pixel", spp=16, min_pixel_width=True), "min_pixel_width"),
 ])
 def test_sampler_settings_are_checked(change, words):
@@ -186,6 +209,7 @@ def test_sampler_settings_are_checked(change, words):
 
 def test_sampler_settings_accepted():
     RenderSettings(sampler="pixel", spp=25).check()
+    RenderSettings(sampler="pixel", spp=64).check()
     RenderSettings(sampler="independent", spp=64).check()
 
 

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
-// The pixel sampler (RenderSettings.sampler "pixel", PIXEL 1): the SPP_N² samples of one
-// pixel share one walk. The accelerator walks the pixel's central ray and hands every
+// The pixel sampler (RenderSettings.sampler "pixel", PIXEL 1): the samples of one pixel
+// share one walk, PIX_GROUP of its SPP_N² at a time (one draw each, sample_index the group:
+// settings.pixel_group keeps a group's layers within the list). The accelerator walks the pixel's central ray and hands every
 // candidate to pixel_offer (accel_pixel_nearest of accel_grid.glsl / accel_bvh.glsl), which
 // tests all the pixel's sample rays against it at once (footprint_mask) and keeps the
 // PIX_M nearest distinct cylinders any sample hits, each with the mask of the samples it
@@ -9,7 +10,8 @@
 // does) and shades the heaviest distinct cylinders once each.
 // docs/DECISIONS.md, "Samples of one pixel share the walk".
 #if PIXEL
-const int PN = SPP_N * SPP_N;               // samples per pixel (settings: at most 25)
+const int PN = PIX_GROUP;                   // samples per walk (settings: at most 25)
+const int GROUPS = SPP_N * SPP_N / PN;      // walks (draws) per pixel
 const uint FULL = PN >= 32 ? 0xffffffffu : (1u << uint(PN)) - 1u;
 
 // Per pixel (set by trace_main.glsl's main): each sample's offset from the pixel's centre

@@ -220,10 +220,12 @@ void sample_ray(vec3 o, vec3 d, vec2 q, out vec3 so, out vec3 sd) {
 #endif
 }
 
+uniform int sample_index;       // the group of samples this draw takes
+
 void main() {
     int px = int(gl_FragCoord.x) + pixel_origin.x;
     int py = int(image_size.y) - 1 - int(gl_FragCoord.y) + pixel_origin.y;   // row 0 = top
-    for (int s = 0; s < PN; ++s) px_off[s] = sample_jitter(s, px, py) - 0.5;
+    for (int s = 0; s < PN; ++s) px_off[s] = sample_jitter(sample_index * PN + s, px, py) - 0.5;
     vec3 o, d; float len;
     camera_ray(float(px) + 0.5, float(py) + 0.5, o, d, len);
     px_du = cam_rot[0] * (pixel_size / len);
@@ -388,7 +390,7 @@ void main() {
     for (int s = 0; s < PN; ++s) Tbg += Ts[s];
 #endif
     Tbg /= float(PN);
-    frag_color = vec4(C + Tbg * background.rgb, 1.0 - Tbg + Tbg * background.a);
+    frag_color = vec4(C + Tbg * background.rgb, 1.0 - Tbg + Tbg * background.a) / float(GROUPS);
 #if COUNT
     frag_count = counter;
 #endif
