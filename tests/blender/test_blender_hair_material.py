@@ -5,6 +5,7 @@ import importlib
 import math
 
 import numpy as np
+import pytest
 import bpy
 
 from hairio import Strands
@@ -14,10 +15,22 @@ def _module(extension, name):
     return importlib.import_module(f"{extension.__name__}.addon.{name}")
 
 
+def _drop_hair_materials():
+    for mat in [m for m in bpy.data.materials if m.name.startswith("Key-Strand Hair")]:
+        bpy.data.materials.remove(mat)
+
+
+@pytest.fixture(autouse=True)
+def _fresh_hair_material():
+    """The tests change the add-on's hair material; later tests (the preview's image against
+    the tracer's defaults) must not find it so."""
+    yield
+    _drop_hair_materials()
+
+
 def _hair(extension):
     curves = _module(extension, "blender_curves")
-    for mat in [m for m in bpy.data.materials if m.name.startswith("Key-Strand Hair")]:
-        bpy.data.materials.remove(mat)      # a fresh add-on material, not an earlier test's
+    _drop_hair_materials()      # a fresh add-on material, not an earlier test's
     pts = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.5]], np.float32)
     hair = curves.strands_to_curves("Hair", Strands.from_arrays(pts, [2]), collection=bpy.context.scene.collection)
     curves.ensure_hair_material(hair)
