@@ -14,8 +14,9 @@ Times: the median of the harness's runs for the one-sample settings; the many-sa
 renders, a single run. On a machine shared with other work a time measured minutes after
 another is no fair ratio, so each candidate timed with runs is timed interleaved with the
 default (default, candidate, default, candidate, ...; both compiled and warm first), the
-default on a renderer of its own whose grid no candidate pads (minimum pixel width and the
-pixel sampler widen the grid's lists, which would slow the default down); its ratio is the
+default on a renderer of its own whose grid no candidate pads (minimum pixel width widens
+the grid's lists, which would slow the default down; the pixel sampler walks a wide grid of
+its own beside the scene's); its ratio is the
 candidate's median over that default's median, beside the same ratio of CPU time (the
 process's, the driver's threads included), which other work on the machine moves less.
 

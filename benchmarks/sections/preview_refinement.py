@@ -4,7 +4,7 @@ reaches the 16-sample error, refined by independent one-sample passes (as before
 pixel-sampler passes (`RenderSettings.refinement`, what the preview does now).
 
 Both start from the same first image, the default settings' one sample, on a renderer of
-their own (so the pixel sampler's padded grid is paid where it is built), and add passes as
+their own (so the pixel sampler's wide grid is paid where it is built), and add passes as
 the preview does: pass k at tracer.Camera.for_pass(k, n) (new sub-pixel positions), the
 passes' mean weighted by their samples. After each pass: the time of all passes so far (the
 renders' wall clock, one run each: a refinement is a sequence of single renders) and the
