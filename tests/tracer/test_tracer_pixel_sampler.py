@@ -183,6 +183,25 @@ def test_see_through_hair_past_one_list_walks_each_pixel_in_groups(renderer):
     assert np.array_equal(renderer.render(cam, many), renderer.render(cam, RenderSettings(spp=4, layers=25)))
 
 
+def test_see_through_layers_in_shadow_keep_their_darkness(renderer):
+    """With layers, a walk shades its few heaviest strands, mostly the front ones; the
+    layers behind lie in their shadow. One more strand, drawn in proportion to its weight,
+    stands for all the unshaded ones, so the mean colour is the independent sampler's (the
+    unshaded weight given to the shaded strands made such hair some 16 % too bright)."""
+    from tracer import Light
+    renderer.set_strands(curls(400, 12, radius=0.006, alpha=0.5))
+    cam = _tuft_camera(48)
+    sun = (Light(vector=(0.2, 0.9, -0.4), intensity=3.0),)
+    rs = dict(spp=16, layers=4, shading="kajiya-kay", lights=sun)
+    ind = renderer.render(cam, RenderSettings(**rs))
+    pix = renderer.render(cam, RenderSettings(sampler="pixel", **rs))
+    dark = renderer.render(cam, RenderSettings(shadows=False, **rs))
+    assert renderer.stats.layers_max == 4
+    lit, shaded = float(dark[..., :3].mean()), float(ind[..., :3].mean())
+    assert shaded < 0.8 * lit, "the layers hardly shadow each other: the test would prove nothing"
+    assert abs(float(pix[..., :3].mean()) - shaded) < 0.03 * shaded
+
+
 def test_more_samples_than_one_mask_take_several_walks(renderer):
     """A walk's samples are bits of a 32-bit mask (at most layout.PIXEL_MAX_SPP): 64 samples
     of opaque hair take four walks of 16, and give the independent sampler's coverage."""
