@@ -276,8 +276,10 @@ class Renderer:
         # Minimum pixel width widens strands, and the pixel sampler's samples stray up to a pixel
         # from the ray it walks: both want every cylinder listed where its widened capsule
         # reaches. The pixel sampler gets a grid of its own beside the scene's (_wide_grid),
-        # unless that does not fit one buffer; the BVH widens its boxes.
-        if (settings.min_pixel_width or (pixel and wide is None)) and self.scene.grid_pad < GRID_WIDEN_CAP:
+        # unless that does not fit one buffer; a BVH's pixel walk grows each box by the
+        # samples' reach itself (shaders/accel_bvh.glsl), so its boxes stay as they are.
+        padded_for_pixel = pixel and wide is None and self.accel == "grid"
+        if (settings.min_pixel_width or padded_for_pixel) and self.scene.grid_pad < GRID_WIDEN_CAP:
             self.scene.grid_pad = GRID_WIDEN_CAP
             self._build_structure(refit=True)      # a BVH keeps its tree: wider boxes only
             self.stats.grid_rebuilds += 1

@@ -113,6 +113,29 @@ def test_one_layer_path_agrees_with_the_list(renderer):
     assert _hair_rmse(one, ind_one) < 1.25 * _hair_rmse(lst, ind_lst) < 0.02
 
 
+@pytest.mark.parametrize("alpha", [1.0, 0.45])
+def test_a_bvh_keeps_its_boxes_for_the_pixel_sampler(alpha):
+    """A BVH's pixel walk grows each box by the samples' reach itself, so the pixel sampler
+    leaves the tree's boxes unpadded (a default render after it is a fresh renderer's) and
+    finds what it finds in boxes padded by minimum pixel width."""
+    hair = curls(60, 12, radius=0.004, alpha=alpha)
+    cam = _tuft_camera(48)
+    rs = RenderSettings(sampler="pixel", spp=9, layers=2)
+    r = Renderer(accel="bvh")
+    r.set_strands(hair)
+    pix = r.render(cam, rs)
+    assert r.scene.grid_pad == 1.0
+    padded = Renderer(accel="bvh")
+    padded.set_strands(hair)
+    padded.render(cam, RenderSettings(min_pixel_width=True))
+    assert padded.scene.grid_pad > 1.0
+    assert (pix[..., 3] > 0).sum() > 300
+    np.testing.assert_allclose(pix, padded.render(cam, rs), atol=1e-6)
+    fresh = Renderer(accel="bvh")
+    fresh.set_strands(hair)
+    np.testing.assert_array_equal(r.render(cam, RenderSettings()), fresh.render(cam, RenderSettings()))
+
+
 @pytest.mark.parametrize("accel", ["grid", "bvh"])
 def test_pixel_sampler_with_meshes_and_both_accelerators(accel):
     r = Renderer(accel=accel)
