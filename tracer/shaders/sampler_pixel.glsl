@@ -1,10 +1,10 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 // The pixel sampler (RenderSettings.sampler "pixel", PIXEL 1): the samples of one pixel
 // share one walk, PIX_GROUP of its SPP_N² at a time (one draw each, sample_index the group:
-// settings.pixel_group keeps a group's layers within the list). The accelerator walks the pixel's central ray and hands every
-// candidate to pixel_offer (accel_pixel_nearest of accel_grid.glsl / accel_bvh.glsl), which
-// tests all the pixel's sample rays against it at once (footprint_mask) and keeps the
-// PIX_M nearest distinct cylinders any sample hits, each with the mask of the samples it
+// settings.pixel_group keeps a group's layers within the list). The accelerator walks the
+// pixel's central ray and hands every candidate to pixel_offer (accel_pixel_nearest of
+// accel_grid.glsl / accel_bvh.glsl), which tests all the group's sample rays against it at
+// once (footprint_mask) and keeps the PIX_M nearest distinct cylinders any sample hits, each with the mask of the samples it
 // covers (with one layer, each sample's own nearest cylinder instead). trace_main.glsl then
 // composites each sample's own hits (at most LAYERS per sample, as the independent sampler
 // does) and shades the heaviest distinct cylinders once each.

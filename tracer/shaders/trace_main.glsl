@@ -395,7 +395,7 @@ void main() {
         int eid = -1; float et = 0.0, acc = 0.0; vec2 mi = vec2(0.0);
         for (int j = 0; j < NE; ++j) {
             float wj = max(wgt[j], 0.0);
-            // The first entry whose running sum passes u, else (rounding) the last one left.
+            // The entry whose stretch of the running sum holds u: the last whose sum before it is <= u.
             bool here = wj > 0.0 && (eid < 0 || acc <= u);
             eid = here ? eids[j] : eid; et = here ? ets[j] : et; mi = here ? mid[j] : mi;
             acc += wj;
