@@ -4,10 +4,11 @@
 // settings.pixel_group keeps a group's layers within the list). The accelerator walks the
 // pixel's central ray and hands every candidate to pixel_offer (accel_pixel_nearest of
 // accel_grid.glsl / accel_bvh.glsl), which tests all the group's sample rays against it at
-// once (footprint_mask) and keeps the PIX_M nearest distinct cylinders any sample hits, each with the mask of the samples it
-// covers (with one layer, each sample's own nearest cylinder instead). trace_main.glsl then
-// composites each sample's own hits (at most LAYERS per sample, as the independent sampler
-// does) and shades the heaviest distinct cylinders once each.
+// once (footprint_mask) and keeps the PIX_M nearest distinct cylinders any sample hits,
+// each with the mask of the samples it covers (with one layer, each sample's own nearest
+// cylinder instead). trace_main.glsl then composites each sample's own hits (at most LAYERS
+// per sample, as the independent sampler does) and shades the heaviest distinct cylinders
+// once each.
 // docs/DECISIONS.md, "Samples of one pixel share the walk".
 #if PIXEL
 const int PN = PIX_GROUP;                   // samples per walk (settings: at most 25)
