@@ -332,6 +332,10 @@ class Collider:
         self._strides = np.array([shape[1] * shape[2], shape[2], 1], np.int64)
         self._corner_offsets = np.array([dx * self._strides[0] + dy * self._strides[1] + dz
                                          for dx in (0, 1) for dy in (0, 1) for dz in (0, 1)], np.int64)
+        # (3, 1) columns for _locate's and _cells' (3, N) rows: the origin, and the last
+        # cell's coordinates along each axis (the cells' upper clamp).
+        self._origin_column = self.origin[:, None].copy()
+        self._upper_cell = shape.astype(np.float64)[:, None] - 2
         phi = self._sample_exact(np.zeros(3), shape, self.band)
         inside = self._parity(shape) if self.closed else np.zeros(self.shape, bool)
         far = np.isnan(phi)
@@ -507,22 +511,6 @@ class Collider:
             base *= n
             base += cell
         return base.astype(np.int64), frac
-
-    @property
-    def _origin_column(self):
-        """(3, 1) the grid's origin."""
-        column = self.__dict__.get("_origin_col")
-        if column is None:
-            column = self.__dict__["_origin_col"] = self.origin[:, None].copy()
-        return column
-
-    @property
-    def _upper_cell(self):
-        """(3, 1) the last cell's coordinates along each axis (the cells' upper clamp)."""
-        upper = self.__dict__.get("_upper")
-        if upper is None:
-            upper = self.__dict__["_upper"] = np.array(self.shape, np.float64)[:, None] - 2
-        return upper
 
     def clear_of(self, points, clearance):
         """True where a point is certainly at least `clearance` outside: one look-up per point
