@@ -59,10 +59,10 @@ class Drawer:
         self._programs = {}
         self._fbos = {}
 
-    def program(self, settings, camera, layers, meshes=False, accel="grid", parts=(1, 1), wide=False):
+    def program(self, settings, camera, layers, meshes=False, accel="grid", parts=(1, 1), wide=False, group=1):
         """`parts`: buffer textures holding the cylinders and the cell lists (tracer/scene_buffers.py);
-        `wide`: the pixel sampler walks a grid of its own (WIDE_BUFFERS)."""
-        group = pixel_group(settings.spp, layers) if settings.sampler == "pixel" else 1
+        `wide`: the pixel sampler walks a grid of its own (WIDE_BUFFERS); `group`: the pixel
+        sampler's samples a walk (settings.pixel_group)."""
         key = (layers, settings.shadows and (1 if settings.shadow_mode == "hard" else 2),
                settings.shading, len(settings.lights), settings.spp_n, settings.min_pixel_width,
                camera.type, settings.count, bool(meshes), layout.glsl_header(), accel, settings.sampler,
@@ -149,8 +149,12 @@ class Drawer:
             meshes = mesh_grid is not None
             accel = "grid" if isinstance(structure, Grid) else "bvh"
             parts = (buffers.parts("tex_cyl"), buffers.parts("tex_idx") if accel == "grid" else 1)
-            own = settings.sampler == "pixel" and wide is not None and wide is not structure
-            prog, vao = self.program(settings, camera, layers, meshes, accel, parts, own)
+            pixel = settings.sampler == "pixel"
+            own = pixel and wide is not None and wide is not structure
+            # The pixel sampler takes a group of a pixel's samples a draw, the other one sample.
+            group = pixel_group(settings.spp, layers) if pixel else 1
+            draws = settings.spp // group
+            prog, vao = self.program(settings, camera, layers, meshes, accel, parts, own, group)
             buffers.bind(TRACE_BUFFERS[accel] + (MESH_BUFFERS if meshes else ("",) * len(MESH_BUFFERS))
                          + SPLIT_PARTS + (WIDE_BUFFERS if own else ()))
             if own:
@@ -174,8 +178,6 @@ class Drawer:
             self.ctx.blend_equation = moderngl.FUNC_ADD
             x0, y0, x1, y1 = box
             step = settings.tile
-            draws = (settings.spp // pixel_group(settings.spp, layers) if settings.sampler == "pixel"
-                     else settings.spp)
             for ty in range(y0, y1, step):
                 for tx in range(x0, x1, step):
                     tw, th = min(step, x1 - tx), min(step, y1 - ty)
