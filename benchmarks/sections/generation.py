@@ -257,9 +257,49 @@ def run(sec, cfg):
                  f"{d['cpu_ratio']:.2f}.**")
     sec.data["timings"] = data
     _plot(sec, data)
+    _one_cpu(sec, cfg, groom, scalp, keys, base, collider, data)
     _presets(sec, cfg, groom, scalp, collider)
     _memory(sec, cfg)
     _incremental(sec, cfg, groom, scalp, collider, placement)
+
+
+def _one_cpu(sec, cfg, groom, scalp, keys, base, collider, data):
+    """groom at 100,000 strands on one CPU against all of them, in turn: how much of the
+    ratio is work and how much the threads' scaling. One CPU: the calling thread's affinity
+    set to one CPU, so groom.parallel sees one and runs every job on that thread."""
+    row = [d for d in data if d["count"] == 100000]
+    if not row or not hasattr(os, "sched_setaffinity"):
+        sec.not_measured("groom on one CPU", "needs the 100,000-strand row and a platform that sets thread affinity")
+        return
+    if over_budget(sec, 0.5):
+        sec.not_measured("groom on one CPU", "skipped to stay inside the section's time budget")
+        return
+    params = base.replace(count=100000)
+    cpus = os.sched_getaffinity(0)
+    sides = {"all": [], "one": []}
+    try:
+        for _ in range(max(int(cfg.runs), MIN_RUNS)):
+            for side in sides:
+                os.sched_setaffinity(0, cpus if side == "all" else {min(cpus)})
+                c0, t0 = time.process_time(), time.perf_counter()
+                groom.generate(scalp, keys, params, collider=collider)
+                sides[side].append((time.perf_counter() - t0, time.process_time() - c0))
+    finally:
+        os.sched_setaffinity(0, cpus)
+    med = {side: (float(np.median([r[0] for r in v])), float(np.median([r[1] for r in v]))) for side, v in sides.items()}
+    blender_cpu = row[0]["blender_cpu"]
+    sec.table(["groom on", "time (median)", "CPU (median)", "time ÷ one CPU's", "CPU ÷ Interpolate Curves CPU"],
+              [[f"all {len(cpus)} CPUs", fmt_time(med["all"][0]), fmt_time(med["all"][1]),
+                f"{med['all'][0] / med['one'][0]:.2f}", f"{med['all'][1] / blender_cpu:.2f}"],
+               ["one CPU", fmt_time(med["one"][0]), fmt_time(med["one"][1]), "1.00",
+                f"{med['one'][1] / blender_cpu:.2f}"]],
+              caption="groom at 100,000 strands of the same job on every CPU and on one (runs in turn), against "
+                      "Interpolate Curves' CPU time in the table above: the work each side does, and what the "
+                      "threads make of it.")
+    sec.data["one_cpu"] = {"all": med["all"], "one": med["one"], "cpus": len(cpus), "blender_cpu": blender_cpu}
+    sec.summary.append(f"100,000 strands: groom on one CPU {fmt_time(med['one'][0])} "
+                       f"({med['one'][1] / blender_cpu:.2f}× Interpolate Curves' CPU time), on {len(cpus)} "
+                       f"{fmt_time(med['all'][0])}")
 
 
 def _plot(sec, data):
