@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import layout
-from .cylinders import column_bounds
+from .cylinders import column_bounds, segment_radius
 
 MAX_REFS_PER_CYLINDER = 8.0
 MAX_CELLS_PER_CYLINDER = 4.0
@@ -122,17 +122,20 @@ def plan_frame(plan, pad_factor=1.0, bounds=None, dims=None):
     whose capsules are widened `pad_factor` times: the one frame both builds use, made
     from the plan alone (the GPU build never has the cylinders on the host). `bounds`:
     column_bounds of the plan's points when the caller has them already; `dims`
-    overrides the resolution."""
+    overrides the resolution. The reach past the points' box comes from their largest
+    radius, which bounds every cylinder's (the mean of two of them)."""
     step = max(1, len(plan) // FRAME_SAMPLE + 1)
     top = plan.top_point[::step]
     rmax = float(plan.radius.max()) if len(plan.radius) else 0.0
     return _segments_frame(column_bounds(plan.points) if bounds is None else bounds, rmax,
-                           plan.points[top], plan.points[top + 1], plan.radius[top], pad_factor, len(plan), dims)
+                           plan.points[top], plan.points[top + 1], segment_radius(plan.radius, top), pad_factor,
+                           len(plan), dims)
 
 
 def cylinders_frame(cylinders, pad_factor=1.0, dims=None):
     """The frame of plan_frame for tracer.cylinders.Cylinders (their end points and radii;
-    for the cylinders of a plan it is the plan's frame)."""
+    for the cylinders of a plan it is the plan's frame but for the reach, here from the
+    largest cylinder's radius, there from the largest point's)."""
     step = max(1, len(cylinders) // FRAME_SAMPLE + 1)
     ends = np.concatenate([cylinders.top, cylinders.tip])
     return _segments_frame(column_bounds(ends), float(cylinders.radius.max()), cylinders.top[::step],

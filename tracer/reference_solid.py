@@ -75,7 +75,8 @@ def cut_cylinders(strands):
     sharp = cos < layout.cos_sharp()
     n2[sharp] = u[sharp]
     cos[sharp] = 1.0
-    r = np.asarray(plan.radius, np.float64)[i]
+    rad = np.asarray(plan.radius, np.float64)
+    r = 0.5 * (rad[i] + rad[i + 1])     # the mean of the cylinder's two points' radii
     # Plane 2 tilts by the bend angle θ: the solid reaches r·tan θ past b along the axis.
     tan = np.sqrt(np.maximum(0.0, 1.0 - cos * cos)) / np.maximum(cos, 1e-12)
     return CutCylinders(a=a, b=b, u=u, n2=n2, radius=r, color=np.asarray(plan.color, np.float64)[i],

@@ -58,3 +58,32 @@ def test_bend_under_the_limit_reaches_r_tan_angle_past_the_tip():
 def test_nan_points_are_rejected_naming_the_array():
     with pytest.raises(InputError, match="points"):
         Strands.from_arrays([[0, 0, 0], [np.nan, 0, 1]], [2])
+
+
+def test_a_cylinder_takes_the_mean_of_its_two_points_radii():
+    # A tapered strand: each cylinder as wide as the middle of its step, not its wider end.
+    s = make_strands([[[0, 0, 0], [0, 0, 1], [0, 0, 2], [0, 0, 3]]], radius=[0.04, 0.03, 0.01, 0.0])
+    c = strands_to_cylinders(s)
+    np.testing.assert_allclose(c.radius, [0.035, 0.02, 0.005], rtol=1e-6)
+
+
+@pytest.mark.parametrize("build", ["numpy", "gpu"])
+def test_a_tapered_strand_covers_the_cones_silhouette(build):
+    # A straight strand tapered from r0 at the root to 0 at the tip, seen from the side: the
+    # curve through its points (what Cycles renders) covers a triangle of area r0·L. With each
+    # cylinder as wide as its top point (the SPEC's r_i), three steps cover 4/3 of that.
+    from tracer import Camera, RenderSettings, Renderer
+    from tracer.gpu_build import compute_available
+    from tracer.gl_state import shared_context
+    if build == "gpu" and not compute_available(shared_context()):
+        pytest.skip("this driver has no compute shaders (OpenGL 4.3)")
+    r0, length = 0.05, 1.0
+    s = make_strands([[[0, 0, 0], [0, 0, 1 / 3], [0, 0, 2 / 3], [0, 0, 1]]], radius=[r0, 2 * r0 / 3, r0 / 3, 0.0])
+    size, scale = (64, 256), 1.2
+    cam = Camera.look_at((0, -5, 0.5), (0, 0, 0.5), type="ORTHO", size=size, ortho_scale=scale)
+    r = Renderer(build=build)
+    r.set_strands(s)
+    img = r.render(cam, RenderSettings(spp=64, shadows=False))
+    pixel = scale / max(size)
+    covered = float(img[..., 3].sum()) * pixel * pixel
+    assert covered == pytest.approx(r0 * length, rel=0.03)

@@ -65,7 +65,9 @@ void main() {
     }
     int flags = (cap1 ? CAP_PLANE1 : 0) | (!has_next || sharp ? CAP_PLANE2 : 0);
     int base = TEXELS_PER_CYL * (k - part_first);
-    imageStore(cyl_img, base + CYL_TOP, vec4(A, texelFetch(tex_rad, p).x));
+    // The mean of the two points' radii, as tracer/cylinders.py's segment_radius: (a + b)·0.5.
+    float r = (texelFetch(tex_rad, p).x + texelFetch(tex_rad, p + 1).x) * 0.5;
+    imageStore(cyl_img, base + CYL_TOP, vec4(A, r));
     imageStore(cyl_img, base + CYL_TIP, vec4(B, texelFetch(tex_alpha, p).x));
     imageStore(cyl_img, base + CYL_N2, vec4(u2, float(flags)));
     imageStore(cyl_img, base + CYL_COL, vec4(texelFetch(tex_col, p).rgb, 0.0));
