@@ -80,15 +80,16 @@ BVH_SHORT_STACK = 16
 
 # --- Pixel sampler (RenderSettings.sampler "pixel", shaders/sampler_pixel.glsl) -------------
 # Distinct cylinders one walk keeps (the nearest hit by any of its samples; with one layer
-# each sample keeps its own nearest instead); cylinders shaded per walk, the heaviest (the
-# others' weight goes to them), each with its own shadow rays; with one layer, strands shaded
-# per walk, all with the heaviest one's shadow rays; the most samples one walk takes (a
-# sample is a bit of a 32-bit mask; 5² = 25; a pixel with more takes several walks:
-# settings.pixel_group). Measured choices: docs/DECISIONS.md,
+# each sample keeps its own nearest instead); cylinders shaded per walk, the heaviest, each
+# with its own shadow rays (one more, drawn by weight, stands for the rest); with one layer,
+# strands shaded per walk (every one a walk of 16 samples meets), with one set of shadow rays
+# from one of them drawn by its light (and one more standing for the rest); the most samples
+# one walk takes (a sample is a bit of a 32-bit mask; 5² = 25; a pixel with more takes
+# several walks: settings.pixel_group). Measured choices: docs/DECISIONS.md,
 # "Samples of one pixel share the walk".
 PIXEL_LIST = 24
 PIXEL_SHADE = 4
-PIXEL_SHADE_ONE = 6
+PIXEL_SHADE_ONE = 16
 PIXEL_MAX_SPP = 25
 
 # --- Compute passes (GL 4.3) -----------------------------------------------------------------

@@ -203,9 +203,10 @@ void camera_ray(float x, float y, out vec3 o, out vec3 d, out float len) {
 // sample composites its own hits front to back (at most LAYERS, none after its
 // transmittance fell below t_eps past the first, as trace() does per sample), which gives
 // every distinct cylinder its weight in the pixel; the PIX_SHADE heaviest that weigh at least
-// SHADE_MIN are shaded, once each, on the ray through the middle of the samples they cover,
-// with one shadow ray per light (with one layer the PIX_SHADE_ONE heaviest, all with the
-// heaviest one's shadow rays). Loops over the samples and the list have constant trip counts and
+// SHADE_MIN are shaded, once each, on the ray of one of the samples they cover (sample_among),
+// with one shadow ray per light (with one layer the PIX_SHADE_ONE heaviest, with one set of
+// shadow rays from one of them, drawn by its light), and one more entry, drawn by weight,
+// stands for the rest. Loops over the samples and the list have constant trip counts and
 // are unrolled, so llvmpipe's cap on loop iterations sees one walk and the shading loop.
 const float SHADE_MIN = 1.0 / 512.0;
 
@@ -222,9 +223,72 @@ void sample_ray(vec3 o, vec3 d, vec2 q, out vec3 so, out vec3 sd) {
 
 uniform int sample_index;       // the group of samples this draw takes
 
-#if LAYERS > 1
-// List entry `eid` (distance `et` along the central ray o + t·d) shaded on the ray through
-// `mi`, the middle of the samples it covers, which lies on the strand but for the linear
+// The pixel's own random stream: a number in [0, 1) for each `k`.
+float pixel_random(int px, int py, uint k) {
+    uint h = hash32(hash32(hash32(hash32(uint(sample_index) ^ 0xc2b2ae35u) ^ uint(py)) ^ uint(px)) ^ k);
+    return float(h >> 8u) * (1.0 / 16777216.0);
+}
+
+// The offset of a sample drawn evenly, by u in [0, 1), among those of `mask` (bit s: sample
+// s): where a strand is shaded. A sample's ray meets a strand at an offset h across it spread
+// evenly over its width, so the drawn sample's is too; the middle of several samples' rays
+// met it nearer its axis, and the first sample by index nearer the edge the strata are
+// counted from (both darkened Chiang-shaded hair, by 5 % and 9 % at 100 samples).
+vec2 sample_among(uint mask, float u) {
+    int n = 0;
+    for (int s = 0; s < PN; ++s) n += (mask & (1u << uint(s))) != 0u ? 1 : 0;
+    int k = min(int(u * float(n)), n - 1);
+    vec2 q = vec2(0.0);
+    int c = 0;
+    for (int s = 0; s < PN; ++s) {
+        bool on = (mask & (1u << uint(s))) != 0u;
+        q = on && c == k ? px_off[s] : q;
+        c += on ? 1 : 0;
+    }
+    return q;
+}
+
+#if LAYERS == 1
+// One layer: one set of shadow rays for the pixel's shaded strands (the shadow walks are what
+// costs; the shading itself little), from a strand drawn per light in proportion to its
+// unshadowed light (a running draw: each strand shaded replaces the one drawn so far with
+// probability its share of the sum so far). Its visibility times the sum is an unbiased
+// estimate of the sum of each strand's light times its own visibility. (The heaviest strand's
+// rays, as before, lit the pixel too much where the strands behind lie in its shadow.) Per
+// light: the sum so far, its luminance, and the point and strand drawn.
+vec3 lit[NUM_LIGHTS]; float lsum[NUM_LIGHTS]; vec3 lp[NUM_LIGHTS]; int lstrand[NUM_LIGHTS];
+uint draw;
+
+// Cylinder `eid` (distance `et` along the central ray o + t·d) of weight w, shaded on the ray
+// of a sample drawn by u among those whose nearest hit it is (as shade_entry): returns the
+// light no shadow touches, adds each light's to `lit` and takes its turn in the draw (`k`:
+// which strand of the pixel it is).
+vec3 shade_one(int eid, float et, float w, int k, float u, vec3 o, vec3 d) {
+    uint mask = 0u;
+    for (int s = 0; s < PN; ++s) mask |= sid[s] == eid ? 1u << uint(s) : 0u;
+    vec3 so, sd;
+    sample_ray(o, d, sample_among(mask, u), so, sd);
+    int surf; float asc, alpha;
+    float th = hit_cylinder(eid, so, sd, 0.0, 0.0, surf, asc, alpha);
+    bool exact = th > 0.0;
+    Surface S = surface_at(eid, exact ? surf : 0, so, sd, exact ? th : et);
+    for (int l = 0; l < NUM_LIGHTS; ++l) {
+        float dist;
+        vec3 L = light_dir(l, S.p, dist);
+        vec3 cl = w * light_col[l] * shade_light(S, L);
+        float y = dot(cl, vec3(0.2126, 0.7152, 0.0722));
+        lsum[l] += y;
+        draw = hash32(draw ^ uint(NUM_LIGHTS * k + l + 1));
+        bool take = y > 0.0 && float(draw >> 8u) * (1.0 / 16777216.0) * lsum[l] < y;
+        lp[l] = take ? S.p : lp[l];
+        lstrand[l] = take ? eid : lstrand[l];
+        lit[l] += cl;
+    }
+    return w * material.x * S.color;
+}
+#else
+// List entry `eid` (distance `et` along the central ray o + t·d) shaded on the ray of the
+// sample at `mi` (one it covers, sample_among), which meets the strand but for the linear
 // test's rounding; where the exact test disagrees, the side at the representative distance.
 vec3 shade_entry(int eid, vec2 mi, float et, vec3 o, vec3 d) {
     vec3 so, sd;
@@ -271,32 +335,31 @@ void main() {
     accel_pixel_nearest(o, d, tmax);
 
     // Each sample's compositing, entry by entry in depth order: the entry's weight and the
-    // middle of the samples it covers.
+    // samples it counts in (one of them is where it is shaded, below).
     float Ts[PN];
 #if LAYERS > 1
     const int NE = PIX_M;
-    float wgt[NE]; vec2 mid[NE]; int eids[NE]; float ets[NE];
+    float wgt[NE]; uint onm[NE]; int eids[NE]; float ets[NE];
     int cnt[PN];
     for (int s = 0; s < PN; ++s) { Ts[s] = 1.0; cnt[s] = 0; }
     for (int j = 0; j < PIX_M; ++j) {
-        float a = la[j], wj = 0.0, nj = 0.0;
-        vec2 cj = vec2(0.0);
+        float a = la[j], wj = 0.0;
+        uint mj = 0u;
         for (int s = 0; s < PN; ++s) {
             bool on = (lm[j] & (1u << uint(s))) != 0u && cnt[s] < LAYERS && (cnt[s] == 0 || Ts[s] >= t_eps);
             wj += on ? Ts[s] * a : 0.0;
-            cj += on ? px_off[s] : vec2(0.0);
-            nj += on ? 1.0 : 0.0;
+            mj |= on ? 1u << uint(s) : 0u;
             Ts[s] *= on ? 1.0 - a : 1.0;
             cnt[s] += on ? 1 : 0;
         }
         wgt[j] = wj / float(PN);
-        mid[j] = cj / max(nj, 1.0);
+        onm[j] = mj;
         eids[j] = lid[j]; ets[j] = lt[j];
     }
 #else
     // One layer: each sample's own nearest hit. The entries are the samples that come first
-    // among those on their cylinder, each with the weight of all of them (the middle is
-    // worked out for the ones shaded). A pixel no sample hits skips the grouping.
+    // among those on their cylinder, each with the weight of all of them (where it is shaded
+    // is worked out for the ones shaded). A pixel no sample hits skips the grouping.
     const int NE = PN;
     float wgt[NE]; int eids[NE]; float ets[NE];
     for (int s = 0; s < PN; ++s) { Ts[s] = 1.0 - sa[s]; wgt[s] = 0.0; eids[s] = sid[s]; ets[s] = st[s]; }
@@ -313,9 +376,7 @@ void main() {
         }
     }
 #endif
-    // The PIX_SHADE (one layer: PIX_SHADE_ONE) heaviest entries are shaded; with one layer the
-    // weight of the others (at most a few samples each, side by side with them in front) goes
-    // to them in proportion, so the pixel keeps its brightness; with layers one more entry
+    // The PIX_SHADE (one layer: PIX_SHADE_ONE) heaviest entries are shaded, and one more entry
     // stands for the rest (below).
     float wall = 0.0, wshaded = 0.0;
     int nshade = 0;
@@ -325,8 +386,8 @@ void main() {
     }
 #if LAYERS == 1
     nshade = min(nshade, PIX_SHADE_ONE);
-    float vis[NUM_LIGHTS];
-    for (int l = 0; l < NUM_LIGHTS; ++l) vis[l] = 1.0;
+    for (int l = 0; l < NUM_LIGHTS; ++l) { lit[l] = vec3(0.0); lsum[l] = 0.0; lp[l] = vec3(0.0); lstrand[l] = -1; }
+    draw = hash32(hash32(hash32(uint(sample_index) ^ 0x85ebca6bu) ^ uint(py)) ^ uint(px));
 #else
     nshade = min(nshade, PIX_SHADE);
 #endif
@@ -336,77 +397,70 @@ void main() {
 #endif
     for (int i = 0; i < nshade; ++i) {
         // The heaviest entry not shaded yet, by constant indices (accel.glsl says why).
-        int eid = 0, pick = -1; float wi = -1.0, et = 0.0; vec2 mi = vec2(0.0);
+        int eid = 0, pick = -1; float wi = -1.0, et = 0.0; uint mm = 0u;
         for (int j = 0; j < NE; ++j) {
             bool here = wgt[j] > wi;
             pick = here ? j : pick;
             eid = here ? eids[j] : eid; wi = here ? wgt[j] : wi; et = here ? ets[j] : et;
 #if LAYERS > 1
-            mi = here ? mid[j] : mi;
+            mm = here ? onm[j] : mm;
 #endif
         }
-#if LAYERS == 1
-        float ni = 0.0;
-        for (int s = 0; s < PN; ++s) {
-            bool same = sid[s] == eid;
-            mi += same ? px_off[s] : vec2(0.0);
-            ni += same ? 1.0 : 0.0;
-        }
-        mi /= max(ni, 1.0);
-#endif
         for (int j = 0; j < NE; ++j) wgt[j] = j == pick ? -1.0 : wgt[j];
         wshaded += wi;
+        float u = pixel_random(px, py, uint(i));
 #if LAYERS == 1
-        vec3 so, sd;
-        sample_ray(o, d, mi, so, sd);
-        int surf; float asc, alpha;
-        float th = hit_cylinder(eid, so, sd, 0.0, 0.0, surf, asc, alpha);
-        bool exact = th > 0.0;      // as in shade_entry
-        // One layer: the strands a pixel shows lie side by side in front, lit alike, so the
-        // heaviest one's shadow rays give every shaded strand its lights' visibility (the
-        // shadow walks are what costs; the shading itself little).
-        Surface S = surface_at(eid, exact ? surf : 0, so, sd, exact ? th : et);
-        vec3 c = material.x * S.color;
-        for (int l = 0; l < NUM_LIGHTS; ++l) {
-            float dist;
-            vec3 L = light_dir(l, S.p, dist);
-#if SHADOWS
-            if (i == 0) vis[l] = shadow_ray(S.p, L, dist, eid, 1e-3 * cyl(eid, CYL_TOP).w, occluder[l]);
-#endif
-            c += vis[l] * light_col[l] * shade_light(S, L);
-        }
-        C += wi * c;
+        C += shade_one(eid, et, wi, i, u, o, d);
 #else
-        C += wi * shade_entry(eid, mi, et, o, d);
+        C += wi * shade_entry(eid, sample_among(mm, u), et, o, d);
 #endif
 #if COUNT
         counter.y += 1.0;
 #endif
     }
-#if LAYERS > 1
     // The entries left unshaded: one of them, drawn in proportion to its weight, stands for
     // all their weight, an unbiased estimate of their sum. (Their weight given to the shaded
-    // ones in proportion brightened see-through hair, whose back layers lie in the shadow of
-    // the front ones: straight.hair under a sun, 16 samples, 16 % too bright.)
+    // ones in proportion brightened the hair, as the strands behind the heaviest lie in their
+    // shadow: see-through straight.hair under a sun, 16 samples, 16 %; opaque wavy 1 %.)
     float wrest = wall - wshaded;
     if (wrest > 0.0) {
         uint h = hash32(hash32(hash32(uint(sample_index) ^ 0x9e3779b9u) ^ uint(py)) ^ uint(px));
         float u = float(h >> 8u) * (1.0 / 16777216.0) * wrest;
-        int eid = -1; float et = 0.0, acc = 0.0; vec2 mi = vec2(0.0);
+        int eid = -1; float et = 0.0, acc = 0.0; uint mm = 0u;
         for (int j = 0; j < NE; ++j) {
             float wj = max(wgt[j], 0.0);
             // The entry whose stretch of the running sum holds u: the last whose sum before it is <= u.
             bool here = wj > 0.0 && (eid < 0 || acc <= u);
-            eid = here ? eids[j] : eid; et = here ? ets[j] : et; mi = here ? mid[j] : mi;
+            eid = here ? eids[j] : eid; et = here ? ets[j] : et;
+#if LAYERS > 1
+            mm = here ? onm[j] : mm;
+#endif
             acc += wj;
         }
         if (eid >= 0) {
-            C += wrest * shade_entry(eid, mi, et, o, d);
+            float us = pixel_random(px, py, 0x3c6ef372u);
+#if LAYERS > 1
+            C += wrest * shade_entry(eid, sample_among(mm, us), et, o, d);
+#else
+            C += shade_one(eid, et, wrest, PIX_SHADE_ONE, us, o, d);
+#endif
             wshaded = wall;
 #if COUNT
             counter.y += 1.0;
 #endif
         }
+    }
+#if LAYERS == 1
+    for (int l = 0; l < NUM_LIGHTS; ++l) {
+        float v = 1.0;
+#if SHADOWS
+        if (lstrand[l] >= 0) {
+            float dist;
+            vec3 L = light_dir(l, lp[l], dist);
+            v = shadow_ray(lp[l], L, dist, lstrand[l], 1e-3 * cyl(lstrand[l], CYL_TOP).w, occluder[l]);
+        }
+#endif
+        C += v * lit[l];
     }
 #endif
     C *= wshaded > 0.0 ? wall / wshaded : 0.0;
