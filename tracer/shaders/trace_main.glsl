@@ -223,9 +223,14 @@ void sample_ray(vec3 o, vec3 d, vec2 q, out vec3 so, out vec3 sd) {
 
 uniform int sample_index;       // the group of samples this draw takes
 
-// The pixel's own random stream: a number in [0, 1) for each `k`.
-float pixel_random(int px, int py, uint k) {
-    uint h = hash32(hash32(hash32(hash32(uint(sample_index) ^ 0xc2b2ae35u) ^ uint(py)) ^ uint(px)) ^ k);
+// The pixel's hash of `seed` (this draw's group and the pixel's place in the image): each use
+// of random numbers in a pixel starts from a seed of its own.
+uint pixel_hash(int px, int py, uint seed) {
+    return hash32(hash32(hash32(uint(sample_index) ^ seed) ^ uint(py)) ^ uint(px));
+}
+
+// A number in [0, 1) from a hash's top 24 bits.
+float unit_of(uint h) {
     return float(h >> 8u) * (1.0 / 16777216.0);
 }
 
@@ -279,7 +284,7 @@ vec3 shade_one(int eid, float et, float w, int k, float u, vec3 o, vec3 d) {
         float y = dot(cl, vec3(0.2126, 0.7152, 0.0722));
         lsum[l] += y;
         draw = hash32(draw ^ uint(NUM_LIGHTS * k + l + 1));
-        bool take = y > 0.0 && float(draw >> 8u) * (1.0 / 16777216.0) * lsum[l] < y;
+        bool take = y > 0.0 && unit_of(draw) * lsum[l] < y;
         lp[l] = take ? S.p : lp[l];
         lstrand[l] = take ? eid : lstrand[l];
         lit[l] += cl;
@@ -387,7 +392,7 @@ void main() {
 #if LAYERS == 1
     nshade = min(nshade, PIX_SHADE_ONE);
     for (int l = 0; l < NUM_LIGHTS; ++l) { lit[l] = vec3(0.0); lsum[l] = 0.0; lp[l] = vec3(0.0); lstrand[l] = -1; }
-    draw = hash32(hash32(hash32(uint(sample_index) ^ 0x85ebca6bu) ^ uint(py)) ^ uint(px));
+    draw = pixel_hash(px, py, 0x85ebca6bu);
 #else
     nshade = min(nshade, PIX_SHADE);
 #endif
@@ -395,6 +400,8 @@ void main() {
 #if SHADOWS
     for (int l = 0; l < NUM_LIGHTS; ++l) occluder[l] = -1;
 #endif
+    // Where each shaded entry is shaded (sample_among) draws from this seed.
+    uint where = pixel_hash(px, py, 0xc2b2ae35u);
     for (int i = 0; i < nshade; ++i) {
         // The heaviest entry not shaded yet, by constant indices (accel.glsl says why).
         int eid = 0, pick = -1; float wi = -1.0, et = 0.0; uint mm = 0u;
@@ -408,7 +415,7 @@ void main() {
         }
         for (int j = 0; j < NE; ++j) wgt[j] = j == pick ? -1.0 : wgt[j];
         wshaded += wi;
-        float u = pixel_random(px, py, uint(i));
+        float u = unit_of(hash32(where ^ uint(i)));
 #if LAYERS == 1
         C += shade_one(eid, et, wi, i, u, o, d);
 #else
@@ -424,8 +431,7 @@ void main() {
     // shadow: see-through straight.hair under a sun, 16 samples, 16 %; opaque wavy 1 %.)
     float wrest = wall - wshaded;
     if (wrest > 0.0) {
-        uint h = hash32(hash32(hash32(uint(sample_index) ^ 0x9e3779b9u) ^ uint(py)) ^ uint(px));
-        float u = float(h >> 8u) * (1.0 / 16777216.0) * wrest;
+        float u = unit_of(pixel_hash(px, py, 0x9e3779b9u)) * wrest;
         int eid = -1; float et = 0.0, acc = 0.0; uint mm = 0u;
         for (int j = 0; j < NE; ++j) {
             float wj = max(wgt[j], 0.0);
@@ -438,7 +444,7 @@ void main() {
             acc += wj;
         }
         if (eid >= 0) {
-            float us = pixel_random(px, py, 0x3c6ef372u);
+            float us = unit_of(hash32(where ^ 0x3c6ef372u));
 #if LAYERS > 1
             C += wrest * shade_entry(eid, sample_among(mm, us), et, o, d);
 #else
