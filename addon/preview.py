@@ -13,7 +13,11 @@ Beside the hair the preview shows the scene's meshes as a render would (the scal
 collider and the other visible meshes: scene_data.scene_meshes), opaque and shaded with
 their base colour, so the head hides the hair behind it and shadows fall on and from it.
 They are uploaded when their arrays changed; a scene of more than MESH_TRIANGLE_BUDGET
-triangles shows only the scalp and collider, and the operator says so.
+triangles shows only the scalp and collider, and the operator says so. Under the physically
+based shading with the scene's lights, the world lights the preview too: a world of one
+colour is the ambient term (world_ambient), so a black world gives no ambient light, as in
+Cycles, and a grey one its radiance. A scene without lights keeps the tracer's default
+lighting, key light and ambient term both.
 
 One image is one pass of the settings' samples; `render(..., sample_pass=k)` shifts every
 sample of pass k by the same sub-pixel offset (tracer.Camera.for_pass, a low-discrepancy
@@ -149,9 +153,55 @@ def scene_lights(scene, sun_strength=False):
     return tuple(lights)
 
 
+# Rec. 709 luminance: Blender's default scene-linear colour space.
+LUMINANCE = (0.2126, 0.7152, 0.0722)
+
+
+def world_ambient(scene):
+    """The light the scene's world gives, as the preview's ambient term for the physically
+    based shading: (ambient, note). A world of one colour (a Background node with its Color
+    and Strength unlinked, or a world without nodes) lights a diffuse surface nothing shades
+    to base colour x its radiance, which is what the ambient term computes: ambient is the
+    luminance of that colour times the strength. No world, or a node tree whose output gets
+    nothing, gives Cycles no light: 0. A world lit by more than a colour (a texture, a sky, a
+    mix) is not summed here: ambient None (the tracer's default stands) and a note that says so."""
+    world = scene.world
+    if world is None:
+        return 0.0, None
+    uses_nodes = world.use_nodes if bpy.app.version < (5, 0, 0) else True    # 5.0: always, and deprecated
+    tree = world.node_tree if uses_nodes else None
+    if tree is None:
+        return _luminance(world.color), None
+    outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld"]
+    out = next((n for n in outputs if n.is_active_output), outputs[0] if outputs else None)
+    surface = None if out is None else out.inputs.get("Surface")
+    if surface is None or not surface.is_linked:
+        return 0.0, None
+    node = surface.links[0].from_node
+    color, strength = node.inputs.get("Color"), node.inputs.get("Strength")
+    if node.bl_idname != "ShaderNodeBackground" or color.is_linked or strength.is_linked:
+        from tracer import RenderSettings
+        return None, (f"The world {world.name!r} gives more than one colour of light ({node.name!r} feeds its "
+                      f"output): the preview lights the hair with its own ambient "
+                      f"{RenderSettings().ambient:g}, not the world's")
+    return max(0.0, _luminance(color.default_value) * float(strength.default_value)), None
+
+
+def world_note(scene, settings):
+    """What the operator says when the world's light cannot be the preview's ambient, or None."""
+    if settings.preview_shading != "chiang" or not settings.preview_scene_lights or not scene_lights(scene):
+        return None
+    return world_ambient(scene)[1]
+
+
+def _luminance(rgb):
+    return float(sum(w * float(c) for w, c in zip(LUMINANCE, tuple(rgb)[:3])))
+
+
 def render_settings(scene, settings, hair_obj=None):
     """tracer.RenderSettings from the scalp's preview settings (and, for the "chiang"
-    shading, the hair object's Principled Hair BSDF and the suns' strengths)."""
+    shading, the hair object's Principled Hair BSDF, the suns' strengths and, where the scene's
+    lights light the preview, the world's light as the ambient term: world_ambient)."""
     from tracer import RenderSettings
     kwargs = dict(spp=int(settings.preview_samples), shadows=settings.preview_shadows,
                   shadow_mode=settings.preview_shadow_mode, layers=settings.preview_layers,
@@ -162,6 +212,11 @@ def render_settings(scene, settings, hair_obj=None):
     lights = scene_lights(scene, sun_strength=physical) if settings.preview_scene_lights else ()
     if lights:
         kwargs["lights"] = lights
+        # The world is one of the scene's lights; a scene without lights gets the tracer's
+        # whole default lighting (its key light and its ambient term).
+        ambient = world_ambient(scene)[0] if physical else None
+        if ambient is not None:
+            kwargs["ambient"] = ambient
     return RenderSettings(**kwargs)
 
 

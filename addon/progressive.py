@@ -23,7 +23,7 @@ import bpy
 from bpy.app.handlers import persistent
 from hairio import InputError
 
-from . import app_handlers, preview, scene_data
+from . import app_handlers, hair_material, preview, scene_data
 from .properties import RENDER_FIELDS
 from .transaction import clear_background, report_background, transaction
 
@@ -74,8 +74,9 @@ def status(scalp):
 def signature(context, session):
     """Everything the preview's pixels depend on, cheaply: the preview settings, the image
     size, the camera and its lens, the hair (its revision, see preview.bump), the scene's
-    lights, and the meshes' objects, places and data with the scene's geometry edits
-    (counted by on_depsgraph_update)."""
+    lights (their strength too), the world's light and the hair material's sliders, and the
+    meshes' objects, places and data with the scene's geometry edits (counted by
+    on_depsgraph_update)."""
     scene, s = context.scene, session.scalp.keystrand_hair
     settings = tuple(_value(getattr(s, name)) for name in RENDER_FIELDS)
     cam = session.camera
@@ -83,12 +84,13 @@ def signature(context, session):
                  ("type", "lens", "sensor_width", "sensor_height", "sensor_fit", "shift_x", "shift_y", "ortho_scale"))
     r = scene.render
     size = (r.resolution_x, r.resolution_y, r.pixel_aspect_x, r.pixel_aspect_y)
-    lights = tuple((o.name, o.data.type, tuple(o.data.color), _matrix(o), o.hide_render)
+    lights = tuple((o.name, o.data.type, tuple(o.data.color), o.data.energy, _matrix(o), o.hide_render)
                    for o in scene.objects if o.type == 'LIGHT')
+    shading = (preview.world_ambient(scene), hair_material.principled_hair_settings(session.hair))
     own, others = scene_data.preview_mesh_objects(scene, context.view_layer, session.scalp)
     meshes = tuple((o.name, _matrix(o), o.data.session_uid) for o in own + others)
     return (settings, size, _matrix(cam), lens, scene.camera == cam, preview.upload_key(session.hair),
-            lights, meshes, _geometry_edits)
+            lights, shading, meshes, _geometry_edits)
 
 
 def _value(v):
@@ -120,9 +122,12 @@ def _begin(session):
 def _restart(context, session, wait=True):
     """A first image: one pass at the settings' samples, the sums started over when it comes
     (at once with wait, else when a later step finds it ready)."""
-    session.signature = signature(context, session)
+    # The meshes first: reading them evaluates the depsgraph, whose pending updates (an edited
+    # world or material) bump _geometry_edits, so the signature after them is the image's.
     session.meshes = preview.scene_meshes(context, session.scalp)
-    session.note = preview.budget_note(session.meshes)
+    session.signature = signature(context, session)
+    notes = (preview.budget_note(session.meshes), preview.world_note(context.scene, session.scalp.keystrand_hair))
+    session.note = ". ".join(n for n in notes if n) or None
     session.starts += 1
     session.pending, session.pending_first = _begin_pass(context, session, 0, wait), True
     if wait:

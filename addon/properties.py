@@ -282,7 +282,8 @@ class HairSettings(PropertyGroup):
     preview_scene_lights: BoolProperty(
         name="Scene Lights", default=True,
         description="Light the preview with the scene's sun and point lights (their colour and "
-                    "direction, without fall-off); off, or with none in the scene, a default key light")
+                    "direction, without fall-off) and, with Principled Hair shading, the world's colour; "
+                    "off, or with none in the scene, a default key light")
     preview_in_process: BoolProperty(
         name="Render Inside Blender", default=False,
         description="Run the preview renderer inside Blender instead of a separate process "

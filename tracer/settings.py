@@ -148,6 +148,10 @@ class RenderSettings:
             raise InputError(f"background: {self.background}; expected four finite numbers (RGBA)")
         if self.tile < 16:
             raise InputError(f"tile: {self.tile}; use >= 16 pixels")
+        for name in ("ambient", "diffuse", "specular", "shininess"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0.0):
+                raise InputError(f"{name}: {value}; use a finite number >= 0")
         self._check_hair()
 
     def _check_hair(self):

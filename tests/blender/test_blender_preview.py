@@ -292,3 +292,43 @@ def test_with_the_renderer_process_a_step_does_not_wait_for_the_pass(clean, monk
     finally:
         progressive.stop()
         preview.close()
+
+
+def test_the_preview_follows_the_world_and_the_suns_strength(clean):
+    """Under the physically based shading with the scene's lights, the world's colour is the
+    ambient light: a brighter world restarts the refinement and lifts every pixel the head
+    covers by its base colour times the world's radiance, as a diffuse surface that nothing
+    shades; a sun's strength restarts it too."""
+    progressive = ext_module(clean, "progressive")
+    scalp = head_scene(size=32)
+    s = scalp.keystrand_hair
+    s.preview_scene_lights, s.preview_shading = True, "chiang"
+    scene = bpy.context.scene
+    kept = scene.world
+    try:
+        scene.world = bpy.data.worlds.new("Studio")
+        if bpy.app.version < (5, 0, 0):
+            scene.world.use_nodes = True
+        background = next(n for n in scene.world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground")
+        background.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+        background.inputs["Strength"].default_value = 0.0
+        sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", 'SUN'))
+        scene.collection.objects.link(sun)
+        sun.data.energy = 2.0
+        activate(scalp)
+        assert bpy.ops.hair.render_preview() == {'FINISHED'}
+        dark = image_pixels()
+        assert progressive.step() == "refined"
+        background.inputs["Strength"].default_value = 0.25
+        assert progressive.step() == "restarted"
+        lit = image_pixels()
+        lift = lit[..., :3] - dark[..., :3]
+        head_only = np.all(np.abs(lift - 0.25 * np.asarray(HEAD_RGB)) < 2e-3, axis=-1)
+        covered = dark[..., 3] > 0.999
+        assert head_only.sum() > 0.2 * covered.sum(), (head_only.sum(), covered.sum())
+        assert np.all(lift[covered] > -1e-4)          # nothing darker under more light
+        assert progressive.step() == "refined"
+        sun.data.energy = 3.0
+        assert progressive.step() == "restarted"
+    finally:
+        scene.world = kept
