@@ -7,6 +7,7 @@ reason and the rest of the report still comes out. The report is rewritten atomi
 every section, so an interrupted run leaves a complete, shorter report, never a torn one.
 """
 import argparse
+import collections
 import json
 import os
 import subprocess
@@ -94,6 +95,12 @@ def _header(runs):
     lines += ["", "The machine may be shared: a section's load average above the number of cores means "
               "other work competed for them; times are then noisier, ratios less so, since both sides "
               "of a ratio ran in the same minutes.", ""]
+    cpus = collections.Counter(r.get("cpu", "?") for r in runs)
+    if len(cpus) > 1:
+        lines += ["The sections were measured on more than one machine (" + "; ".join(
+            f"{cpu}: {n} section{'s' if n > 1 else ''}" for cpu, n in cpus.most_common())
+            + "); the table above is the newest's, and each section names its own. A ratio compares "
+              "figures of one section's run, so of one machine; figures of two sections may not.", ""]
     return "\n".join(lines)
 
 
@@ -135,7 +142,8 @@ def render_report(results, runs):
         if when:
             body.append(f"<sub>measured {when['date_utc']} in {when['mode']} mode at commit "
                         f"{when['commit']}, load average {when['load_average']} at the start on "
-                        f"{when['cores']} cores; section time {fmt_time(r.get('elapsed', 0.0))}</sub>")
+                        f"{when['cores']} cores ({when.get('cpu', 'cpu not recorded')}); section time "
+                        f"{fmt_time(r.get('elapsed', 0.0))}</sub>")
         body.append(r["markdown"])
     return "\n\n".join(body) + "\n"
 

@@ -64,14 +64,15 @@ def _render(sc, samples, seed, transparent):
 
 def render_contact(strands, head_vertices, head_triangles, head_rgb, camera_matrix, size, sun_direction,
                    sun_strength, hair, samples, mask_samples=64, seeds=(1,), mask_seeds=(1,), lens=50.0,
-                   sensor_width=36.0):
+                   sensor_width=36.0, world=0.0):
     """Cycles' images of the strands (the Principled Hair `hair`: a dict as
-    blender_hair_shading._material takes) and the head (a diffuse mesh of `head_rgb`).
+    blender_hair_shading._material takes) and the head (a diffuse mesh of `head_rgb`);
+    `world`: the radiance of a grey world lighting them beside the sun (0: black, no light).
 
     Returns a dict: rgb, a list of (H, W, 3) linear RGB renders, one per seed (on a black
     film); seconds, their render times; hair, (H, W) the fraction of each pixel the hair
     covers; cover, (H, W) the fraction hair or head cover; masks, (hair, cover) per mask
-    seed (the first is hair, cover); mask_seconds."""
+    seed (the first is hair, cover; none with no mask seeds); mask_seconds."""
     bpy = _bpy()
     bpy.ops.wm.read_factory_settings(use_empty=True)
     sc = bpy.context.scene
@@ -82,6 +83,10 @@ def render_contact(strands, head_vertices, head_triangles, head_rgb, camera_matr
     head_obj.data.materials.append(head_mat)
 
     direct_light_scene(sc, camera_matrix, size, sun_direction, sun_strength, lens, sensor_width)
+    if world:
+        bg = sc.world.node_tree.nodes["Background"]
+        bg.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+        bg.inputs["Strength"].default_value = float(world)
 
     out = {"rgb": [], "seconds": []}
     for seed in seeds:
@@ -95,5 +100,6 @@ def render_contact(strands, head_vertices, head_triangles, head_rgb, camera_matr
     for seed in mask_seeds:
         img, out["mask_seconds"] = _render(sc, mask_samples, seed, transparent=True)
         out["masks"].append((img[..., 0], img[..., 3]))
-    out["hair"], out["cover"] = out["masks"][0]
+    if out["masks"]:
+        out["hair"], out["cover"] = out["masks"][0]
     return out

@@ -12,9 +12,12 @@ one delta sun, max bounces 0, a black world, a box pixel filter, linear float ou
 preview: its default settings as tracer.settings.RenderSettings gives them (listed below,
 read when the section runs), with the same sun, the head at the same base colour (under the
 default, physically based shading the preview's meshes are Lambertian as Cycles' diffuse
-surface: colour / pi × irradiance × cos) and one change so it computes what Cycles does:
-ambient 0 (Cycles' world gives no light). The last table shows what that change is worth
-against the add-on's default ambient, on the first preset.
+surface: colour / pi × irradiance × cos) and the ambient term the add-on gives it under a
+black world: 0 (addon/preview.py, world_ambient: with the scene's lights and this shading the
+world's radiance is the ambient term). The last table measures that rule on the first
+preset: Cycles under a black world and under Blender's default world (grey, radiance
+DEFAULT_WORLD) beside the sun, the preview with the world's ambient and with the fixed 0.08
+the add-on gave every scene before.
 
 Error (benchmarks/region_error.py): over the hair pixels (where Cycles' hair covers at least
 half the pixel) and over the head pixels (where Cycles' head covers at least half), in
@@ -51,6 +54,7 @@ SUN_STRENGTH = 3.0                         # W/m² in Cycles, the preview light'
 REFINED_SPP = 16                           # the preview's refined image (stratified samples)
 MASK_SAMPLES = 64                          # Cycles' coverage render
 CHECK_SPP = 64                             # the first preset's convergence check
+DEFAULT_WORLD = 0.0508                     # the radiance of Blender's default world (grey, strength 1)
 
 
 def hair_material(settings):
@@ -193,16 +197,25 @@ def run(sec, cfg):
                            _cell(e_check["head"]), f"{e_check['iou']:.3f}"])
         numbers[f"{CHECK_SPP}spp"] = _numbers(e_check)
         numbers["preview_seconds"][str(CHECK_SPP)] = t_check
-        # What the add-on leaves as it is: the ambient term.
-        e_amb = compare(renderer.render(camera, dataclasses.replace(refined, ambient=defaults.ambient)),
-                        cover_refined, ref, ref_hair, ref_cover)
-        conv_rows = [["as measured above (ambient 0)", _cell(e_refined["hair"]), _cell(e_refined["head"])],
-                     [f"the default ambient {defaults.ambient:g}", _cell(e_amb["hair"]),
-                      _cell(e_amb["head"])]]
-        numbers["and_default_ambient"] = _numbers(e_amb)
+        # The world's light: the add-on's rule (the world's radiance is the ambient term) against
+        # the fixed ambient it had before, under a black world and under Blender's default one.
+        cyc_w = render_contact(strands, head.vertices, head.triangles, HEAD_RGB, matrix, size, SUN, SUN_STRENGTH,
+                               hair, cycles_samples, mask_seeds=(), world=DEFAULT_WORLD)
+        numbers["world"], grey = {}, cyc_w["rgb"][0]
+        for world, cycles_img, ambient, label in (
+                (0.0, ref, 0.0, "0, the world's (the add-on's rule)"),
+                (0.0, ref, defaults.ambient, f"{defaults.ambient:g}, fixed (before)"),
+                (DEFAULT_WORLD, grey, DEFAULT_WORLD, f"{DEFAULT_WORLD:g}, the world's (the add-on's rule)"),
+                (DEFAULT_WORLD, grey, defaults.ambient, f"{defaults.ambient:g}, fixed (before)")):
+            e = e_refined if (world, ambient) == (0.0, 0.0) else compare(
+                renderer.render(camera, dataclasses.replace(refined, ambient=ambient)), cover_refined, cycles_img,
+                ref_hair, ref_cover)
+            conv_rows.append(["black" if world == 0 else f"grey, radiance {world:g} (Blender's default world)",
+                              label, _cell(e["hair"]), _cell(e["head"])])
+            numbers["world"][f"world {world:g}, ambient {ambient:g}"] = _numbers(e)
         conv_name = name
     elif kept is not None:
-        sec.not_measured("Cycles' own noise, the convergence check and the ambient term's worth",
+        sec.not_measured("Cycles' own noise, the convergence check and the world's light",
                          f"{fmt_time(left(sec))} of the section's time left")
 
     rows = [r for name in rows for r in rows[name]]
@@ -211,9 +224,10 @@ def run(sec, cfg):
                "mean ratio", "hair coverage IoU"], rows,
               caption="Each time beside its error against the Cycles image of the same preset:")
     if conv_rows:
-        sec.table(["preview", "hair: MAE / RMSE (relative); mean ratio", "head: MAE / RMSE (relative); mean ratio"],
-                  conv_rows, caption=f"What the ambient term costs ({conv_name}, {REFINED_SPP} spp, "
-                                     "against the same Cycles image):")
+        sec.table(["Cycles' world", "the preview's ambient term", "hair: MAE / RMSE (relative); mean ratio",
+                   "head: MAE / RMSE (relative); mean ratio"],
+                  conv_rows, caption=f"The world's light ({conv_name}, the preview at {REFINED_SPP} spp, against "
+                                     "Cycles under that world):")
     if panels:
         _figure(sec, panels, first.spp)
         data = [v for v in sec.data.values() if isinstance(v, dict) and "strands" in v]
