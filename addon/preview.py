@@ -132,10 +132,13 @@ def preview_size(scene, settings):
     return w, max(1, int(round(w * aspect)))
 
 
-def scene_lights(scene, sun_strength=False):
+def scene_lights(scene, physical=False):
     """The scene's sun and point lights as tracer.Light (at most 8), or () for none.
-    `sun_strength`: suns at their Strength (irradiance, W/m², for the physically based
-    "chiang" shading, which then matches Cycles); else every light at intensity 1."""
+    `physical` (the "chiang" shading, which then matches Cycles): each at its power as Cycles
+    lights with it, times 2^exposure (Blender 5.0's Exposure): a sun's Strength is its
+    irradiance (W/m²), a point light's Power P radiates P / 4 pi W/sr and falls off with the
+    square of the distance (a point, whatever its radius). Else every light at intensity 1,
+    without fall-off (the thesis's constant light). Spot and area lights are left out."""
     from tracer import Light
     from tracer.settings import MAX_LIGHTS
     lights = []
@@ -143,9 +146,11 @@ def scene_lights(scene, sun_strength=False):
         if obj.type != 'LIGHT' or obj.hide_render or obj.data.type not in ('SUN', 'POINT'):
             continue
         m = np.array(obj.matrix_world, np.float64)
+        power = float(obj.data.energy) * 2.0 ** float(getattr(obj.data, "exposure", 0.0))
         if obj.data.type == 'SUN':
-            strength = float(obj.data.energy) if sun_strength else 1.0
-            lights.append(Light("directional", tuple(-m[:3, 2]), tuple(obj.data.color), strength))
+            lights.append(Light("directional", tuple(-m[:3, 2]), tuple(obj.data.color), power if physical else 1.0))
+        elif physical:
+            lights.append(Light("point", tuple(m[:3, 3]), tuple(obj.data.color), power / (4.0 * np.pi), falloff=True))
         else:
             lights.append(Light("point", tuple(m[:3, 3]), tuple(obj.data.color), 1.0))
         if len(lights) == MAX_LIGHTS:
@@ -209,7 +214,7 @@ def render_settings(scene, settings, hair_obj=None):
     physical = settings.preview_shading == "chiang"
     if physical and hair_obj is not None:
         kwargs.update(hair_material.principled_hair_settings(hair_obj))
-    lights = scene_lights(scene, sun_strength=physical) if settings.preview_scene_lights else ()
+    lights = scene_lights(scene, physical=physical) if settings.preview_scene_lights else ()
     if lights:
         kwargs["lights"] = lights
         # The world is one of the scene's lights; a scene without lights gets the tracer's

@@ -26,20 +26,25 @@ SAMPLERS = ("independent", "pixel")
 @dataclass(frozen=True)
 class Light:
     """kind "directional": `vector` is the direction the light travels (a sun shining down is
-    (0, 0, -1)); kind "point": `vector` is the position. No fall-off with distance: the thesis's
-    Phong model uses a constant light intensity Il = color * intensity."""
+    (0, 0, -1)); kind "point": `vector` is the position. By default no fall-off with distance:
+    the thesis's Phong model uses a constant light intensity Il = color * intensity. `falloff`
+    (point lights only): the inverse-square law, intensity then the radiant intensity (W/sr, a
+    Blender point light's Power / 4 pi) and color * intensity / d² the irradiance at distance d,
+    as Cycles lights (addon/preview.py, scene_lights)."""
     kind: str = "directional"
     vector: tuple = (0.4, 0.6, -1.0)
     color: tuple = (1.0, 1.0, 1.0)
     intensity: float = 1.0
+    falloff: bool = False
 
     def packed(self):
-        """(vec4, rgb) as the shader wants them: w = 1 for a point light."""
+        """(vec4, rgb) as the shader wants them: w = 0 for a directional light, 1 for a point
+        light, 2 for a point light with the inverse-square fall-off."""
         v = np.asarray(self.vector, np.float64)
+        rgb = tuple(np.asarray(self.color, np.float64) * self.intensity)
         if self.kind == "directional":
-            v = v / np.linalg.norm(v)
-            return (*v, 0.0), tuple(np.asarray(self.color, np.float64) * self.intensity)
-        return (*v, 1.0), tuple(np.asarray(self.color, np.float64) * self.intensity)
+            return (*(v / np.linalg.norm(v)), 0.0), rgb
+        return (*v, 2.0 if self.falloff else 1.0), rgb
 
     def check(self):
         if self.kind not in ("directional", "point"):
@@ -49,6 +54,9 @@ class Light:
             raise InputError(f"light vector: {self.vector}; expected three finite numbers")
         if self.kind == "directional" and np.linalg.norm(v) == 0:
             raise InputError("light vector: a directional light needs a non-zero direction")
+        if self.kind == "directional" and self.falloff:
+            raise InputError("light falloff: a directional light has no distance to fall off with; "
+                             "use falloff with a point light")
         c = np.asarray(self.color, np.float64)
         if c.shape != (3,) or not np.all(np.isfinite(c)) or not np.isfinite(self.intensity):
             raise InputError(f"light color/intensity: {self.color}, {self.intensity}; expected finite values")

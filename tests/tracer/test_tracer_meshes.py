@@ -83,6 +83,39 @@ def test_a_strand_shadows_a_plane(meshed):
     assert np.isclose(grey[..., 0], lit_level, atol=1e-4).sum() > 500
 
 
+@pytest.mark.parametrize("falloff", [True, False])
+def test_a_point_light_lights_a_plane_by_the_inverse_square_law(meshed, falloff):
+    """Every pixel of a Lambertian floor under a point light of radiant intensity I at height
+    h, against the radiometry written out here: base colour / pi × I cos θ / d² (without
+    fall-off, I cos θ), d the distance to the light and θ the angle from the floor's normal."""
+    floor = plane(0.0, 2.0)
+    light = (0.3, -0.2, 0.8)
+    cam = Camera.look_at((0.2, -1.6, 1.4), (0, 0, 0), size=(64, 48), fov_deg=45)
+    settings = RenderSettings(shadows=True, ambient=0.0, lights=(Light("point", light, intensity=3.0,
+                                                                       falloff=falloff),))
+    meshed.set_strands(make_strands([[[5, 5, 5], [5, 5, 5.1]]], radius=0.01))     # out of view
+    meshed.set_meshes([(*floor, GREY)])
+    img = meshed.render(cam, settings).astype(np.float64)
+    h, w = img.shape[:2]
+    x, y = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    o, d = cam.rays(x, y)
+    t = -o[..., 2] / d[..., 2]
+    on_floor = (t > 0) & np.all(np.abs(o + t[..., None] * d)[..., :2] < 0.99, axis=-1)
+    p = o + t[..., None] * d
+    to_light = np.asarray(light) - p
+    dist = np.linalg.norm(to_light, axis=-1)
+    irradiance = 3.0 * to_light[..., 2] / dist / (dist ** 2 if falloff else 1.0)
+    expected = GREY[0] / np.pi * irradiance
+    assert on_floor.sum() > 0.5 * h * w
+    np.testing.assert_allclose(img[..., 0][on_floor], expected[on_floor], rtol=2e-4, atol=1e-6)
+    assert np.all(img[..., 3][on_floor] == 1.0)
+
+
+def test_a_directional_light_cannot_fall_off():
+    with pytest.raises(InputError, match="falloff"):
+        RenderSettings(lights=(Light("directional", (0, 0, -1), falloff=True),)).check()
+
+
 def test_a_plane_shadows_strands(meshed):
     tuft = curls(16, 8, radius=0.015)
     roof = plane(1.3, 0.3, centre=(-0.3, 0.0))      # over the left half of the tuft

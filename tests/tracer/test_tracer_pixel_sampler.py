@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hairio import InputError
-from tracer import Camera, Renderer, RenderSettings
+from tracer import Camera, Light, Renderer, RenderSettings
 
 from tracer_scenes import curls, make_strands, uv_sphere
 
@@ -67,11 +67,17 @@ def _tuft_camera(size=72):
 
 # Opaque hair takes one layer, each sample its own nearest hit; see-through hair the list of
 # distinct cylinders, which holds enough for 9 samples of 2 layers in one walk.
-@pytest.mark.parametrize("alpha, layers, spp", [(1.0, 4, 16), (0.45, 2, 9)], ids=["opaque", "layers"])
-def test_pixel_sampler_matches_independent_at_same_samples(renderer, alpha, layers, spp):
+# A point light that falls off with distance (Light.falloff) lights each strand by its own distance.
+NEAR_LIGHT = (Light("point", (0.6, -1.2, 1.2), intensity=2.0, falloff=True),)
+
+
+@pytest.mark.parametrize("alpha, layers, spp, lights", [(1.0, 4, 16, None), (0.45, 2, 9, None),
+                                                        (1.0, 4, 16, NEAR_LIGHT), (0.45, 2, 9, NEAR_LIGHT)],
+                         ids=["opaque", "layers", "opaque, near point light", "layers, near point light"])
+def test_pixel_sampler_matches_independent_at_same_samples(renderer, alpha, layers, spp, lights):
     renderer.set_strands(curls(60, 12, radius=0.004, alpha=alpha))
     cam = _tuft_camera()
-    rs = dict(spp=spp, layers=layers)
+    rs = dict(spp=spp, layers=layers) | ({"lights": lights} if lights else {})
     ind = renderer.render(cam, RenderSettings(**rs))
     pix = renderer.render(cam, RenderSettings(sampler="pixel", **rs))
     empty = np.zeros_like(ind)

@@ -32,6 +32,10 @@ SCENES = {
         Camera.look_at((1.2, -1.8, 1.2), (0, 0, 0.5), fov_deg=40, size=(64, 64)),
         RenderSettings(shadows=True, shadow_mode="transmittance", layers=4, spp=4,
                        lights=(Light("directional", (0.2, 0.5, -1)), Light("point", (-1, -1, 2), intensity=0.5)))),
+    "curls, Chiang, a point light falling off with distance": (
+        lambda: curls(24, 12, radius=0.015),
+        Camera.look_at((1.2, -1.8, 1.2), (0, 0, 0.5), fov_deg=40, size=(72, 72)),
+        RenderSettings(shadows=True, lights=(Light("point", (0.8, -0.9, 1.3), intensity=2.0, falloff=True),))),
     "orthographic, Kajiya-Kay": (
         lambda: curls(20, 10, radius=0.01),
         Camera.look_at((0, -3, 0.5), (0, 0, 0.5), fov_deg=30, size=(72, 72), type="ORTHO", ortho_scale=1.1),

@@ -10,7 +10,8 @@ uniform vec2 image_size;      // this draw's image (a window of the whole image,
 uniform ivec2 pixel_origin;   // its pixel (0, 0) in the whole image (tracer/camera.py)
 uniform vec2 centre_px;       // the optical axis in the whole image's pixels (Camera.centre_px)
 
-uniform vec4 light_vec[NUM_LIGHTS];   // w = 0: xyz is the direction light travels; w = 1: position
+uniform vec4 light_vec[NUM_LIGHTS];   // w = 0: xyz is the direction light travels; w = 1: position;
+                                      // w = 2: position, with the inverse-square fall-off
 uniform vec3 light_col[NUM_LIGHTS];
 uniform vec4 background;              // premultiplied
 
@@ -78,6 +79,11 @@ vec3 light_dir(int l, vec3 p, out float dist) {
     return L;
 }
 
+// Light l's colour times its intensity at distance dist (the inverse-square fall-off for w = 2).
+vec3 light_at(int l, float dist) {
+    return light_vec[l].w > 1.5 ? light_col[l] / max(dist * dist, 1e-30) : light_col[l];
+}
+
 vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
     Surface s = surface_at(id, surf, o, d, t);
     vec3 result = material.x * s.color;
@@ -89,7 +95,7 @@ vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
         lit = shadow_ray(s.p, L, dist, id, 1e-3 * cyl(id, CYL_TOP).w, occluder[l]);
         if (lit <= 0.0) continue;
 #endif
-        result += lit * light_col[l] * shade_light(s, L);
+        result += lit * light_at(l, dist) * shade_light(s, L);
     }
     return result;
 }
@@ -118,7 +124,7 @@ vec3 shade_mesh(int tri, vec3 o, vec3 d, float t, vec3 N) {
         lit = accel_transmittance(q, L, dist, -1, 0.0, hint);
         if (lit <= 0.0) continue;
 #endif
-        result += lit * light_col[l] * max(dot(N, L), 0.0) * (mesh_brdf * col);
+        result += lit * light_at(l, dist) * max(dot(N, L), 0.0) * (mesh_brdf * col);
     }
     return result;
 }
@@ -280,7 +286,7 @@ vec3 shade_one(int eid, float et, float w, int k, float u, vec3 o, vec3 d) {
     for (int l = 0; l < NUM_LIGHTS; ++l) {
         float dist;
         vec3 L = light_dir(l, S.p, dist);
-        vec3 cl = w * light_col[l] * shade_light(S, L);
+        vec3 cl = w * light_at(l, dist) * shade_light(S, L);
         float y = dot(cl, vec3(0.2126, 0.7152, 0.0722));
         lsum[l] += y;
         draw = hash32(draw ^ uint(NUM_LIGHTS * k + l + 1));

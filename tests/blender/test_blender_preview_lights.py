@@ -1,0 +1,151 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The preview lights a scene as Cycles does under the physically based shading: a sun at its
+Strength, a point light at its Power falling off with the square of the distance, both times
+2^Exposure where Blender has it; under the other shadings every light is the thesis's constant
+light of intensity 1. Checked against Cycles itself: a diffuse floor under each light, every
+pixel of the preview beside Cycles' render of it."""
+import importlib
+import math
+
+import numpy as np
+import pytest
+import bpy
+
+from hairio import Strands
+
+
+CLAY = (0.7, 0.55, 0.4)
+
+
+def ext_module(extension, name):
+    return importlib.import_module(f"{extension.__name__}.addon.{name}")
+
+
+def _light(kind, energy, location=(0.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0), scene=None):
+    data = bpy.data.lights.new(kind.title(), kind)
+    data.energy = energy
+    if kind == 'POINT':
+        data.shadow_soft_size = 0.0          # a point, as the preview's
+    if kind == 'SUN':
+        data.angle = 0.0
+    obj = bpy.data.objects.new(kind.title(), data)
+    scene = scene or bpy.context.scene
+    scene.collection.objects.link(obj)
+    obj.location, obj.rotation_euler = location, rotation
+    scene.view_layers[0].update()
+    return obj
+
+
+def test_lights_reach_the_preview_at_their_power_for_the_physical_shading_only(clean):
+    preview = ext_module(clean, "preview")
+    scene = bpy.context.scene
+    sun = _light('SUN', 4.0, rotation=(0.3, 0.0, 0.0))
+    lamp = _light('POINT', 1000.0, location=(1.0, -2.0, 3.0))
+    physical = {light.kind: light for light in preview.scene_lights(scene, physical=True)}
+    assert physical["directional"].intensity == pytest.approx(4.0) and not physical["directional"].falloff
+    point = physical["point"]
+    assert point.falloff and point.intensity == pytest.approx(1000.0 / (4.0 * math.pi))
+    assert point.vector == pytest.approx((1.0, -2.0, 3.0))
+    plain = preview.scene_lights(scene, physical=False)
+    assert sorted((light.kind, light.intensity, light.falloff) for light in plain) == [
+        ("directional", 1.0, False), ("point", 1.0, False)]
+    if hasattr(lamp.data, "exposure"):       # Blender 5.0: Power × 2^Exposure
+        lamp.data.exposure, sun.data.exposure = 1.0, -1.0
+        lights = {light.kind: light for light in preview.scene_lights(scene, physical=True)}
+        assert lights["point"].intensity == pytest.approx(2000.0 / (4.0 * math.pi))
+        assert lights["directional"].intensity == pytest.approx(2.0)
+
+
+def _cycles_floor(scene, size, samples=4):
+    """Cycles' render of the scene, direct light only: (H, W, 3) linear RGB, row 0 at the top."""
+    import os
+    import tempfile
+    scene.render.engine = 'CYCLES'
+    c = scene.cycles
+    c.device, c.samples, c.max_bounces = 'CPU', samples, 0
+    c.use_denoising, c.use_adaptive_sampling = False, False
+    c.pixel_filter_type, c.filter_width = 'BOX', 1.0
+    scene.render.resolution_x, scene.render.resolution_y = size
+    scene.render.resolution_percentage = 100
+    scene.view_settings.view_transform = 'Standard'
+    fmt = scene.render.image_settings
+    fmt.file_format, fmt.color_depth = 'OPEN_EXR', '32'
+    with tempfile.TemporaryDirectory() as tmp:
+        scene.render.filepath = os.path.join(tmp, "floor.exr")
+        bpy.ops.render.render(write_still=True, scene=scene.name)
+        img = bpy.data.images.load(scene.render.filepath)
+        w, h = img.size
+        px = np.empty(w * h * 4, np.float32)
+        img.pixels.foreach_get(px)
+        bpy.data.images.remove(img)
+    return px.reshape(h, w, 4)[::-1, :, :3].astype(np.float64)
+
+
+@pytest.fixture
+def black_world():
+    """A scene of its own (the render settings Cycles needs stay out of the other tests'),
+    under a black world; removed after the test with what it holds."""
+    scene = bpy.data.scenes.new("Lights")
+    world = bpy.data.worlds.new("Black")
+    if bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
+    next(n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground").inputs["Strength"].default_value = 0
+    scene.world = world
+    yield scene
+    objects = list(scene.objects)
+    bpy.data.scenes.remove(scene)
+    bpy.data.worlds.remove(world)
+    bpy.data.batch_remove(objects)
+    for mat in [m for m in bpy.data.materials if m.name.startswith("Clay")]:
+        bpy.data.materials.remove(mat)
+
+
+@pytest.mark.parametrize("kind", ['POINT', 'SUN'])
+def test_the_preview_lights_a_floor_as_cycles_does(clean, black_world, kind):
+    from tracer import Renderer, RenderSettings
+    preview = ext_module(clean, "preview")
+    scene_data = ext_module(clean, "scene_data")
+    scene = black_world
+    mesh = bpy.data.meshes.new("Floor")
+    mesh.from_pydata([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], [], [(0, 1, 2, 3)])
+    floor = bpy.data.objects.new("Floor", mesh)
+    scene.collection.objects.link(floor)
+    # Lambert on both sides: a Diffuse BSDF in Cycles, its colour as the viewport colour the
+    # preview falls back to when a material has no Principled BSDF.
+    mat = bpy.data.materials.new("Clay")
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    tree = mat.node_tree
+    tree.nodes.clear()
+    diffuse, out = tree.nodes.new("ShaderNodeBsdfDiffuse"), tree.nodes.new("ShaderNodeOutputMaterial")
+    diffuse.inputs["Color"].default_value = (*CLAY, 1.0)
+    diffuse.inputs["Roughness"].default_value = 0.0
+    tree.links.new(diffuse.outputs[0], out.inputs["Surface"])
+    mat.diffuse_color = (*CLAY, 1.0)
+    mesh.materials.append(mat)
+    if kind == 'POINT':          # near the floor: the fall-off spans a factor of ten across it
+        _light('POINT', 100.0, location=(0.3, -0.2, 0.6), scene=scene)
+    else:
+        _light('SUN', 3.0, rotation=(0.5, 0.2, 0.0), scene=scene)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    scene.collection.objects.link(cam)
+    cam.data.type, cam.data.ortho_scale = 'ORTHO', 1.6
+    cam.location = (0.0, 0.0, 2.0)
+    scene.camera = cam
+    scene.view_layers[0].update()
+    size = (48, 48)
+    cycles = _cycles_floor(scene, size)
+
+    lights = preview.scene_lights(scene, physical=True)
+    renderer = Renderer()
+    renderer.set_strands(Strands.from_arrays(np.array([[5.0, 5.0, 5.0], [5.0, 5.0, 5.1]], np.float32), [2]))
+    renderer.set_meshes([(np.array([v.co[:] for v in mesh.vertices]), np.array([[0, 1, 2], [0, 2, 3]]),
+                          scene_data.material_base_color(mat))])
+    img = renderer.render(preview.camera_for(scene, cam, size),
+                          RenderSettings(lights=lights, ambient=0.0, shadows=True))[..., :3].astype(np.float64)
+    assert cycles.mean() > 0.02, "Cycles' floor is dark: the test would prove nothing"
+    # A delta light on a diffuse floor: Cycles has no noise to speak of at 4 samples.
+    rel = np.abs(img - cycles) / cycles
+    assert np.median(rel) < 0.01 and np.quantile(rel, 0.98) < 0.03, (np.median(rel), rel.max())
+    if kind == 'POINT':
+        assert cycles[..., 0].max() > 5 * cycles[..., 0].min()     # the fall-off is in the picture
