@@ -133,29 +133,47 @@ def preview_size(scene, settings):
 
 
 def scene_lights(scene, physical=False):
-    """The scene's sun and point lights as tracer.Light (at most 8), or () for none.
-    `physical` (the "chiang" shading, which then matches Cycles): each at its power as Cycles
-    lights with it, times 2^exposure (Blender 5.0's Exposure): a sun's Strength is its
-    irradiance (W/m²), a point light's Power P radiates P / 4 pi W/sr and falls off with the
-    square of the distance (a point, whatever its radius). Else every light at intensity 1,
-    without fall-off (the thesis's constant light). Spot and area lights are left out."""
+    """The scene's lights as tracer.Light (at most 8), or () for none.
+    `physical` (the "chiang" shading, which then matches Cycles): each as Cycles lights with it,
+    its power times 2^Exposure (Blender 5.0's Exposure): a sun's Strength is its irradiance
+    (W/m²); a point light's Power P radiates P / 4 pi W/sr, a spot light's the same within its
+    cone (Spot Size, Blend); an area light's P / pi along its axis, times the cosine from it
+    (times its area when Normalize is off); all three falling off with the square of the
+    distance, from their centre (a point, whatever its radius or size: hard shadows).
+    Else every light at intensity 1, without fall-off or cone (the thesis's constant light)."""
     from tracer import Light
     from tracer.settings import MAX_LIGHTS
     lights = []
     for obj in scene.objects:
-        if obj.type != 'LIGHT' or obj.hide_render or obj.data.type not in ('SUN', 'POINT'):
+        if obj.type != 'LIGHT' or obj.hide_render or obj.data.type not in ('SUN', 'POINT', 'SPOT', 'AREA'):
             continue
-        m = np.array(obj.matrix_world, np.float64)
-        power = float(obj.data.energy) * 2.0 ** float(getattr(obj.data, "exposure", 0.0))
-        if obj.data.type == 'SUN':
-            lights.append(Light("directional", tuple(-m[:3, 2]), tuple(obj.data.color), power if physical else 1.0))
-        elif physical:
-            lights.append(Light("point", tuple(m[:3, 3]), tuple(obj.data.color), power / (4.0 * np.pi), falloff=True))
+        data, m = obj.data, np.array(obj.matrix_world, np.float64)
+        position, axis, rgb = tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(data.color)   # lights shine along -Z
+        power = float(data.energy) * 2.0 ** float(getattr(data, "exposure", 0.0))
+        if data.type == 'SUN':
+            lights.append(Light("directional", axis, rgb, power if physical else 1.0))
+        elif not physical:
+            lights.append(Light("point", position, rgb, 1.0))
+        elif data.type == 'POINT':
+            lights.append(Light("point", position, rgb, power / (4.0 * np.pi), falloff=True))
+        elif data.type == 'SPOT':
+            lights.append(Light("spot", position, rgb, power / (4.0 * np.pi), axis=axis,
+                                spot_size=float(data.spot_size), spot_blend=float(data.spot_blend)))
         else:
-            lights.append(Light("point", tuple(m[:3, 3]), tuple(obj.data.color), 1.0))
+            if not getattr(data, "normalize", True):        # Blender 5.0: Power per square metre
+                power *= _area_light_area(data, m)
+            lights.append(Light("area", position, rgb, power / np.pi, axis=axis))
         if len(lights) == MAX_LIGHTS:
             break
     return tuple(lights)
+
+
+def _area_light_area(data, m):
+    """An area light's emitting area in world units (its shape's, scaled by its object's X and Y)."""
+    x = float(data.size)
+    y = float(data.size_y) if data.shape in ('RECTANGLE', 'ELLIPSE') else x
+    area = x * y * (np.pi / 4.0 if data.shape in ('DISK', 'ELLIPSE') else 1.0)
+    return area * float(np.linalg.norm(m[:3, 0]) * np.linalg.norm(m[:3, 1]))
 
 
 # Rec. 709 luminance: Blender's default scene-linear colour space.

@@ -84,8 +84,7 @@ def signature(context, session):
                  ("type", "lens", "sensor_width", "sensor_height", "sensor_fit", "shift_x", "shift_y", "ortho_scale"))
     r = scene.render
     size = (r.resolution_x, r.resolution_y, r.pixel_aspect_x, r.pixel_aspect_y)
-    lights = tuple((o.name, o.data.type, tuple(o.data.color), o.data.energy, getattr(o.data, "exposure", 0.0),
-                    _matrix(o), o.hide_render) for o in scene.objects if o.type == 'LIGHT')
+    lights = preview.scene_lights(scene, physical=True)      # all a light gives the preview, any shading
     shading = (preview.world_ambient(scene), hair_material.principled_hair_settings(session.hair))
     own, others = scene_data.preview_mesh_objects(scene, context.view_layer, session.scalp)
     meshes = tuple((o.name, _matrix(o), o.data.session_uid) for o in own + others)

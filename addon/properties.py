@@ -281,10 +281,10 @@ class HairSettings(PropertyGroup):
                     "so distant hair doesn't break up into dots")
     preview_scene_lights: BoolProperty(
         name="Scene Lights", default=True,
-        description="Light the preview with the scene's sun and point lights; with Principled Hair "
-                    "shading at their power, point lights falling off with distance, and the world's "
-                    "colour as Cycles lights with them, else at one intensity without fall-off; "
-                    "off, or with none in the scene, a default key light")
+        description="Light the preview with the scene's lights; with Principled Hair shading as "
+                    "Cycles does (their power, fall-off with distance, spot cones) and with the world's "
+                    "colour, else at one intensity without fall-off; off, or with none in the scene, "
+                    "a default key light")
     preview_in_process: BoolProperty(
         name="Render Inside Blender", default=False,
         description="Run the preview renderer inside Blender instead of a separate process "

@@ -233,6 +233,11 @@ def _set_uniforms(prog, camera, settings):
         prog["light_vec"].write(np.array([p[0] for p in packed], np.float32).tobytes())
     if "light_col" in prog:
         prog["light_col"].write(np.array([p[1] for p in packed], np.float32).tobytes())
+    cones = [light.cone() for light in settings.lights]
+    if "light_axis" in prog:
+        prog["light_axis"].write(np.array([c[0] for c in cones], np.float32).tobytes())
+    if "light_blend" in prog:
+        prog["light_blend"].write(np.array([c[1] for c in cones], np.float32).tobytes())
     set_uniforms(prog, background=settings.premultiplied_background(),
                  material=(settings.ambient, settings.diffuse, settings.specular, settings.shininess),
                  mpw_cap=float(settings.min_pixel_width_cap), t_eps=float(settings.transmittance_eps))

@@ -222,8 +222,8 @@ def _shade(cyl, ids, surf, o, d, t, settings):
         lit = np.ones(len(p))
         if settings.shadows:
             lit = _light_through(cyl, p, L, dist, cyl.radius[ids], settings, vec[:3] if vec[3] > 0.5 else None)
-        if light.kind == "point" and light.falloff:       # the inverse-square law
-            lit = lit / dist ** 2
+        if vec[3] > 0.5:                # fall-off, a spot's cone, an area light's cosine
+            lit = lit * light.scale(L, dist)
         out = out + lit[:, None] * np.asarray(lcol) * model.reference(s, L, settings)
     return out
 

@@ -23,32 +23,81 @@ MAX_SPP = 4096
 SAMPLERS = ("independent", "pixel")
 
 
+LIGHT_KINDS = ("directional", "point", "spot", "area")
+# The shader's code for each kind (light_vec's w); a point light with fall-off is 2.
+_KIND_CODE = {"directional": 0.0, "point": 1.0, "spot": 3.0, "area": 4.0}
+
+
 @dataclass(frozen=True)
 class Light:
     """kind "directional": `vector` is the direction the light travels (a sun shining down is
-    (0, 0, -1)); kind "point": `vector` is the position. By default no fall-off with distance:
-    the thesis's Phong model uses a constant light intensity Il = color * intensity. `falloff`
-    (point lights only): the inverse-square law, intensity then the radiant intensity (W/sr, a
-    Blender point light's Power / 4 pi) and color * intensity / d² the irradiance at distance d,
-    as Cycles lights (addon/preview.py, scene_lights)."""
+    (0, 0, -1)); the others: `vector` is the position. A point light has by default no
+    fall-off with distance: the thesis's Phong model uses a constant light intensity Il =
+    color * intensity. `falloff` (point lights): the inverse-square law, intensity then the
+    radiant intensity (W/sr, a Blender point light's Power / 4 pi) and color * intensity / d²
+    the irradiance at distance d, as Cycles lights (addon/preview.py, scene_lights).
+
+    kind "spot" (always the inverse-square law): a point light whose light leaves within a
+    cone along `axis` of full angle `spot_size` (radians), its edge softened over `spot_blend`
+    (0..1) of the cosine range as Blender's spot lights (smoothstep of (cos - cos half angle) /
+    ((1 - cos half angle) · blend)); intensity as a point light's (Power / 4 pi inside the cone).
+    kind "area" (always the inverse-square law): a small Lambertian emitter at `vector` facing
+    `axis`, intensity the radiant intensity along the axis (a Blender area light's Power / pi),
+    times the cosine from the axis, none behind; lit from its centre, so its shadows are hard."""
     kind: str = "directional"
     vector: tuple = (0.4, 0.6, -1.0)
     color: tuple = (1.0, 1.0, 1.0)
     intensity: float = 1.0
     falloff: bool = False
+    axis: tuple = (0.0, 0.0, -1.0)
+    spot_size: float = float(np.pi)
+    spot_blend: float = 0.0
 
     def packed(self):
         """(vec4, rgb) as the shader wants them: w = 0 for a directional light, 1 for a point
-        light, 2 for a point light with the inverse-square fall-off."""
+        light, 2 for a point light with the inverse-square fall-off, 3 for a spot light, 4 for
+        an area light."""
         v = np.asarray(self.vector, np.float64)
         rgb = tuple(np.asarray(self.color, np.float64) * self.intensity)
         if self.kind == "directional":
             return (*(v / np.linalg.norm(v)), 0.0), rgb
-        return (*v, 2.0 if self.falloff else 1.0), rgb
+        code = 2.0 if self.kind == "point" and self.falloff else _KIND_CODE[self.kind]
+        return (*v, code), rgb
+
+    def cone(self):
+        """(vec4, float) as the shader wants them: the unit axis and the cosine of the half
+        angle (spot lights; -2 for the others), and the width of the cosine range the edge is
+        softened over (0: a hard edge)."""
+        a = np.asarray(self.axis, np.float64)
+        if self.kind not in ("spot", "area"):
+            return (0.0, 0.0, -1.0, -2.0), 0.0
+        a = a / np.linalg.norm(a)
+        if self.kind == "area":
+            return (*a, -2.0), 0.0
+        cos_half = float(np.cos(0.5 * self.spot_size))
+        return (*a, cos_half), (1.0 - cos_half) * float(self.spot_blend)
+
+    def scale(self, L, dist):
+        """Float64, per point: what the light's colour is multiplied by at points whose unit
+        directions toward the light are L (N, 3) and distances dist (N,): 1 without fall-off,
+        else 1 / dist² times the spot's cone or the area light's cosine (the references' model;
+        the shader's is light_at in shaders/trace_main.glsl)."""
+        if self.kind == "directional" or (self.kind == "point" and not self.falloff):
+            return np.ones(len(dist))
+        f = 1.0 / np.maximum(dist * dist, 1e-30)
+        if self.kind == "point":
+            return f
+        axis, smooth = self.cone()
+        c = -(L @ np.asarray(axis[:3], np.float64))          # the cosine from the light's axis
+        if self.kind == "area":
+            return f * np.maximum(c, 0.0)
+        t = c - axis[3]
+        edge = np.clip(t / smooth, 0.0, 1.0) if smooth > 0 else np.ones_like(t)
+        return f * np.where(t > 0.0, edge * edge * (3.0 - 2.0 * edge), 0.0)
 
     def check(self):
-        if self.kind not in ("directional", "point"):
-            raise InputError(f"light kind: {self.kind!r}; use 'directional' or 'point'")
+        if self.kind not in LIGHT_KINDS:
+            raise InputError(f"light kind: {self.kind!r}; use one of {', '.join(map(repr, LIGHT_KINDS))}")
         v = np.asarray(self.vector, np.float64)
         if v.shape != (3,) or not np.all(np.isfinite(v)):
             raise InputError(f"light vector: {self.vector}; expected three finite numbers")
@@ -57,6 +106,15 @@ class Light:
         if self.kind == "directional" and self.falloff:
             raise InputError("light falloff: a directional light has no distance to fall off with; "
                              "use falloff with a point light")
+        if self.kind in ("spot", "area"):
+            a = np.asarray(self.axis, np.float64)
+            if a.shape != (3,) or not np.all(np.isfinite(a)) or np.linalg.norm(a) == 0:
+                raise InputError(f"light axis: {self.axis}; a {self.kind} light needs a non-zero direction "
+                                 "(three finite numbers) it shines along")
+        if self.kind == "spot" and not (np.isfinite(self.spot_size) and 0.0 < self.spot_size <= np.pi):
+            raise InputError(f"light spot_size: {self.spot_size}; use the cone's full angle, 0 < angle <= pi radians")
+        if self.kind == "spot" and not (np.isfinite(self.spot_blend) and 0.0 <= self.spot_blend <= 1.0):
+            raise InputError(f"light spot_blend: {self.spot_blend}; use 0..1")
         c = np.asarray(self.color, np.float64)
         if c.shape != (3,) or not np.all(np.isfinite(c)) or not np.isfinite(self.intensity):
             raise InputError(f"light color/intensity: {self.color}, {self.intensity}; expected finite values")

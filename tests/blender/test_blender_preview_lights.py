@@ -1,9 +1,10 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The preview lights a scene as Cycles does under the physically based shading: a sun at its
-Strength, a point light at its Power falling off with the square of the distance, both times
-2^Exposure where Blender has it; under the other shadings every light is the thesis's constant
-light of intensity 1. Checked against Cycles itself: a diffuse floor under each light, every
-pixel of the preview beside Cycles' render of it."""
+Strength, a point light at its Power falling off with the square of the distance, a spot light
+the same within its cone, an area light at its Power / pi times the cosine from its axis, all
+times 2^Exposure where Blender has it; under the other shadings every light is the thesis's
+constant light of intensity 1. Checked against Cycles itself: a diffuse floor under each
+light, every pixel of the preview beside Cycles' render of it."""
 import importlib
 import math
 
@@ -24,8 +25,12 @@ def ext_module(extension, name):
 def _light(kind, energy, location=(0.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0), scene=None):
     data = bpy.data.lights.new(kind.title(), kind)
     data.energy = energy
-    if kind == 'POINT':
+    if kind in ('POINT', 'SPOT'):
         data.shadow_soft_size = 0.0          # a point, as the preview's
+    if kind == 'SPOT':
+        data.spot_size, data.spot_blend = math.radians(80.0), 0.4
+    if kind == 'AREA':
+        data.size = 0.02                     # small against its distance: the preview's point
     if kind == 'SUN':
         data.angle = 0.0
     obj = bpy.data.objects.new(kind.title(), data)
@@ -56,7 +61,7 @@ def test_lights_reach_the_preview_at_their_power_for_the_physical_shading_only(c
         assert lights["directional"].intensity == pytest.approx(2.0)
 
 
-def _cycles_floor(scene, size, samples=4):
+def _cycles_floor(scene, size, samples=64):
     """Cycles' render of the scene, direct light only: (H, W, 3) linear RGB, row 0 at the top."""
     import os
     import tempfile
@@ -100,7 +105,7 @@ def black_world():
         bpy.data.materials.remove(mat)
 
 
-@pytest.mark.parametrize("kind", ['POINT', 'SUN'])
+@pytest.mark.parametrize("kind", ['POINT', 'SUN', 'SPOT', 'AREA'])
 def test_the_preview_lights_a_floor_as_cycles_does(clean, black_world, kind):
     from tracer import Renderer, RenderSettings
     preview = ext_module(clean, "preview")
@@ -123,10 +128,10 @@ def test_the_preview_lights_a_floor_as_cycles_does(clean, black_world, kind):
     tree.links.new(diffuse.outputs[0], out.inputs["Surface"])
     mat.diffuse_color = (*CLAY, 1.0)
     mesh.materials.append(mat)
-    if kind == 'POINT':          # near the floor: the fall-off spans a factor of ten across it
-        _light('POINT', 100.0, location=(0.3, -0.2, 0.6), scene=scene)
-    else:
+    if kind == 'SUN':
         _light('SUN', 3.0, rotation=(0.5, 0.2, 0.0), scene=scene)
+    else:                        # near the floor: the fall-off spans a factor of ten across it
+        _light(kind, 100.0, location=(0.3, -0.2, 0.6), rotation=(0.4, 0.0, 0.0), scene=scene)
     cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
     scene.collection.objects.link(cam)
     cam.data.type, cam.data.ortho_scale = 'ORTHO', 1.6
@@ -142,10 +147,17 @@ def test_the_preview_lights_a_floor_as_cycles_does(clean, black_world, kind):
     renderer.set_meshes([(np.array([v.co[:] for v in mesh.vertices]), np.array([[0, 1, 2], [0, 2, 3]]),
                           scene_data.material_base_color(mat))])
     img = renderer.render(preview.camera_for(scene, cam, size),
-                          RenderSettings(lights=lights, ambient=0.0, shadows=True))[..., :3].astype(np.float64)
+                          RenderSettings(lights=lights, ambient=0.0, shadows=True, spp=64))[..., :3].astype(np.float64)
     assert cycles.mean() > 0.02, "Cycles' floor is dark: the test would prove nothing"
-    # A delta light on a diffuse floor: Cycles has no noise to speak of at 4 samples.
-    rel = np.abs(img - cycles) / cycles
+    lit = cycles[..., 0] > 1e-3 * cycles[..., 0].max()
+    if kind == 'SPOT':                  # the cone's edge crosses the floor
+        assert 0.2 < lit.mean() < 0.8
+        assert abs((img[..., 0] > 1e-3 * cycles[..., 0].max()).mean() - lit.mean()) < 0.02     # the same cone
+    # Delta lights (and a tiny area light) on a diffuse floor, 64 samples over each pixel on both
+    # sides: they differ little but on the spot's edge.
+    bright = cycles[..., 0] > 0.05 * cycles[..., 0].max()
+    rel = np.abs(img - cycles)[bright] / cycles[bright]
     assert np.median(rel) < 0.01 and np.quantile(rel, 0.98) < 0.03, (np.median(rel), rel.max())
-    if kind == 'POINT':
-        assert cycles[..., 0].max() > 5 * cycles[..., 0].min()     # the fall-off is in the picture
+    assert np.abs(img - cycles).max() < 0.01 * cycles.max()         # the dim edge of a spot too
+    if kind != 'SUN':
+        assert cycles[..., 0].max() > 5 * cycles[..., 0][lit].min()     # the fall-off is in the picture

@@ -8,6 +8,7 @@ import pytest
 
 from hairio import InputError
 from tracer import Camera, Light, RenderSettings, Renderer, reference_render
+from tracer import layout
 from tracer.meshes import mesh_set
 
 from tracer_scenes import curls, make_strands, plane, uv_sphere
@@ -83,16 +84,41 @@ def test_a_strand_shadows_a_plane(meshed):
     assert np.isclose(grey[..., 0], lit_level, atol=1e-4).sum() > 500
 
 
-@pytest.mark.parametrize("falloff", [True, False])
-def test_a_point_light_lights_a_plane_by_the_inverse_square_law(meshed, falloff):
-    """Every pixel of a Lambertian floor under a point light of radiant intensity I at height
-    h, against the radiometry written out here: base colour / pi × I cos θ / d² (without
-    fall-off, I cos θ), d the distance to the light and θ the angle from the floor's normal."""
+def _emitted(kind, to_light, dist):
+    """What leaves a light of radiant intensity 1 toward points seeing it along to_light (unit,
+    (..., 3)) at dist, written out from Blender's lights: a spot of 70° and blend 0.4 pointing
+    down and a little forward, an area light facing the same way."""
+    if kind == "point, no fall-off":
+        return np.ones_like(dist)
+    axis = np.array([0.0, 0.3, -1.0]) / np.linalg.norm([0.0, 0.3, -1.0])
+    c = -(to_light @ axis)
+    if kind == "spot":
+        cos_half = np.cos(np.radians(35.0))
+        u = np.clip((c - cos_half) / ((1 - cos_half) * 0.4), 0.0, 1.0)
+        return u * u * (3 - 2 * u) / dist ** 2
+    if kind == "area":
+        return np.maximum(c, 0.0) / dist ** 2
+    return 1.0 / dist ** 2
+
+
+LIGHT_KINDS = {
+    "point": dict(kind="point", falloff=True),
+    "point, no fall-off": dict(kind="point"),
+    "spot": dict(kind="spot", axis=(0.0, 0.3, -1.0), spot_size=np.radians(70.0), spot_blend=0.4),
+    "area": dict(kind="area", axis=(0.0, 0.3, -1.0)),
+}
+
+
+@pytest.mark.parametrize("name", sorted(LIGHT_KINDS))
+def test_lights_light_a_plane_by_the_radiometry_of_their_kind(meshed, name):
+    """Every pixel of a Lambertian floor under a light of radiant intensity I at height h,
+    against the radiometry written out here: base colour / pi × I × emitted × cos θ, θ the angle
+    from the floor's normal and `emitted` the light's fall-off, cone or emitter cosine."""
     floor = plane(0.0, 2.0)
     light = (0.3, -0.2, 0.8)
     cam = Camera.look_at((0.2, -1.6, 1.4), (0, 0, 0), size=(64, 48), fov_deg=45)
-    settings = RenderSettings(shadows=True, ambient=0.0, lights=(Light("point", light, intensity=3.0,
-                                                                       falloff=falloff),))
+    settings = RenderSettings(shadows=True, ambient=0.0, lights=(Light(vector=light, intensity=3.0,
+                                                                       **LIGHT_KINDS[name]),))
     meshed.set_strands(make_strands([[[5, 5, 5], [5, 5, 5.1]]], radius=0.01))     # out of view
     meshed.set_meshes([(*floor, GREY)])
     img = meshed.render(cam, settings).astype(np.float64)
@@ -101,13 +127,17 @@ def test_a_point_light_lights_a_plane_by_the_inverse_square_law(meshed, falloff)
     o, d = cam.rays(x, y)
     t = -o[..., 2] / d[..., 2]
     on_floor = (t > 0) & np.all(np.abs(o + t[..., None] * d)[..., :2] < 0.99, axis=-1)
-    p = o + t[..., None] * d
+    # Shaded where its shadow rays start: MESH_SHADOW_OFFSET × the mesh's diagonal above it.
+    p = o + t[..., None] * d + [0.0, 0.0, layout.MESH_SHADOW_OFFSET * np.hypot(4.0, 4.0)]
     to_light = np.asarray(light) - p
     dist = np.linalg.norm(to_light, axis=-1)
-    irradiance = 3.0 * to_light[..., 2] / dist / (dist ** 2 if falloff else 1.0)
-    expected = GREY[0] / np.pi * irradiance
+    to_light /= dist[..., None]
+    expected = GREY[0] / np.pi * 3.0 * to_light[..., 2] * _emitted(name, to_light, dist)
     assert on_floor.sum() > 0.5 * h * w
-    np.testing.assert_allclose(img[..., 0][on_floor], expected[on_floor], rtol=2e-4, atol=1e-6)
+    if name == "spot":              # inside, on the edge and outside the cone
+        inside = expected[on_floor] > 0
+        assert 0.1 < inside.mean() < 0.9
+    np.testing.assert_allclose(img[..., 0][on_floor], expected[on_floor], rtol=2e-4, atol=2e-5)
     assert np.all(img[..., 3][on_floor] == 1.0)
 
 

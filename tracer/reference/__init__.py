@@ -23,17 +23,15 @@ from .triangles import TriangleSet, mesh_blocked, mesh_nearest
 
 def _lights(settings, p):
     """Per light: unit directions toward it from every point p, distances, its colour (per
-    point, (N, 3), for a point light that falls off with distance), and its position (None
-    for a directional light)."""
+    point, (N, 3), for a light that falls off with distance: Light.scale), and its position
+    (None for a directional light)."""
     for light in settings.lights:
         vec, lcol = light.packed()
         if vec[3] > 0.5:
             L = np.asarray(vec[:3]) - p
             dist = np.linalg.norm(L, axis=1)
-            lcol = np.asarray(lcol)
-            if vec[3] > 1.5:
-                lcol = lcol / np.maximum(dist * dist, 1e-30)[:, None]
-            yield L / np.maximum(dist, 1e-30)[:, None], dist, lcol, vec[:3]
+            L = L / np.maximum(dist, 1e-30)[:, None]
+            yield L, dist, np.asarray(lcol) * light.scale(L, dist)[:, None], vec[:3]
         else:
             yield np.broadcast_to(-np.asarray(vec[:3]), p.shape), np.full(len(p), BIG), np.asarray(lcol), None
 

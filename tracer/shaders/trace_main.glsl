@@ -11,8 +11,12 @@ uniform ivec2 pixel_origin;   // its pixel (0, 0) in the whole image (tracer/cam
 uniform vec2 centre_px;       // the optical axis in the whole image's pixels (Camera.centre_px)
 
 uniform vec4 light_vec[NUM_LIGHTS];   // w = 0: xyz is the direction light travels; w = 1: position;
-                                      // w = 2: position, with the inverse-square fall-off
+                                      // w = 2: position, with the inverse-square fall-off; 3: a spot
+                                      // light's position, 4: an area light's (both falling off)
 uniform vec3 light_col[NUM_LIGHTS];
+uniform vec4 light_axis[NUM_LIGHTS];  // spot and area: the unit axis it shines along; w: a spot's
+                                      // cosine of its half angle
+uniform float light_blend[NUM_LIGHTS];   // a spot: the cosine range its edge is softened over
 uniform vec4 background;              // premultiplied
 
 layout(location = 0) out vec4 frag_color;
@@ -79,9 +83,20 @@ vec3 light_dir(int l, vec3 p, out float dist) {
     return L;
 }
 
-// Light l's colour times its intensity at distance dist (the inverse-square fall-off for w = 2).
-vec3 light_at(int l, float dist) {
-    return light_vec[l].w > 1.5 ? light_col[l] / max(dist * dist, 1e-30) : light_col[l];
+// Light l's colour times its intensity toward a point that sees it along L at distance dist:
+// the inverse-square fall-off for w >= 2, times a spot's cone (Blender's smoothstep edge) or an
+// area light's cosine from its axis (tracer.settings.Light.scale, the references' model).
+vec3 light_at(int l, vec3 L, float dist) {
+    float w = light_vec[l].w;
+    if (w < 1.5) return light_col[l];
+    float f = 1.0 / max(dist * dist, 1e-30);
+    float c = -dot(L, light_axis[l].xyz);
+    if (w > 3.5) f *= max(c, 0.0);
+    else if (w > 2.5) {
+        float t = c - light_axis[l].w, b = light_blend[l];
+        f *= t <= 0.0 ? 0.0 : (b > 0.0 ? smoothstep(0.0, 1.0, t / b) : 1.0);
+    }
+    return light_col[l] * f;
 }
 
 vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
@@ -95,7 +110,7 @@ vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
         lit = shadow_ray(s.p, L, dist, id, 1e-3 * cyl(id, CYL_TOP).w, occluder[l]);
         if (lit <= 0.0) continue;
 #endif
-        result += lit * light_at(l, dist) * shade_light(s, L);
+        result += lit * light_at(l, L, dist) * shade_light(s, L);
     }
     return result;
 }
@@ -124,7 +139,7 @@ vec3 shade_mesh(int tri, vec3 o, vec3 d, float t, vec3 N) {
         lit = accel_transmittance(q, L, dist, -1, 0.0, hint);
         if (lit <= 0.0) continue;
 #endif
-        result += lit * light_at(l, dist) * max(dot(N, L), 0.0) * (mesh_brdf * col);
+        result += lit * light_at(l, L, dist) * max(dot(N, L), 0.0) * (mesh_brdf * col);
     }
     return result;
 }
@@ -286,7 +301,7 @@ vec3 shade_one(int eid, float et, float w, int k, float u, vec3 o, vec3 d) {
     for (int l = 0; l < NUM_LIGHTS; ++l) {
         float dist;
         vec3 L = light_dir(l, S.p, dist);
-        vec3 cl = w * light_at(l, dist) * shade_light(S, L);
+        vec3 cl = w * light_at(l, L, dist) * shade_light(S, L);
         float y = dot(cl, vec3(0.2126, 0.7152, 0.0722));
         lsum[l] += y;
         draw = hash32(draw ^ uint(NUM_LIGHTS * k + l + 1));
