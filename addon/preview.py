@@ -140,7 +140,8 @@ def scene_lights(scene, physical=False):
     cone (Spot Size, Blend); an area light's P / pi along its axis, times the cosine from it
     (times its area when Normalize is off); all three falling off with the square of the
     distance, from their centre (a point, whatever its radius or size: hard shadows).
-    Else every light at intensity 1, without fall-off or cone (the thesis's constant light)."""
+    Else every light at intensity 1, without fall-off or cone (the thesis's constant light).
+    A light whose Cast Shadow is off casts none in the preview either."""
     from tracer import Light
     from tracer.settings import MAX_LIGHTS
     lights = []
@@ -150,19 +151,20 @@ def scene_lights(scene, physical=False):
         data, m = obj.data, np.array(obj.matrix_world, np.float64)
         position, axis, rgb = tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(data.color)   # lights shine along -Z
         power = float(data.energy) * 2.0 ** float(getattr(data, "exposure", 0.0))
+        shadows = bool(data.use_shadow)
         if data.type == 'SUN':
-            lights.append(Light("directional", axis, rgb, power if physical else 1.0))
+            lights.append(Light("directional", axis, rgb, power if physical else 1.0, shadows=shadows))
         elif not physical:
-            lights.append(Light("point", position, rgb, 1.0))
+            lights.append(Light("point", position, rgb, 1.0, shadows=shadows))
         elif data.type == 'POINT':
-            lights.append(Light("point", position, rgb, power / (4.0 * np.pi), falloff=True))
+            lights.append(Light("point", position, rgb, power / (4.0 * np.pi), falloff=True, shadows=shadows))
         elif data.type == 'SPOT':
-            lights.append(Light("spot", position, rgb, power / (4.0 * np.pi), axis=axis,
+            lights.append(Light("spot", position, rgb, power / (4.0 * np.pi), axis=axis, shadows=shadows,
                                 spot_size=float(data.spot_size), spot_blend=float(data.spot_blend)))
         else:
             if not getattr(data, "normalize", True):        # Blender 5.0: Power per square metre
                 power *= _area_light_area(data, m)
-            lights.append(Light("area", position, rgb, power / np.pi, axis=axis))
+            lights.append(Light("area", position, rgb, power / np.pi, axis=axis, shadows=shadows))
         if len(lights) == MAX_LIGHTS:
             break
     return tuple(lights)
@@ -208,6 +210,18 @@ def world_ambient(scene):
                       f"output): the preview lights the hair with its own ambient "
                       f"{RenderSettings().ambient:g}, not the world's")
     return max(0.0, _luminance(color.default_value) * float(strength.default_value)), None
+
+
+def lights_note(scene, settings):
+    """What the operator says when the scene has more lights than the preview takes, or None."""
+    from tracer.settings import MAX_LIGHTS
+    if not settings.preview_scene_lights:
+        return None
+    n = sum(1 for obj in scene.objects if obj.type == 'LIGHT' and not obj.hide_render)
+    if n <= MAX_LIGHTS:
+        return None
+    return (f"The scene has {n} lights; the preview takes the first {MAX_LIGHTS} of them "
+            "(hide the others from renders to choose which)")
 
 
 def world_note(scene, settings):

@@ -125,7 +125,9 @@ def _restart(context, session, wait=True):
     # world or material) bump _geometry_edits, so the signature after them is the image's.
     session.meshes = preview.scene_meshes(context, session.scalp)
     session.signature = signature(context, session)
-    notes = (preview.budget_note(session.meshes), preview.world_note(context.scene, session.scalp.keystrand_hair))
+    s = session.scalp.keystrand_hair
+    notes = (preview.budget_note(session.meshes), preview.lights_note(context.scene, s),
+             preview.world_note(context.scene, s))
     session.note = ". ".join(n for n in notes if n) or None
     session.starts += 1
     session.pending, session.pending_first = _begin_pass(context, session, 0, wait), True

@@ -238,6 +238,8 @@ def _set_uniforms(prog, camera, settings):
         prog["light_axis"].write(np.array([c[0] for c in cones], np.float32).tobytes())
     if "light_blend" in prog:
         prog["light_blend"].write(np.array([c[1] for c in cones], np.float32).tobytes())
+    if "light_shadow" in prog:
+        prog["light_shadow"].write(np.array([float(light.shadows) for light in settings.lights], np.float32).tobytes())
     set_uniforms(prog, background=settings.premultiplied_background(),
                  material=(settings.ambient, settings.diffuse, settings.specular, settings.shininess),
                  mpw_cap=float(settings.min_pixel_width_cap), t_eps=float(settings.transmittance_eps))

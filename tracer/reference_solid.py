@@ -220,7 +220,7 @@ def _shade(cyl, ids, surf, o, d, t, settings):
             L = np.broadcast_to(-np.asarray(vec[:3], np.float64), p.shape).copy()
             dist = np.full(len(p), BIG)
         lit = np.ones(len(p))
-        if settings.shadows:
+        if settings.shadows and light.shadows:
             lit = _light_through(cyl, p, L, dist, cyl.radius[ids], settings, vec[:3] if vec[3] > 0.5 else None)
         if vec[3] > 0.5:                # fall-off, a spot's cone, an area light's cosine
             lit = lit * light.scale(L, dist)

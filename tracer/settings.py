@@ -43,7 +43,8 @@ class Light:
     ((1 - cos half angle) · blend)); intensity as a point light's (Power / 4 pi inside the cone).
     kind "area" (always the inverse-square law): a small Lambertian emitter at `vector` facing
     `axis`, intensity the radiant intensity along the axis (a Blender area light's Power / pi),
-    times the cosine from the axis, none behind; lit from its centre, so its shadows are hard."""
+    times the cosine from the axis, none behind; lit from its centre, so its shadows are hard.
+    `shadows` False: nothing shadows this light (RenderSettings.shadows turns them all off)."""
     kind: str = "directional"
     vector: tuple = (0.4, 0.6, -1.0)
     color: tuple = (1.0, 1.0, 1.0)
@@ -52,6 +53,7 @@ class Light:
     axis: tuple = (0.0, 0.0, -1.0)
     spot_size: float = float(np.pi)
     spot_blend: float = 0.0
+    shadows: bool = True              # False: no shadow rays toward it (Blender's Cast Shadow off)
 
     def packed(self):
         """(vec4, rgb) as the shader wants them: w = 0 for a directional light, 1 for a point

@@ -54,6 +54,11 @@ def test_lights_reach_the_preview_at_their_power_for_the_physical_shading_only(c
     plain = preview.scene_lights(scene, physical=False)
     assert sorted((light.kind, light.intensity, light.falloff) for light in plain) == [
         ("directional", 1.0, False), ("point", 1.0, False)]
+    assert all(light.shadows for light in plain)
+    lamp.data.use_shadow = False            # Cast Shadow off: nothing shadows it in the preview either
+    for physical_or_not in (True, False):
+        by_kind = {light.kind: light for light in preview.scene_lights(scene, physical=physical_or_not)}
+        assert not by_kind["point"].shadows and by_kind["directional"].shadows
     if hasattr(lamp.data, "exposure"):       # Blender 5.0: Power × 2^Exposure
         lamp.data.exposure, sun.data.exposure = 1.0, -1.0
         lights = {light.kind: light for light in preview.scene_lights(scene, physical=True)}
@@ -161,3 +166,20 @@ def test_the_preview_lights_a_floor_as_cycles_does(clean, black_world, kind):
     assert np.abs(img - cycles).max() < 0.01 * cycles.max()         # the dim edge of a spot too
     if kind != 'SUN':
         assert cycles[..., 0].max() > 5 * cycles[..., 0][lit].min()     # the fall-off is in the picture
+
+
+def test_past_eight_lights_the_preview_says_which_it_takes(clean):
+    from types import SimpleNamespace
+    from tracer.settings import MAX_LIGHTS
+    preview = ext_module(clean, "preview")
+    scene = bpy.context.scene
+    on, off = SimpleNamespace(preview_scene_lights=True), SimpleNamespace(preview_scene_lights=False)
+    lamps = [_light('POINT', 10.0, location=(i, 0.0, 2.0)) for i in range(MAX_LIGHTS)]
+    assert preview.lights_note(scene, on) is None
+    lamps.append(_light('POINT', 10.0, location=(0.0, 3.0, 2.0)))
+    note = preview.lights_note(scene, on)
+    assert note is not None and f"{MAX_LIGHTS + 1} lights" in note and f"first {MAX_LIGHTS}" in note
+    assert len(preview.scene_lights(scene, physical=True)) == MAX_LIGHTS
+    assert preview.lights_note(scene, off) is None
+    lamps[0].hide_render = True             # hidden from renders: eight again
+    assert preview.lights_note(scene, on) is None

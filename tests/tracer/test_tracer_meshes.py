@@ -3,6 +3,8 @@
 the camera and from the lights, take the hair's shadows and cast their own; bad meshes are
 refused where they enter. Bounds as in test_tracer_vs_reference (float32 against float64:
 pixels may flip only on a silhouette or shadow edge, and rarely)."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -144,6 +146,21 @@ def test_lights_light_a_plane_by_the_radiometry_of_their_kind(meshed, name):
 def test_a_directional_light_cannot_fall_off():
     with pytest.raises(InputError, match="falloff"):
         RenderSettings(lights=(Light("directional", (0, 0, -1), falloff=True),)).check()
+
+
+def test_a_light_that_casts_no_shadows_lights_the_plane_under_the_strand(meshed):
+    strand = make_strands([[[-0.5, 0, 0.2], [0.5, 0, 0.2]]], radius=0.04)
+    floor = plane(0.0, 1.0)
+    cam = Camera.look_at((0, -2.0, 1.2), (0, 0.3, 0), size=(64, 48), fov_deg=40)
+    sun = Light(vector=(0.0, 0.0, -1.0))
+    casting = RenderSettings(shadows=True, lights=(sun,))
+    free = RenderSettings(shadows=True, lights=(dataclasses.replace(sun, shadows=False),))
+    img, _ = _matches_reference(meshed, strand, [(*floor, GREY)], cam, free)
+    shadow_level, lit_level = GREY[0] * casting.ambient, GREY[0] * (casting.ambient + 1.0 / np.pi)
+    # Where the strand's shadow lay the floor is lit: no floor pixel at the shadow's level.
+    assert np.isclose(meshed.render(cam, casting)[..., 0], shadow_level, atol=1e-4).sum() > 10
+    assert np.isclose(img[..., 0], shadow_level, atol=1e-4).sum() == 0
+    assert np.isclose(img[..., 0], lit_level, atol=1e-4).sum() > 500
 
 
 def test_a_plane_shadows_strands(meshed):

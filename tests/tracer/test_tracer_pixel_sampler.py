@@ -68,9 +68,10 @@ def _tuft_camera(size=72):
 # Opaque hair takes one layer, each sample its own nearest hit; see-through hair the list of
 # distinct cylinders, which holds enough for 9 samples of 2 layers in one walk.
 # Lights that fall off with distance light each strand by its own distance; a spot's edge
-# crosses the tuft.
+# crosses the tuft, and nothing shadows the spot.
 NEAR_LIGHT = (Light("point", (0.6, -1.2, 1.2), intensity=2.0, falloff=True),
-              Light("spot", (-0.4, -1.0, 1.4), intensity=2.0, axis=(0.3, 1.0, -0.7), spot_size=0.5, spot_blend=0.3))
+              Light("spot", (-0.4, -1.0, 1.4), intensity=2.0, axis=(0.3, 1.0, -0.7), spot_size=0.5, spot_blend=0.3,
+                    shadows=False))
 
 
 @pytest.mark.parametrize("alpha, layers, spp, lights", [(1.0, 4, 16, None), (0.45, 2, 9, None),

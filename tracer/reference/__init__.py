@@ -23,17 +23,19 @@ from .triangles import TriangleSet, mesh_blocked, mesh_nearest
 
 def _lights(settings, p):
     """Per light: unit directions toward it from every point p, distances, its colour (per
-    point, (N, 3), for a light that falls off with distance: Light.scale), and its position
-    (None for a directional light)."""
+    point, (N, 3), for a light that falls off with distance: Light.scale), its position (None
+    for a directional light), and whether shadow rays go toward it (the settings' and its own)."""
     for light in settings.lights:
         vec, lcol = light.packed()
+        shadowed = settings.shadows and light.shadows
         if vec[3] > 0.5:
             L = np.asarray(vec[:3]) - p
             dist = np.linalg.norm(L, axis=1)
             L = L / np.maximum(dist, 1e-30)[:, None]
-            yield L, dist, np.asarray(lcol) * light.scale(L, dist)[:, None], vec[:3]
+            yield L, dist, np.asarray(lcol) * light.scale(L, dist)[:, None], vec[:3], shadowed
         else:
-            yield np.broadcast_to(-np.asarray(vec[:3]), p.shape), np.full(len(p), BIG), np.asarray(lcol), None
+            yield (np.broadcast_to(-np.asarray(vec[:3]), p.shape), np.full(len(p), BIG), np.asarray(lcol), None,
+                   shadowed)
 
 
 def _hair_transmittance(cyl, p, L, dist, own, tmin, settings, target):
@@ -50,9 +52,9 @@ def shade_mesh(cyl, tris, tri, o, d, t, n, settings):
     brdf = shading_model(settings.shading).mesh_brdf
     q = o + t[:, None] * d + n * tris.offset
     out = settings.ambient * col
-    for L, dist, lcol, target in _lights(settings, q):
+    for L, dist, lcol, target, shadowed in _lights(settings, q):
         lit = np.ones(len(q))
-        if settings.shadows:
+        if shadowed:
             lit = _hair_transmittance(cyl, q, L, dist, np.full(len(q), -1), np.zeros(len(q)), settings, target)
             lit[mesh_blocked(tris, q, L, dist, tri)] = 0.0
         nl = np.maximum(np.einsum("ij,ij->i", n, L), 0.0)
@@ -72,9 +74,9 @@ def shade(cyl, ids, surf, o, d, t, settings, tris=None):
     N = cylinder_normal(cyl, ids, surf, p, d, T) if model.needs_normal else None
     s = Surface(p=p, T=T, N=N, V=d, color=col)
     out = settings.ambient * col
-    for L, dist, lcol, target in _lights(settings, p):
+    for L, dist, lcol, target, shadowed in _lights(settings, p):
         lit = np.ones(len(p))
-        if settings.shadows:
+        if shadowed:
             lit = transmittance(cyl, p, np.ascontiguousarray(L), dist, ids, 1e-3 * cyl.radius[ids], settings, target)
             if tris is not None:
                 lit[mesh_blocked(tris, p, L, dist)] = 0.0

@@ -17,6 +17,7 @@ uniform vec3 light_col[NUM_LIGHTS];
 uniform vec4 light_axis[NUM_LIGHTS];  // spot and area: the unit axis it shines along; w: a spot's
                                       // cosine of its half angle
 uniform float light_blend[NUM_LIGHTS];   // a spot: the cosine range its edge is softened over
+uniform float light_shadow[NUM_LIGHTS];  // 1: shadow rays toward it; 0: nothing shadows it
 uniform vec4 background;              // premultiplied
 
 layout(location = 0) out vec4 frag_color;
@@ -107,8 +108,10 @@ vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
         vec3 L = light_dir(l, s.p, dist);
         float lit = 1.0;
 #if SHADOWS
-        lit = shadow_ray(s.p, L, dist, id, 1e-3 * cyl(id, CYL_TOP).w, occluder[l]);
-        if (lit <= 0.0) continue;
+        if (light_shadow[l] > 0.5) {
+            lit = shadow_ray(s.p, L, dist, id, 1e-3 * cyl(id, CYL_TOP).w, occluder[l]);
+            if (lit <= 0.0) continue;
+        }
 #endif
         result += lit * light_at(l, L, dist) * shade_light(s, L);
     }
@@ -131,13 +134,15 @@ vec3 shade_mesh(int tri, vec3 o, vec3 d, float t, vec3 N) {
         else { L = -light_vec[l].xyz; dist = BIG; }
         float lit = 1.0;
 #if SHADOWS
+        if (light_shadow[l] > 0.5) {
 #if COUNT
-        counter.x += 1.0;
+            counter.x += 1.0;
 #endif
-        if (mesh_blocked(q, L, dist, tri)) continue;
-        int hint = -1;
-        lit = accel_transmittance(q, L, dist, -1, 0.0, hint);
-        if (lit <= 0.0) continue;
+            if (mesh_blocked(q, L, dist, tri)) continue;
+            int hint = -1;
+            lit = accel_transmittance(q, L, dist, -1, 0.0, hint);
+            if (lit <= 0.0) continue;
+        }
 #endif
         result += lit * light_at(l, L, dist) * max(dot(N, L), 0.0) * (mesh_brdf * col);
     }
@@ -481,7 +486,7 @@ void main() {
     for (int l = 0; l < NUM_LIGHTS; ++l) {
         float v = 1.0;
 #if SHADOWS
-        if (lstrand[l] >= 0) {
+        if (lstrand[l] >= 0 && light_shadow[l] > 0.5) {
             float dist;
             vec3 L = light_dir(l, lp[l], dist);
             v = shadow_ray(lp[l], L, dist, lstrand[l], 1e-3 * cyl(lstrand[l], CYL_TOP).w, occluder[l]);
