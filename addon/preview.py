@@ -139,7 +139,8 @@ def scene_lights(scene, physical=False):
     (W/m²); a point light's Power P radiates P / 4 pi W/sr, a spot light's the same within its
     cone (Spot Size, Blend); an area light's P / pi along its axis, times the cosine from it
     (times its area when Normalize is off); all three falling off with the square of the
-    distance, from their centre (a point, whatever its radius or size: hard shadows).
+    distance. Their extent as Cycles samples it, so their shadows are soft: a sun's Angle, a
+    point or spot light's Radius, an area light's Shape and Size (tracer.Light).
     Else every light at intensity 1, without fall-off or cone (the thesis's constant light).
     A light whose Cast Shadow is off casts none in the preview either."""
     from tracer import Light
@@ -153,29 +154,35 @@ def scene_lights(scene, physical=False):
         power = float(data.energy) * 2.0 ** float(getattr(data, "exposure", 0.0))
         shadows = bool(data.use_shadow)
         if data.type == 'SUN':
-            lights.append(Light("directional", axis, rgb, power if physical else 1.0, shadows=shadows))
+            lights.append(Light("directional", axis, rgb, power if physical else 1.0, shadows=shadows,
+                                angle=float(data.angle) if physical else 0.0))
         elif not physical:
             lights.append(Light("point", position, rgb, 1.0, shadows=shadows))
         elif data.type == 'POINT':
-            lights.append(Light("point", position, rgb, power / (4.0 * np.pi), falloff=True, shadows=shadows))
+            lights.append(Light("point", position, rgb, power / (4.0 * np.pi), falloff=True, shadows=shadows,
+                                radius=float(data.shadow_soft_size)))
         elif data.type == 'SPOT':
             lights.append(Light("spot", position, rgb, power / (4.0 * np.pi), axis=axis, shadows=shadows,
-                                spot_size=float(data.spot_size), spot_blend=float(data.spot_blend)))
+                                spot_size=float(data.spot_size), spot_blend=float(data.spot_blend),
+                                radius=float(data.shadow_soft_size)))
         else:
+            width, height = _area_light_size(data, m)
             if not getattr(data, "normalize", True):        # Blender 5.0: Power per square metre
-                power *= _area_light_area(data, m)
-            lights.append(Light("area", position, rgb, power / np.pi, axis=axis, shadows=shadows))
+                power *= width * height * (np.pi / 4.0 if data.shape in ('DISK', 'ELLIPSE') else 1.0)
+            lights.append(Light("area", position, rgb, power / np.pi, axis=axis, shadows=shadows,
+                                size=(width, height), tangent=tuple(m[:3, 0]),
+                                shape="ellipse" if data.shape in ('DISK', 'ELLIPSE') else "rectangle"))
         if len(lights) == MAX_LIGHTS:
             break
     return tuple(lights)
 
 
-def _area_light_area(data, m):
-    """An area light's emitting area in world units (its shape's, scaled by its object's X and Y)."""
+def _area_light_size(data, m):
+    """An area light's width and height in world units: its Size (and Size Y for a rectangle
+    or an ellipse) times its object's X and Y scale."""
     x = float(data.size)
     y = float(data.size_y) if data.shape in ('RECTANGLE', 'ELLIPSE') else x
-    area = x * y * (np.pi / 4.0 if data.shape in ('DISK', 'ELLIPSE') else 1.0)
-    return area * float(np.linalg.norm(m[:3, 0]) * np.linalg.norm(m[:3, 1]))
+    return x * float(np.linalg.norm(m[:3, 0])), y * float(np.linalg.norm(m[:3, 1]))
 
 
 # Rec. 709 luminance: Blender's default scene-linear colour space.

@@ -238,6 +238,11 @@ def _set_uniforms(prog, camera, settings):
         prog["light_axis"].write(np.array([c[0] for c in cones], np.float32).tobytes())
     if "light_blend" in prog:
         prog["light_blend"].write(np.array([c[1] for c in cones], np.float32).tobytes())
+    extents = [light.extent() for light in settings.lights]
+    if "light_u" in prog:
+        prog["light_u"].write(np.array([e[0] for e in extents], np.float32).tobytes())
+    if "light_v" in prog:
+        prog["light_v"].write(np.array([e[1] for e in extents], np.float32).tobytes())
     if "light_shadow" in prog:
         prog["light_shadow"].write(np.array([float(light.shadows) for light in settings.lights], np.float32).tobytes())
     set_uniforms(prog, background=settings.premultiplied_background(),

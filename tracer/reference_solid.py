@@ -30,7 +30,7 @@ from hairio import InputError
 from . import layout
 from .cylinders import plan_cylinders
 from .ray_bundles import candidate_pairs
-from .reference import finish_pixels, pixel_samples
+from .reference import finish_pixels, light_sample, light_seeds, pixel_samples
 from .settings import RenderSettings
 from .shading import Surface, shading_model
 
@@ -203,25 +203,21 @@ def _light_through(cyl, p, L, dist, own_radius, settings, target=None):
     return lit
 
 
-def _shade(cyl, ids, surf, o, d, t, settings):
+def _shade(cyl, ids, surf, o, d, t, settings, seeds, k):
     model = shading_model(settings.shading)
     p = o + t[:, None] * d
     col = cyl.color[ids]
     n = _normals(cyl, ids, surf, p, d) if model.needs_normal else None
     s = Surface(p=p, T=cyl.u[ids], N=n, V=d, color=col)
     out = settings.ambient * col
-    for light in settings.lights:
+    for l, light in enumerate(settings.lights):
         vec, lcol = light.packed()
-        if vec[3] > 0.5:
-            L = np.asarray(vec[:3], np.float64) - p
-            dist = np.linalg.norm(L, axis=1)
-            L = L / np.maximum(dist, 1e-30)[:, None]
-        else:
-            L = np.broadcast_to(-np.asarray(vec[:3], np.float64), p.shape).copy()
-            dist = np.full(len(p), BIG)
+        # The point on the light the shader draws for this shading (its centre without extent).
+        L, dist = light.towards(p, light_sample(seeds, k, l, len(settings.lights)))
         lit = np.ones(len(p))
         if settings.shadows and light.shadows:
-            lit = _light_through(cyl, p, L, dist, cyl.radius[ids], settings, vec[:3] if vec[3] > 0.5 else None)
+            one_point = vec[3] > 0.5 and not any(np.concatenate(light.extent()))
+            lit = _light_through(cyl, p, L, dist, cyl.radius[ids], settings, vec[:3] if one_point else None)
         if vec[3] > 0.5:                # fall-off, a spot's cone, an area light's cosine
             lit = lit * light.scale(L, dist)
         out = out + lit[:, None] * np.asarray(lcol) * model.reference(s, L, settings)
@@ -239,6 +235,7 @@ def solid_render(strands, camera, settings=None, pixels=None):
     cyl = cut_cylinders(strands)
     n = settings.spp_n
     pos = pixel_samples(camera, n, pixels)
+    seeds = light_seeds(camera, n, pixels)
     o, d = camera.rays(pos[:, 0], pos[:, 1])
     C = np.zeros((len(o), 3))
     T = np.ones(len(o))
@@ -254,7 +251,7 @@ def solid_render(strands, camera, settings=None, pixels=None):
             if not len(sel):
                 break
             r_k, ids = ray[sel], cid[sel]
-            col = _shade(cyl, ids, surf[sel], o[r_k], d[r_k], t[sel], settings)
+            col = _shade(cyl, ids, surf[sel], o[r_k], d[r_k], t[sel], settings, seeds[r_k], k)
             alpha = cyl.alpha[ids]
             C[r_k] += (T[r_k] * alpha)[:, None] * col
             T[r_k] *= 1 - alpha

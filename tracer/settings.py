@@ -44,7 +44,18 @@ class Light:
     kind "area" (always the inverse-square law): a small Lambertian emitter at `vector` facing
     `axis`, intensity the radiant intensity along the axis (a Blender area light's Power / pi),
     times the cosine from the axis, none behind; lit from its centre, so its shadows are hard.
-    `shadows` False: nothing shadows this light (RenderSettings.shadows turns them all off)."""
+    `shadows` False: nothing shadows this light (RenderSettings.shadows turns them all off).
+
+    Lights with an extent are sampled, a point of them per shading point and light (drawn by a
+    fixed hash of the pixel, the sample, the layer and the light, the same in the references),
+    so their shadows are soft over the samples of a pixel and the passes of a refinement:
+    `angle` (directional): the sun's angular diameter (radians), its directions spread evenly
+    over a disk of radius tan(angle / 2) across the direction; `radius` (point and spot): a
+    sphere, sampled as the disk of that radius facing the shading point; `size` (area: width
+    along `tangent`, height across it, metres) with `shape` "rectangle" or "ellipse": the area
+    light's surface, sampled evenly, each point lighting as the whole light would from there
+    (radiant intensity × the cosine from the axis / d², an unbiased estimate of the area's
+    light). A size of 0 is the small emitter above, lit from its centre."""
     kind: str = "directional"
     vector: tuple = (0.4, 0.6, -1.0)
     color: tuple = (1.0, 1.0, 1.0)
@@ -54,6 +65,11 @@ class Light:
     spot_size: float = float(np.pi)
     spot_blend: float = 0.0
     shadows: bool = True              # False: no shadow rays toward it (Blender's Cast Shadow off)
+    angle: float = 0.0                # directional: angular diameter (radians)
+    radius: float = 0.0               # point, spot: the sphere's radius
+    size: tuple = (0.0, 0.0)          # area: width along `tangent`, height across it
+    tangent: tuple = (1.0, 0.0, 0.0)  # area: the direction of its width (across `axis`)
+    shape: str = "rectangle"          # area: "rectangle" or "ellipse"
 
     def packed(self):
         """(vec4, rgb) as the shader wants them: w = 0 for a directional light, 1 for a point
@@ -78,6 +94,55 @@ class Light:
             return (*a, -2.0), 0.0
         cos_half = float(np.cos(0.5 * self.spot_size))
         return (*a, cos_half), (1.0 - cos_half) * float(self.spot_blend)
+
+    def extent(self):
+        """(vec4, vec4) as the shader wants them (light_u, light_v): an area light's half width
+        and half height as vectors, u.w = 1 for an ellipse; v.w the sampled disk's radius of a
+        point or spot light (its sphere), or of a directional light (tan(angle / 2)); zeros for
+        a light without extent."""
+        if self.kind == "area" and max(self.size) > 0.0:
+            a = np.asarray(self.axis, np.float64)
+            a = a / np.linalg.norm(a)
+            t = np.asarray(self.tangent, np.float64)
+            t = t - a * (t @ a)
+            t = t / np.linalg.norm(t)
+            b = np.cross(a, t)
+            hw, hh = 0.5 * float(self.size[0]), 0.5 * float(self.size[1])
+            return (*(t * hw), 1.0 if self.shape == "ellipse" else 0.0), (*(b * hh), 0.0)
+        disk = 0.0
+        if self.kind == "directional":
+            disk = float(np.tan(0.5 * self.angle))
+        elif self.kind in ("point", "spot"):
+            disk = float(self.radius)
+        return (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, disk)
+
+    def towards(self, p, u):
+        """Float64, per point: the unit direction (N, 3) from each point p (N, 3) toward the
+        light's point drawn by u (N, 2) in [0, 1) (its centre without extent) and its distance
+        (BIG for a directional light): the shader's light_dir."""
+        from .reference.shapes import BIG
+        ext_u, ext_v = (np.asarray(e, np.float64) for e in self.extent())
+        vec = np.asarray(self.packed()[0], np.float64)
+        if self.kind == "directional":
+            L = np.broadcast_to(-vec[:3], p.shape).copy()
+            if ext_v[3] > 0.0:
+                t, b = _basis(L)
+                dx, dy = _concentric(u)
+                L = L + ext_v[3] * (dx[:, None] * t + dy[:, None] * b)
+                L /= np.linalg.norm(L, axis=1)[:, None]
+            return L, np.full(len(p), BIG)
+        q = np.broadcast_to(vec[:3], p.shape).copy()
+        if self.kind == "area" and np.any(ext_u[:3]):
+            sx, sy = _concentric(u) if ext_u[3] > 0.5 else (2.0 * u[:, 0] - 1.0, 2.0 * u[:, 1] - 1.0)
+            q = q + sx[:, None] * ext_u[:3] + sy[:, None] * ext_v[:3]
+        elif ext_v[3] > 0.0:
+            c = q - p
+            t, b = _basis(c / np.maximum(np.linalg.norm(c, axis=1), 1e-30)[:, None])
+            dx, dy = _concentric(u)
+            q = q + ext_v[3] * (dx[:, None] * t + dy[:, None] * b)
+        L = q - p
+        dist = np.linalg.norm(L, axis=1)
+        return L / np.maximum(dist, 1e-30)[:, None], dist
 
     def scale(self, L, dist):
         """Float64, per point: what the light's colour is multiplied by at points whose unit
@@ -120,6 +185,41 @@ class Light:
         c = np.asarray(self.color, np.float64)
         if c.shape != (3,) or not np.all(np.isfinite(c)) or not np.isfinite(self.intensity):
             raise InputError(f"light color/intensity: {self.color}, {self.intensity}; expected finite values")
+        if not (np.isfinite(self.angle) and 0.0 <= self.angle < np.pi):
+            raise InputError(f"light angle: {self.angle}; use the sun's angular diameter, 0 <= angle < pi radians")
+        if not (np.isfinite(self.radius) and self.radius >= 0.0):
+            raise InputError(f"light radius: {self.radius}; use a finite radius >= 0")
+        size = np.asarray(self.size, np.float64)
+        if size.shape != (2,) or not np.all(np.isfinite(size)) or np.any(size < 0.0):
+            raise InputError(f"light size: {self.size}; use (width, height), two finite sizes >= 0")
+        if self.shape not in ("rectangle", "ellipse"):
+            raise InputError(f"light shape: {self.shape!r}; use 'rectangle' or 'ellipse'")
+        if self.kind == "area" and np.any(size > 0.0):
+            t = np.asarray(self.tangent, np.float64)
+            a = np.asarray(self.axis, np.float64)
+            if (t.shape != (3,) or not np.all(np.isfinite(t))
+                    or np.linalg.norm(np.cross(t, a)) <= 1e-9 * np.linalg.norm(t) * np.linalg.norm(a)):
+                raise InputError(f"light tangent: {self.tangent}; an area light with a size needs the direction "
+                                 "of its width, three finite numbers across its axis")
+
+
+def _basis(n):
+    """Two unit vectors (N, 3) across the unit vectors n (N, 3), as the shader's basis()."""
+    t = np.where(np.abs(n[:, 2:3]) < 0.999, np.cross(n, [0.0, 0.0, 1.0]), np.cross(n, [1.0, 0.0, 0.0]))
+    t /= np.linalg.norm(t, axis=1)[:, None]
+    return t, np.cross(n, t)
+
+
+def _concentric(u):
+    """Shirley's concentric map of u (N, 2) in [0, 1)² onto the unit disk, as the shader's."""
+    a, b = 2.0 * u[:, 0] - 1.0, 2.0 * u[:, 1] - 1.0
+    first = np.abs(a) > np.abs(b)
+    r = np.where(first, a, b)
+    safe_a = np.where(a == 0.0, 1.0, a)
+    safe_b = np.where(b == 0.0, 1.0, b)
+    phi = np.where(first, 0.25 * np.pi * (b / safe_a), 0.5 * np.pi - 0.25 * np.pi * (a / safe_b))
+    phi = np.where((a == 0.0) & (b == 0.0), 0.0, phi)
+    return r * np.cos(phi), r * np.sin(phi)
 
 
 def pixel_list_holds(spp, layers):

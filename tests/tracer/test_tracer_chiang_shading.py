@@ -79,7 +79,7 @@ def test_reference_shade_is_the_fibre_model_times_irradiance():
     o = np.stack([x, np.full(9, -2.0), np.zeros(9)], axis=1)
     d = np.tile([0.0, 1.0, 0.0], (9, 1))
     t = 2.0 - np.sqrt(0.1 ** 2 - x ** 2)
-    got = shade(cyl, np.zeros(9, np.int64), np.zeros(9, np.int64), o, d, t, settings)
+    got = shade(cyl, np.zeros(9, np.int64), np.zeros(9, np.int64), o, d, t, settings, np.zeros(9, np.uint32), 0)
     L = -np.asarray(SUN.packed()[0][:3])
     h = -x / 0.1        # Y = X x wo = z x (0, -1, 0) = +x: h = -x / r
     want = 3.0 * hb.hair_bsdf(np.tile(L, (9, 1)), -d, np.tile([0.0, 0.0, 1.0], (9, 1)), h,

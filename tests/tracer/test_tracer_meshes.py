@@ -143,6 +143,62 @@ def test_lights_light_a_plane_by_the_radiometry_of_their_kind(meshed, name):
     assert np.all(img[..., 3][on_floor] == 1.0)
 
 
+@pytest.mark.parametrize("shape", ["rectangle", "ellipse"])
+def test_an_area_light_lights_a_plane_as_its_surface_does(meshed, shape):
+    """A large area light (as wide as it is high above the floor) against its irradiance
+    integrated over its surface here (a 120 × 120 midpoint rule): the mean over a patch of the
+    floor at 64 samples a pixel, each sample lit from a point of the light's surface. From the
+    light's centre alone the floor would be 20-30 % brighter."""
+    h, size = 0.6, (0.6, 0.4)
+    axis, tangent = np.array([0.0, 0.0, -1.0]), np.array([1.0, 0.0, 0.0])
+    light = Light("area", (0.0, 0.0, h), intensity=2.0, axis=tuple(axis), tangent=tuple(tangent), size=size,
+                  shape=shape)
+    floor = plane(0.0, 2.0)
+    cam = Camera.look_at((0.0, 0.0, 1.5), (0, 0, 0), up=(0, 1, 0), size=(24, 24), type="ORTHO", ortho_scale=0.4)
+    settings = RenderSettings(shadows=True, ambient=0.0, spp=64, lights=(light,))
+    meshed.set_strands(make_strands([[[5, 5, 5], [5, 5, 5.1]]], radius=0.01))
+    meshed.set_meshes([(*floor, GREY)])
+    img = meshed.render(cam, settings).astype(np.float64)[..., 0]
+    x, y = np.meshgrid(np.arange(24) + 0.5, np.arange(24) + 0.5)
+    o, d = cam.rays(x, y)
+    p = (o + (-o[..., 2] / d[..., 2])[..., None] * d).reshape(-1, 3)
+    p[:, 2] += layout.MESH_SHADOW_OFFSET * np.hypot(4.0, 4.0)
+    # The light's surface: radiance L = I / area, irradiance = ∫ L cos θ_light cos θ_floor / d² dA.
+    g = (np.arange(120) + 0.5) / 120 * 2 - 1
+    gu, gv = np.meshgrid(g, g)
+    inside = np.ones_like(gu, bool) if shape == "rectangle" else gu ** 2 + gv ** 2 <= 1
+    q = np.stack([gu[inside] * size[0] / 2, gv[inside] * size[1] / 2, np.full(inside.sum(), h)], axis=1)
+    area = size[0] * size[1] * (np.pi / 4 if shape == "ellipse" else 1.0)
+    dA = area / inside.sum()
+    v = q[None] - p[:, None]
+    dist2 = np.sum(v * v, axis=-1)
+    cos_floor = v[..., 2] / np.sqrt(dist2)
+    E = (2.0 / area * cos_floor * cos_floor / dist2).sum(axis=1) * dA      # cos θ_light = cos θ_floor here
+    expected = (GREY[0] / np.pi * E).reshape(24, 24)
+    assert abs(img.mean() / expected.mean() - 1.0) < 0.01, (img.mean(), expected.mean())
+    assert np.quantile(np.abs(img / expected - 1.0), 0.9) < 0.08        # 64 points of the light a pixel
+    centre_only = GREY[0] / np.pi * 2.0 / h ** 2
+    assert centre_only > 1.15 * expected.mean()
+
+
+def test_a_sun_with_an_angle_casts_a_soft_shadow(meshed):
+    strand = make_strands([[[-0.5, 0, 0.3], [0.5, 0, 0.3]]], radius=0.01)
+    floor = plane(0.0, 1.0)
+    cam = Camera.look_at((0, 0.0, 2.0), (0, 0, 0), up=(0, 1, 0), size=(32, 32), type="ORTHO", ortho_scale=0.4)
+    sun = Light(vector=(0.0, 0.0, -1.0))
+    levels = {}
+    for angle in (0.0, np.radians(10.0)):
+        settings = RenderSettings(shadows=True, spp=64, lights=(dataclasses.replace(sun, angle=angle),))
+        img, _ = _matches_reference(meshed, strand, [(*floor, GREY)], cam, settings)
+        floor_px = img[..., 3] == 1.0
+        shadow, lit = GREY[0] * settings.ambient, GREY[0] * (settings.ambient + 1.0 / np.pi)
+        col = img[..., 0][floor_px & (np.abs(img[..., 0] - img[..., 2]) < 1e-6)]
+        levels[angle] = ((col > shadow + 0.02) & (col < lit - 0.02)).sum()
+    # A 0.02-wide strand 0.3 above the floor under a sun 10° wide: a penumbra 0.05 wide each side
+    # of an umbra nearly gone; under a point-like sun, only the strand's edge pixels mix.
+    assert levels[np.radians(10.0)] > 3 * max(levels[0.0], 1), levels
+
+
 def test_a_directional_light_cannot_fall_off():
     with pytest.raises(InputError, match="falloff"):
         RenderSettings(lights=(Light("directional", (0, 0, -1), falloff=True),)).check()

@@ -67,9 +67,9 @@ def _tuft_camera(size=72):
 
 # Opaque hair takes one layer, each sample its own nearest hit; see-through hair the list of
 # distinct cylinders, which holds enough for 9 samples of 2 layers in one walk.
-# Lights that fall off with distance light each strand by its own distance; a spot's edge
-# crosses the tuft, and nothing shadows the spot.
-NEAR_LIGHT = (Light("point", (0.6, -1.2, 1.2), intensity=2.0, falloff=True),
+# Lights that fall off with distance light each strand by its own distance; the point light is
+# a sphere (soft shadows); a spot's edge crosses the tuft, and nothing shadows the spot.
+NEAR_LIGHT = (Light("point", (0.6, -1.2, 1.2), intensity=2.0, falloff=True, radius=0.3),
               Light("spot", (-0.4, -1.0, 1.4), intensity=2.0, axis=(0.3, 1.0, -0.7), spot_size=0.5, spot_blend=0.3,
                     shadows=False))
 

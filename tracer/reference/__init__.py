@@ -15,27 +15,25 @@ from ..cylinders import strands_to_cylinders
 from ..meshes import mesh_set
 from ..settings import RenderSettings
 from ..shading import Surface, shading_model
-from .samples import finish_pixels, pixel_samples, sample_positions  # noqa: F401  (the API)
+from .samples import finish_pixels, light_sample, light_seeds, pixel_samples, sample_positions  # noqa: F401  (the API)
 from .shapes import BIG, CylinderSet, cylinder_normal, intersect
 from .traversal import candidates, transmittance
 from .triangles import TriangleSet, mesh_blocked, mesh_nearest
 
 
-def _lights(settings, p):
-    """Per light: unit directions toward it from every point p, distances, its colour (per
-    point, (N, 3), for a light that falls off with distance: Light.scale), its position (None
-    for a directional light), and whether shadow rays go toward it (the settings' and its own)."""
-    for light in settings.lights:
+def _lights(settings, p, seeds, k):
+    """Per light: unit directions from every point p toward its point drawn for the pixel's
+    k-th shading (the shader's light_sample: `seeds` per point, Light.towards), distances, its
+    colour (per point, (N, 3), for a light that falls off with distance: Light.scale), the
+    point every shadow ray heads for (a light without extent; None: a directional light or
+    points of their own), and whether shadow rays go toward it (the settings' and its own)."""
+    for l, light in enumerate(settings.lights):
+        u = light_sample(seeds, k, l, len(settings.lights))
+        L, dist = light.towards(p, u)
         vec, lcol = light.packed()
         shadowed = settings.shadows and light.shadows
-        if vec[3] > 0.5:
-            L = np.asarray(vec[:3]) - p
-            dist = np.linalg.norm(L, axis=1)
-            L = L / np.maximum(dist, 1e-30)[:, None]
-            yield L, dist, np.asarray(lcol) * light.scale(L, dist)[:, None], vec[:3], shadowed
-        else:
-            yield (np.broadcast_to(-np.asarray(vec[:3]), p.shape), np.full(len(p), BIG), np.asarray(lcol), None,
-                   shadowed)
+        one_point = vec[3] > 0.5 and not any(np.concatenate(light.extent()))
+        yield L, dist, np.asarray(lcol) * light.scale(L, dist)[:, None], vec[:3] if one_point else None, shadowed
 
 
 def _hair_transmittance(cyl, p, L, dist, own, tmin, settings, target):
@@ -44,7 +42,10 @@ def _hair_transmittance(cyl, p, L, dist, own, tmin, settings, target):
     return transmittance(cyl, p, np.ascontiguousarray(L), dist, own, tmin, settings, target)
 
 
-def shade_mesh(cyl, tris, tri, o, d, t, n, settings):
+MESH_SHADING = 255      # trace_main.glsl's index of the mesh's shading for light_sample
+
+
+def shade_mesh(cyl, tris, tri, o, d, t, n, settings, seeds):
     """The shader's shade_mesh: base colour times ambient plus every light's colour times
     max(N·L, 0) times the model's mesh_brdf (tracer/shading), in the shadow of hair and meshes (shadow rays leave tris.offset off the
     surface and ignore the triangle they leave)."""
@@ -52,7 +53,7 @@ def shade_mesh(cyl, tris, tri, o, d, t, n, settings):
     brdf = shading_model(settings.shading).mesh_brdf
     q = o + t[:, None] * d + n * tris.offset
     out = settings.ambient * col
-    for L, dist, lcol, target, shadowed in _lights(settings, q):
+    for L, dist, lcol, target, shadowed in _lights(settings, q, seeds, MESH_SHADING):
         lit = np.ones(len(q))
         if shadowed:
             lit = _hair_transmittance(cyl, q, L, dist, np.full(len(q), -1), np.zeros(len(q)), settings, target)
@@ -62,7 +63,7 @@ def shade_mesh(cyl, tris, tri, o, d, t, n, settings):
     return out
 
 
-def shade(cyl, ids, surf, o, d, t, settings, tris=None):
+def shade(cyl, ids, surf, o, d, t, settings, seeds, k, tris=None):
     """The shader's shade: ambient plus every light's shade_light of the settings' model,
     each light's part times its transmittance (0 behind a mesh of `tris`)."""
     model = shading_model(settings.shading)
@@ -74,7 +75,7 @@ def shade(cyl, ids, surf, o, d, t, settings, tris=None):
     N = cylinder_normal(cyl, ids, surf, p, d, T) if model.needs_normal else None
     s = Surface(p=p, T=T, N=N, V=d, color=col)
     out = settings.ambient * col
-    for L, dist, lcol, target, shadowed in _lights(settings, p):
+    for L, dist, lcol, target, shadowed in _lights(settings, p, seeds, k):
         lit = np.ones(len(p))
         if shadowed:
             lit = transmittance(cyl, p, np.ascontiguousarray(L), dist, ids, 1e-3 * cyl.radius[ids], settings, target)
@@ -96,6 +97,7 @@ def reference_render(strands, camera, settings=None, cylinders=None, pixels=None
     w, h = camera.size
     n = settings.spp_n
     pos = pixel_samples(camera, n, pixels)
+    seeds = light_seeds(camera, n, pixels)
     o, d = camera.rays(pos[:, 0], pos[:, 1])
     nray = len(o)
     C = np.zeros((nray, 3))
@@ -132,13 +134,14 @@ def reference_render(strands, camera, settings=None, cylinders=None, pixels=None
             if not len(r_k):
                 break
             ids, s_k, t_k, a_k = cc[sel][live], surf[sel][live], t[sel][live], asc[sel][live]
-            col = shade(cyl, ids, s_k, o[r_k], d[r_k], t_k, settings, tris)
+            col = shade(cyl, ids, s_k, o[r_k], d[r_k], t_k, settings, seeds[r_k], k, tris)
             alpha = cyl.alpha[ids] * a_k
             C[r_k] += (T[r_k] * alpha)[:, None] * col
             T[r_k] *= 1 - alpha
     if tris is not None:        # opaque: what is left of each ray ends on the mesh
         r_m = np.flatnonzero(mtri >= 0)
-        C[r_m] += T[r_m, None] * shade_mesh(cyl, tris, mtri[r_m], o[r_m], d[r_m], tmesh[r_m], mnormal[r_m], settings)
+        C[r_m] += T[r_m, None] * shade_mesh(cyl, tris, mtri[r_m], o[r_m], d[r_m], tmesh[r_m], mnormal[r_m], settings,
+                                            seeds[r_m])
         T[r_m] = 0.0
     bg = np.asarray(settings.premultiplied_background(), np.float64)
     rgba = np.concatenate([C + T[:, None] * bg[:3], (1 - T + T * bg[3])[:, None]], axis=1)

@@ -51,3 +51,25 @@ def finish_pixels(rgba, camera, spp_n, pixels=None):
     w, h = camera.size
     shape = (h, w) if pixels is None else (len(pixels),)
     return rgba.reshape(shape + (spp_n * spp_n, 4)).mean(axis=-2)
+
+
+def light_seeds(camera, spp_n, pixels=None):
+    """Per sample (in pixel_samples' order) the shader's light_seed: the hash of (sample,
+    row, column, 0x27d4eb2d) its points on lights are drawn from (trace_main.glsl's main)."""
+    w, h = camera.size
+    py, px, s = np.meshgrid(np.arange(h), np.arange(w), np.arange(spp_n * spp_n), indexing="ij")
+    gx = (px + int(camera.pixel_origin[0])).astype(np.uint32)
+    gy = (py + int(camera.pixel_origin[1])).astype(np.uint32)
+    seeds = _hash32(_hash32(_hash32(s.astype(np.uint32) ^ np.uint32(0x27D4EB2D)) ^ gy) ^ gx)
+    if pixels is None:
+        return seeds.reshape(-1)
+    px_ = np.asarray(pixels, np.int64)
+    return seeds[px_[:, 1], px_[:, 0]].reshape(-1)
+
+
+def light_sample(seeds, k, l, num_lights):
+    """(N, 2): the shader's light_sample(k, l) for each sample's seed."""
+    h = _hash32(seeds ^ np.uint32(k * num_lights + l + 1))
+    u0 = (h >> np.uint32(8)).astype(np.float64) / 16777216.0
+    u1 = (_hash32(h ^ np.uint32(0x68BC21EB)) >> np.uint32(8)).astype(np.float64) / 16777216.0
+    return np.stack([u0, u1], axis=1)

@@ -18,6 +18,9 @@ uniform vec4 light_axis[NUM_LIGHTS];  // spot and area: the unit axis it shines 
                                       // cosine of its half angle
 uniform float light_blend[NUM_LIGHTS];   // a spot: the cosine range its edge is softened over
 uniform float light_shadow[NUM_LIGHTS];  // 1: shadow rays toward it; 0: nothing shadows it
+uniform vec4 light_u[NUM_LIGHTS];     // an area light's half width (w = 1: an ellipse)
+uniform vec4 light_v[NUM_LIGHTS];     // its half height; w: the sampled disk's radius of a point or
+                                      // spot light (its sphere) or a sun (tan of half its angle)
 uniform vec4 background;              // premultiplied
 
 layout(location = 0) out vec4 frag_color;
@@ -30,6 +33,19 @@ uint hash32(uint x) {
     x ^= x >> 16; x *= 0x7feb352du;
     x ^= x >> 15; x *= 0x846ca68bu;
     x ^= x >> 16; return x;
+}
+
+// A number in [0, 1) from a hash's top 24 bits.
+float unit_of(uint h) {
+    return float(h >> 8u) * (1.0 / 16777216.0);
+}
+
+// The seed of this sample's (or this pixel sampler walk's) points on lights with an extent,
+// set by main; light_sample(k, l): the two numbers for light l at the pixel's k-th shading.
+uint light_seed;
+vec2 light_sample(int k, int l) {
+    uint h = hash32(light_seed ^ uint(k * NUM_LIGHTS + l + 1));
+    return vec2(unit_of(h), unit_of(hash32(h ^ 0x68bc21ebu)));
 }
 
 #if SHADOWS
@@ -76,12 +92,46 @@ Surface surface_at(int id, int surf, vec3 o, vec3 d, float t) {
     return s;
 }
 
-// Light l's direction from p, and how far it is (BIG: directional).
-vec3 light_dir(int l, vec3 p, out float dist) {
-    vec3 L;
-    if (light_vec[l].w > 0.5) { L = light_vec[l].xyz - p; dist = length(L); L /= max(dist, 1e-30); }
-    else { L = -light_vec[l].xyz; dist = BIG; }
-    return L;
+// Two unit vectors across unit n (tracer.settings._basis).
+void basis(vec3 n, out vec3 t, out vec3 b) {
+    t = normalize(abs(n.z) < 0.999 ? cross(n, vec3(0.0, 0.0, 1.0)) : cross(n, vec3(1.0, 0.0, 0.0)));
+    b = cross(n, t);
+}
+
+// Shirley's concentric map of u in [0, 1)² onto the unit disk (tracer.settings._concentric).
+vec2 concentric(vec2 u) {
+    vec2 a = 2.0 * u - 1.0;
+    if (a.x == 0.0 && a.y == 0.0) return vec2(0.0);
+    bool first = abs(a.x) > abs(a.y);
+    float r = first ? a.x : a.y;
+    float phi = first ? 0.7853981633974483 * (a.y / a.x) : 1.5707963267948966 - 0.7853981633974483 * (a.x / a.y);
+    return r * vec2(cos(phi), sin(phi));
+}
+
+// Light l's direction from p toward its point drawn by u (its centre without an extent:
+// tracer.settings.Light.towards), and how far it is (BIG: directional).
+vec3 light_dir(int l, vec3 p, vec2 u, out float dist) {
+    vec4 lv = light_vec[l];
+    float disk = light_v[l].w;
+    vec3 t, b;
+    if (lv.w < 0.5) {
+        vec3 L = -lv.xyz;
+        dist = BIG;
+        if (disk > 0.0) { basis(L, t, b); vec2 c = disk * concentric(u); L = normalize(L + c.x * t + c.y * b); }
+        return L;
+    }
+    vec3 q = lv.xyz;
+    if (lv.w > 3.5 && (light_u[l].x != 0.0 || light_u[l].y != 0.0 || light_u[l].z != 0.0)) {
+        vec2 c = light_u[l].w > 0.5 ? concentric(u) : 2.0 * u - 1.0;
+        q += c.x * light_u[l].xyz + c.y * light_v[l].xyz;
+    } else if (disk > 0.0) {
+        basis(normalize(q - p), t, b);
+        vec2 c = disk * concentric(u);
+        q += c.x * t + c.y * b;
+    }
+    vec3 L = q - p;
+    dist = length(L);
+    return L / max(dist, 1e-30);
 }
 
 // Light l's colour times its intensity toward a point that sees it along L at distance dist:
@@ -100,12 +150,13 @@ vec3 light_at(int l, vec3 L, float dist) {
     return light_col[l] * f;
 }
 
-vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
+// `k`: which shading of the pixel's sample this is (its layer), for the points on lights.
+vec3 shade(int id, int surf, vec3 o, vec3 d, float t, int k) {
     Surface s = surface_at(id, surf, o, d, t);
     vec3 result = material.x * s.color;
     for (int l = 0; l < NUM_LIGHTS; ++l) {
         float dist;
-        vec3 L = light_dir(l, s.p, dist);
+        vec3 L = light_dir(l, s.p, light_sample(k, l), dist);
         float lit = 1.0;
 #if SHADOWS
         if (light_shadow[l] > 0.5) {
@@ -124,14 +175,14 @@ vec3 shade(int id, int surf, vec3 o, vec3 d, float t) {
 // are irradiance: tracer/shading), in the shadow of hair and meshes. Shadow rays
 // leave mesh_offset off the surface, ignoring the triangle they leave.
 uniform float mesh_brdf;
+const int MESH_SHADING = 255;   // the mesh's shading index for light_sample
 vec3 shade_mesh(int tri, vec3 o, vec3 d, float t, vec3 N) {
     vec3 col = triangle_color(tri);
     vec3 q = o + t * d + N * mesh_offset;
     vec3 result = material.x * col;
     for (int l = 0; l < NUM_LIGHTS; ++l) {
-        vec3 L; float dist;
-        if (light_vec[l].w > 0.5) { L = light_vec[l].xyz - q; dist = length(L); L /= max(dist, 1e-30); }
-        else { L = -light_vec[l].xyz; dist = BIG; }
+        float dist;
+        vec3 L = light_dir(l, q, light_sample(MESH_SHADING, l), dist);
         float lit = 1.0;
 #if SHADOWS
         if (light_shadow[l] > 0.5) {
@@ -177,7 +228,7 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
         // to memory for the whole traversal).
         float et = 0.0, ea = 0.0; int eid = 0, es = 0;
         for (int j = 0; j < LAYERS; ++j) if (j == i) { et = ht[j]; ea = ha[j]; eid = hid[j]; es = hs[j]; }
-        C += T * ea * shade(eid, es, o, d, et);
+        C += T * ea * shade(eid, es, o, d, et, i);
         T *= 1.0 - ea;
 #if COUNT
         counter.y += 1.0;
@@ -255,11 +306,6 @@ uint pixel_hash(int px, int py, uint seed) {
     return hash32(hash32(hash32(uint(sample_index) ^ seed) ^ uint(py)) ^ uint(px));
 }
 
-// A number in [0, 1) from a hash's top 24 bits.
-float unit_of(uint h) {
-    return float(h >> 8u) * (1.0 / 16777216.0);
-}
-
 // The offset of a sample drawn evenly, by u in [0, 1), among those of `mask` (bit s: sample
 // s): where a strand is shaded. A sample's ray meets a strand at an offset h across it spread
 // evenly over its width, so the drawn sample's is too; the middle of several samples' rays
@@ -288,6 +334,7 @@ vec2 sample_among(uint mask, float u) {
 // rays, as before, lit the pixel too much where the strands behind lie in its shadow.) Per
 // light: the sum so far, its luminance, and the point and strand drawn.
 vec3 lit[NUM_LIGHTS]; float lsum[NUM_LIGHTS]; vec3 lp[NUM_LIGHTS]; int lstrand[NUM_LIGHTS];
+vec2 lu[NUM_LIGHTS];          // the drawn strand's point on the light
 uint draw;
 
 // Cylinder `eid` (distance `et` along the central ray o + t·d) of weight w, shaded on the ray
@@ -305,13 +352,15 @@ vec3 shade_one(int eid, float et, float w, int k, float u, vec3 o, vec3 d) {
     Surface S = surface_at(eid, exact ? surf : 0, so, sd, exact ? th : et);
     for (int l = 0; l < NUM_LIGHTS; ++l) {
         float dist;
-        vec3 L = light_dir(l, S.p, dist);
+        vec2 u2 = light_sample(k, l);
+        vec3 L = light_dir(l, S.p, u2, dist);
         vec3 cl = w * light_at(l, L, dist) * shade_light(S, L);
         float y = dot(cl, vec3(0.2126, 0.7152, 0.0722));
         lsum[l] += y;
         draw = hash32(draw ^ uint(NUM_LIGHTS * k + l + 1));
         bool take = y > 0.0 && unit_of(draw) * lsum[l] < y;
         lp[l] = take ? S.p : lp[l];
+        lu[l] = take ? u2 : lu[l];
         lstrand[l] = take ? eid : lstrand[l];
         lit[l] += cl;
     }
@@ -321,13 +370,13 @@ vec3 shade_one(int eid, float et, float w, int k, float u, vec3 o, vec3 d) {
 // List entry `eid` (distance `et` along the central ray o + t·d) shaded on the ray of the
 // sample at `mi` (one it covers, sample_among), which meets the strand but for the linear
 // test's rounding; where the exact test disagrees, the side at the representative distance.
-vec3 shade_entry(int eid, vec2 mi, float et, vec3 o, vec3 d) {
+vec3 shade_entry(int eid, vec2 mi, float et, vec3 o, vec3 d, int k) {
     vec3 so, sd;
     sample_ray(o, d, mi, so, sd);
     int surf; float asc, alpha;
     float th = hit_cylinder(eid, so, sd, 0.0, 0.0, surf, asc, alpha);
     bool exact = th > 0.0;
-    return shade(eid, exact ? surf : 0, so, sd, exact ? th : et);
+    return shade(eid, exact ? surf : 0, so, sd, exact ? th : et, k);
 }
 #endif
 
@@ -335,6 +384,7 @@ void main() {
     int px = int(gl_FragCoord.x) + pixel_origin.x;
     int py = int(image_size.y) - 1 - int(gl_FragCoord.y) + pixel_origin.y;   // row 0 = top
     for (int s = 0; s < PN; ++s) px_off[s] = sample_jitter(sample_index * PN + s, px, py) - 0.5;
+    light_seed = pixel_hash(px, py, 0x27d4eb2du);
     vec3 o, d; float len;
     camera_ray(float(px) + 0.5, float(py) + 0.5, o, d, len);
     px_du = cam_rot[0] * (pixel_size / len);
@@ -417,7 +467,9 @@ void main() {
     }
 #if LAYERS == 1
     nshade = min(nshade, PIX_SHADE_ONE);
-    for (int l = 0; l < NUM_LIGHTS; ++l) { lit[l] = vec3(0.0); lsum[l] = 0.0; lp[l] = vec3(0.0); lstrand[l] = -1; }
+    for (int l = 0; l < NUM_LIGHTS; ++l) {
+        lit[l] = vec3(0.0); lsum[l] = 0.0; lp[l] = vec3(0.0); lstrand[l] = -1; lu[l] = vec2(0.5);
+    }
     draw = pixel_hash(px, py, 0x85ebca6bu);
 #else
     nshade = min(nshade, PIX_SHADE);
@@ -445,7 +497,7 @@ void main() {
 #if LAYERS == 1
         C += shade_one(eid, et, wi, i, u, o, d);
 #else
-        C += wi * shade_entry(eid, sample_among(mm, u), et, o, d);
+        C += wi * shade_entry(eid, sample_among(mm, u), et, o, d, i);
 #endif
 #if COUNT
         counter.y += 1.0;
@@ -472,7 +524,7 @@ void main() {
         if (eid >= 0) {
             float us = unit_of(hash32(where ^ 0x3c6ef372u));
 #if LAYERS > 1
-            C += wrest * shade_entry(eid, sample_among(mm, us), et, o, d);
+            C += wrest * shade_entry(eid, sample_among(mm, us), et, o, d, PIX_SHADE);
 #else
             C += shade_one(eid, et, wrest, PIX_SHADE_ONE, us, o, d);
 #endif
@@ -488,7 +540,7 @@ void main() {
 #if SHADOWS
         if (lstrand[l] >= 0 && light_shadow[l] > 0.5) {
             float dist;
-            vec3 L = light_dir(l, lp[l], dist);
+            vec3 L = light_dir(l, lp[l], lu[l], dist);
             v = shadow_ray(lp[l], L, dist, lstrand[l], 1e-3 * cyl(lstrand[l], CYL_TOP).w, occluder[l]);
         }
 #endif
@@ -534,6 +586,7 @@ void main() {
     int px = int(gl_FragCoord.x) + pixel_origin.x;
     int py = int(image_size.y) - 1 - int(gl_FragCoord.y) + pixel_origin.y;   // row 0 = top
     vec2 jit = sample_jitter(sample_index, px, py);
+    light_seed = hash32(hash32(hash32(uint(sample_index) ^ 0x27d4eb2du) ^ uint(py)) ^ uint(px));
     vec3 o, d; float len;
     camera_ray(float(px) + jit.x, float(py) + jit.y, o, d, len);
     float widen_per_t = 0.0, widen_const = 0.0;
