@@ -155,7 +155,7 @@ def scene_lights(scene, physical=False):
         shadows = bool(data.use_shadow)
         if data.type == 'SUN':
             lights.append(Light("directional", axis, rgb, power if physical else 1.0, shadows=shadows,
-                                angle=float(data.angle) if physical else 0.0))
+                                angle=min(float(data.angle), SUN_ANGLE_MAX) if physical else 0.0))
         elif not physical:
             lights.append(Light("point", position, rgb, 1.0, shadows=shadows))
         elif data.type == 'POINT':
@@ -175,6 +175,11 @@ def scene_lights(scene, physical=False):
         if len(lights) == MAX_LIGHTS:
             break
     return tuple(lights)
+
+
+# The widest sun the preview samples: Blender takes up to 180°, where the disk of directions
+# (radius tan(angle / 2)) is infinite.
+SUN_ANGLE_MAX = float(np.radians(179.0))
 
 
 def _area_light_size(data, m):

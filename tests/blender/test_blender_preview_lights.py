@@ -42,6 +42,7 @@ def _light(kind, energy, location=(0.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0), sce
 
 
 def test_lights_reach_the_preview_at_their_power_for_the_physical_shading_only(clean):
+    from tracer import RenderSettings
     preview = ext_module(clean, "preview")
     scene = bpy.context.scene
     sun = _light('SUN', 4.0, rotation=(0.3, 0.0, 0.0))
@@ -59,6 +60,11 @@ def test_lights_reach_the_preview_at_their_power_for_the_physical_shading_only(c
     for physical_or_not in (True, False):
         by_kind = {light.kind: light for light in preview.scene_lights(scene, physical=physical_or_not)}
         assert not by_kind["point"].shadows and by_kind["directional"].shadows
+    sun.data.angle = math.pi                # Blender's widest sun: sampled as 179°
+    widest = next(light for light in preview.scene_lights(scene, physical=True) if light.kind == "directional")
+    widest_settings = RenderSettings(lights=(widest,))
+    widest_settings.check()
+    assert widest.angle == pytest.approx(math.radians(179.0))
     if hasattr(lamp.data, "exposure"):       # Blender 5.0: Power × 2^Exposure
         lamp.data.exposure, sun.data.exposure = 1.0, -1.0
         lights = {light.kind: light for light in preview.scene_lights(scene, physical=True)}
