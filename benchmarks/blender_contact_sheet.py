@@ -54,6 +54,27 @@ def _node_material(name, kind, rgb, strength=1.0):
     return mat
 
 
+def _studio_lights(sc, studio):
+    """The scene's sun removed, the `studio` lights (render_contact) added in its place."""
+    import mathutils
+    bpy = _bpy()
+    for obj in [o for o in sc.objects if o.type == 'LIGHT']:
+        bpy.data.objects.remove(obj)
+    for i, (kind, power, location, target, extent) in enumerate(studio):
+        data = bpy.data.lights.new(f"{kind.title()} {i}", kind)
+        data.energy = float(power)
+        if kind == 'AREA':
+            data.shape, data.size = 'SQUARE', float(extent)
+        else:
+            data.shadow_soft_size = float(extent)
+        obj = bpy.data.objects.new(data.name, data)
+        sc.collection.objects.link(obj)
+        obj.location = tuple(float(x) for x in location)
+        aim = mathutils.Vector(tuple(float(x) for x in target)) - obj.location
+        obj.rotation_euler = aim.to_track_quat('-Z', 'Y').to_euler()
+    bpy.context.view_layer.update()
+
+
 def _render(sc, samples, seed, transparent):
     """(H, W, 4) float64 RGBA, row 0 at the top, and the render's wall time."""
     sc.cycles.samples = int(samples)
@@ -64,10 +85,14 @@ def _render(sc, samples, seed, transparent):
 
 def render_contact(strands, head_vertices, head_triangles, head_rgb, camera_matrix, size, sun_direction,
                    sun_strength, hair, samples, mask_samples=64, seeds=(1,), mask_seeds=(1,), lens=50.0,
-                   sensor_width=36.0, world=0.0):
+                   sensor_width=36.0, world=0.0, studio=None):
     """Cycles' images of the strands (the Principled Hair `hair`: a dict as
     blender_hair_shading._material takes) and the head (a diffuse mesh of `head_rgb`);
-    `world`: the radiance of a grey world lighting them beside the sun (0: black, no light).
+    `world`: the radiance of a grey world lighting them beside the sun (0: black, no light);
+    `studio`: lights in place of the sun, (kind, power, location, target, extent) each: a
+    Blender light of that type and power at `location` pointing at `target`, extent its Size
+    (AREA) or Radius (POINT, SPOT). Then out["lights"] and out["ambient"] are what the add-on
+    makes of the scene for the preview (addon/preview.py: scene_lights, world_ambient).
 
     Returns a dict: rgb, a list of (H, W, 3) linear RGB renders, one per seed (on a black
     film); seconds, their render times; hair, (H, W) the fraction of each pixel the hair
@@ -87,8 +112,13 @@ def render_contact(strands, head_vertices, head_triangles, head_rgb, camera_matr
         bg = sc.world.node_tree.nodes["Background"]
         bg.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
         bg.inputs["Strength"].default_value = float(world)
-
     out = {"rgb": [], "seconds": []}
+    if studio is not None:
+        _studio_lights(sc, studio)
+        from addon import preview
+        out["lights"] = preview.scene_lights(sc, physical=True)
+        out["ambient"] = preview.world_ambient(sc)[0]
+
     for seed in seeds:
         img, seconds = _render(sc, samples, seed, transparent=False)
         out["rgb"].append(img[..., :3])

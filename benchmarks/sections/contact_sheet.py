@@ -17,7 +17,9 @@ black world: 0 (addon/preview.py, world_ambient: with the scene's lights and thi
 world's radiance is the ambient term). The last table measures that rule on the first
 preset: Cycles under a black world and under Blender's default world (grey, radiance
 DEFAULT_WORLD) beside the sun, the preview with the world's ambient and with the fixed 0.08
-the add-on gave every scene before.
+the add-on gave every scene before; and, in place of the sun, an artist's lights under that
+world (studio_lights: a key area light and a fill sphere light, their shadows soft), which
+the preview takes as Render Preview does, read from Cycles' own scene by the add-on.
 
 Error (benchmarks/region_error.py): over the hair pixels (where Cycles' hair covers at least
 half the pixel) and over the head pixels (where Cycles' head covers at least half), in
@@ -55,6 +57,21 @@ REFINED_SPP = 16                           # the preview's refined image (strati
 MASK_SAMPLES = 64                          # Cycles' coverage render
 CHECK_SPP = 64                             # the first preset's convergence check
 DEFAULT_WORLD = 0.0508                     # the radiance of Blender's default world (grey, strength 1)
+KEY_SIZE, FILL_RADIUS = 0.5, 0.1           # the studio lights' area light (square) and sphere light
+
+
+def studio_lights(head_vertices):
+    """A key area light from the front left and above and a fill sphere light from the right,
+    three head sizes away, aimed at the head's centre, each giving it about the sun's
+    irradiance (key) and a third of it (fill): (kind, power, location, target, extent) as
+    blender_contact_sheet.render_contact takes them."""
+    lo, hi = head_vertices.min(axis=0), head_vertices.max(axis=0)
+    centre, reach = 0.5 * (lo + hi), 1.5 * float(np.linalg.norm(hi - lo))
+    key = centre + reach * np.array([-0.5, -1.0, 0.8]) / np.linalg.norm([-0.5, -1.0, 0.8])
+    fill = centre + reach * np.array([0.9, -0.5, 0.1]) / np.linalg.norm([0.9, -0.5, 0.1])
+    # Area light: E = (P / pi) / d² on its axis; sphere light: E = P / (4 pi d²).
+    return [("AREA", SUN_STRENGTH * np.pi * reach ** 2, key, centre, KEY_SIZE),
+            ("POINT", SUN_STRENGTH / 3 * 4 * np.pi * reach ** 2, fill, centre, FILL_RADIUS)]
 
 
 def hair_material(settings):
@@ -213,6 +230,19 @@ def run(sec, cfg):
             conv_rows.append(["black" if world == 0 else f"grey, radiance {world:g} (Blender's default world)",
                               label, _cell(e["hair"]), _cell(e["head"])])
             numbers["world"][f"world {world:g}, ambient {ambient:g}"] = _numbers(e)
+        # An artist's lights: Blender's default world, a key area light and a fill sphere light,
+        # both read by the add-on for the preview (addon/preview.py) as Render Preview does.
+        for world in (0.0, DEFAULT_WORLD):
+            cyc_l = render_contact(strands, head.vertices, head.triangles, HEAD_RGB, matrix, size, SUN,
+                                   SUN_STRENGTH, hair, cycles_samples, mask_seeds=(), world=world,
+                                   studio=studio_lights(head.vertices))
+            studio = dataclasses.replace(refined, lights=cyc_l["lights"], ambient=cyc_l["ambient"])
+            e = compare(renderer.render(camera, studio), cover_refined, cyc_l["rgb"][0], ref_hair, ref_cover)
+            conv_rows.append([("black" if world == 0 else f"grey, radiance {world:g}") + f", a key area light "
+                              f"({KEY_SIZE:g} m square) and a fill sphere light ({FILL_RADIUS:g} m) in place of "
+                              "the sun", f"{cyc_l['ambient']:g}, the world's; the lights as the add-on reads them",
+                              _cell(e["hair"]), _cell(e["head"])])
+            numbers["world"][f"world {world:g}, studio lights"] = _numbers(e)
         conv_name = name
     elif kept is not None:
         sec.not_measured("Cycles' own noise, the convergence check and the world's light",
