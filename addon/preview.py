@@ -144,7 +144,7 @@ def scene_lights(scene, physical=False):
     Else every light at intensity 1, without fall-off or cone (the thesis's constant light).
     A light whose Cast Shadow is off casts none in the preview either."""
     from tracer import Light
-    from tracer.settings import MAX_LIGHTS
+    from tracer.settings import MAX_LIGHTS, blender_light
     lights = []
     for obj in scene.objects:
         if obj.type != 'LIGHT' or obj.hide_render or obj.data.type not in ('SUN', 'POINT', 'SPOT', 'AREA'):
@@ -153,25 +153,25 @@ def scene_lights(scene, physical=False):
         position, axis, rgb = tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(data.color)   # lights shine along -Z
         power = float(data.energy) * 2.0 ** float(getattr(data, "exposure", 0.0))
         shadows = bool(data.use_shadow)
-        if data.type == 'SUN':
-            lights.append(Light("directional", axis, rgb, power if physical else 1.0, shadows=shadows,
-                                angle=min(float(data.angle), SUN_ANGLE_MAX) if physical else 0.0))
-        elif not physical:
-            lights.append(Light("point", position, rgb, 1.0, shadows=shadows))
-        elif data.type == 'POINT':
-            lights.append(Light("point", position, rgb, power / (4.0 * np.pi), falloff=True, shadows=shadows,
-                                radius=float(data.shadow_soft_size)))
-        elif data.type == 'SPOT':
-            lights.append(Light("spot", position, rgb, power / (4.0 * np.pi), axis=axis, shadows=shadows,
-                                spot_size=float(data.spot_size), spot_blend=float(data.spot_blend),
-                                radius=float(data.shadow_soft_size)))
+        if not physical:
+            lights.append(Light("directional", axis, rgb, 1.0, shadows=shadows) if data.type == 'SUN'
+                          else Light("point", position, rgb, 1.0, shadows=shadows))
+        elif data.type == 'SUN':
+            lights.append(blender_light('SUN', power, axis, rgb, shadows=shadows,
+                                        angle=min(float(data.angle), SUN_ANGLE_MAX)))
+        elif data.type in ('POINT', 'SPOT'):
+            lights.append(blender_light(data.type, power, position, rgb, axis=axis, shadows=shadows,
+                                        radius=float(data.shadow_soft_size),
+                                        spot_size=float(getattr(data, "spot_size", np.pi)),
+                                        spot_blend=float(getattr(data, "spot_blend", 0.0))))
         else:
             width, height = _area_light_size(data, m)
+            ellipse = data.shape in ('DISK', 'ELLIPSE')
             if not getattr(data, "normalize", True):        # Blender 5.0: Power per square metre
-                power *= width * height * (np.pi / 4.0 if data.shape in ('DISK', 'ELLIPSE') else 1.0)
-            lights.append(Light("area", position, rgb, power / np.pi, axis=axis, shadows=shadows,
-                                size=(width, height), tangent=tuple(m[:3, 0]),
-                                shape="ellipse" if data.shape in ('DISK', 'ELLIPSE') else "rectangle"))
+                power *= width * height * (np.pi / 4.0 if ellipse else 1.0)
+            lights.append(blender_light('AREA', power, position, rgb, axis=axis, shadows=shadows,
+                                        size=(width, height), tangent=tuple(m[:3, 0]),
+                                        shape="ellipse" if ellipse else "rectangle"))
         if len(lights) == MAX_LIGHTS:
             break
     return tuple(lights)

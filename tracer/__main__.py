@@ -3,6 +3,7 @@
 [--sampler independent|pixel] [--shadows|--no-shadows] [--layers K] [--shading MODEL]
 [--min-pixel-width|--no-min-pixel-width]
 [--camera auto|x,y,z:tx,ty,tz:fov] [--up auto|z|y] [--mesh MESH.obj [--mesh-color R,G,B]]...
+[--light TYPE:...]... [--ambient X]
 
 Bad input exits 2 with one line naming it and writes nothing. What can be known before the
 render is checked before it: the size, the memory of one band of tiles at that width, the
@@ -20,7 +21,7 @@ import numpy as np
 
 from hairio import InputError
 
-from .settings import ACCELS, DEFAULT_ACCEL
+from .settings import ACCELS, DEFAULT_ACCEL, MAX_LIGHTS
 
 # Samples are placed in float32 pixel coordinates of the whole image: below 16384 they
 # round to within 1/2048 of a pixel (a 32nd of the finest stratum, 64 per side at MAX_SPP);
@@ -109,6 +110,58 @@ def parse_camera(text, strands, size, meshes=None):
     except ValueError:
         raise InputError(f"--camera {text!r}: expected auto or x,y,z:tx,ty,tz:fov") from None
     return Camera.look_at(eye, target, fov_deg=fov, size=size)
+
+
+# --light: a Blender light's type, place and power, as the add-on reads them from a scene.
+LIGHT_FORMS = {
+    "sun": "sun:DX,DY,DZ[:STRENGTH[:ANGLE]] (the way it shines, irradiance in W/m², angular diameter "
+           "in degrees)",
+    "point": "point:X,Y,Z:POWER[:RADIUS] (watts, metres)",
+    "spot": "spot:X,Y,Z:TX,TY,TZ:POWER[:SIZE[:BLEND]] (aimed at TX,TY,TZ; cone angle in degrees, blend 0..1)",
+    "area": "area:X,Y,Z:TX,TY,TZ:POWER[:WIDTH[:HEIGHT]] (facing TX,TY,TZ; a rectangle, metres)",
+}
+
+
+def parse_light(text):
+    """A tracer Light from --light's TYPE:... (LIGHT_FORMS), as Cycles lights with the Blender
+    light of those settings (settings.blender_light). Every number must be finite."""
+    from .settings import blender_light
+    kind, _, rest = text.partition(":")
+    form = LIGHT_FORMS.get(kind.lower())
+    if form is None:
+        raise InputError(f"--light {text!r}: unknown type {kind!r}; use one of: " + "; ".join(LIGHT_FORMS.values()))
+    kind = kind.lower()
+    places = 1 if kind in ("sun", "point") else 2       # points (or the sun's direction) first
+    # The numbers after them with their defaults (None: required).
+    tail = {"sun": [1.0, 0.0], "point": [None, 0.0], "spot": [None, 180.0, 0.0], "area": [None, 0.0, None]}[kind]
+    try:
+        parts = [[float(x) for x in p.split(",")] for p in rest.split(":")]
+        numbers = [p[0] for p in parts[places:]]
+        if (len(parts) < places or any(len(p) != 3 for p in parts[:places]) or any(len(p) != 1 for p in parts[places:])
+                or len(numbers) > len(tail) or not all(np.all(np.isfinite(p)) for p in parts)):
+            raise ValueError
+        values = numbers + tail[len(numbers):]
+        if values[0] is None:
+            raise ValueError
+        if kind == "sun":
+            light = blender_light("SUN", values[0], parts[0], angle=np.radians(values[1]))
+        elif kind == "point":
+            light = blender_light("POINT", values[0], parts[0], radius=values[1])
+        else:
+            axis = np.asarray(parts[1]) - np.asarray(parts[0])
+            if kind == "spot":
+                light = blender_light("SPOT", values[0], parts[0], axis=axis, spot_size=np.radians(values[1]),
+                                      spot_blend=values[2])
+            else:
+                width, height = values[1], values[1] if values[2] is None else values[2]
+                across = np.cross(axis, (0.0, 0.0, 1.0))        # its width level, where it can be
+                tangent = across if np.linalg.norm(across) > 1e-9 * np.linalg.norm(axis) else (1.0, 0.0, 0.0)
+                light = blender_light("AREA", values[0], parts[0], axis=axis, size=(width, height), tangent=tangent)
+        light.check()
+    except (ValueError, InputError) as e:
+        detail = f" ({e})" if isinstance(e, InputError) else ""
+        raise InputError(f"--light {text!r}: expected {form}{detail}") from None
+    return light
 
 
 def parse_color(text, option="--mesh-color"):
@@ -234,6 +287,13 @@ def build_parser():
                    help="which way is up in INPUT (and in the meshes, which come in its frame): z keeps the "
                         "coordinates, y turns a Y-up file into Z up, auto does so for the formats that are "
                         "Y up (TressFX .tfx, USC .data) (default %(default)s)")
+    r.add_argument("--light", action="append", default=[], metavar="TYPE:...",
+                   help="a light as Cycles lights with the Blender light of those settings, in the picture's "
+                        "frame (Z up, after --up); repeatable, up to 8; without any, the tracer's default sun. "
+                        "Forms: " + "; ".join(LIGHT_FORMS.values()))
+    r.add_argument("--ambient", type=float, default=defaults.ambient, metavar="X",
+                   help="light from everywhere, the radiance of an even grey world (0: none, as Cycles under "
+                        "a black world) (default %(default)s)")
     r.add_argument("--mesh", action="append", default=[], metavar="MESH.obj",
                    help="an opaque mesh beside the strands (a head, a body); repeatable")
     r.add_argument("--mesh-color", action="append", default=[], metavar="R,G,B",
@@ -253,9 +313,15 @@ def main(argv=None):
         from hairio.atomic import check_destination
         check_destination(args.out, f"--out {args.out}")
         from .settings import RenderSettings
+        lights = tuple(parse_light(text) for text in args.light)
+        if len(lights) > MAX_LIGHTS:
+            raise InputError(f"--light: {len(lights)} given; use at most {MAX_LIGHTS}")
+        if not np.isfinite(args.ambient) or args.ambient < 0:
+            raise InputError(f"--ambient {args.ambient}: use a finite number >= 0")
         settings = RenderSettings(spp=args.spp, sampler=args.sampler, shadows=args.shadows, layers=args.layers,
                                   shading=args.shading, min_pixel_width=args.min_pixel_width,
                                   background=(0.0, 0.0, 0.0, 0.0), hair_color=args.hair_color,
+                                  ambient=args.ambient, **({"lights": lights} if lights else {}),
                                   **{field: getattr(args, field) for _, field, _ in HAIR_SLIDERS})
         settings.check()
         from hairio.formats.up_axis import file_frame

@@ -176,8 +176,9 @@ class Light:
         if self.kind in ("spot", "area"):
             a = np.asarray(self.axis, np.float64)
             if a.shape != (3,) or not np.all(np.isfinite(a)) or np.linalg.norm(a) == 0:
-                raise InputError(f"light axis: {self.axis}; a {self.kind} light needs a non-zero direction "
-                                 "(three finite numbers) it shines along")
+                article = "an" if self.kind == "area" else "a"
+                raise InputError(f"light axis: {self.axis}; {article} {self.kind} light needs the direction it "
+                                 "shines along, three finite numbers, not all zero")
         if self.kind == "spot" and not (np.isfinite(self.spot_size) and 0.0 < self.spot_size <= np.pi):
             raise InputError(f"light spot_size: {self.spot_size}; use the cone's full angle, 0 < angle <= pi radians")
         if self.kind == "spot" and not (np.isfinite(self.spot_blend) and 0.0 <= self.spot_blend <= 1.0):
@@ -201,6 +202,32 @@ class Light:
                     or np.linalg.norm(np.cross(t, a)) <= 1e-9 * np.linalg.norm(t) * np.linalg.norm(a)):
                 raise InputError(f"light tangent: {self.tangent}; an area light with a size needs the direction "
                                  "of its width, three finite numbers across its axis")
+
+
+def blender_light(kind, power, vector, color=(1.0, 1.0, 1.0), axis=(0.0, 0.0, -1.0), shadows=True, angle=0.0,
+                  radius=0.0, size=(0.0, 0.0), tangent=(1.0, 0.0, 0.0), shape="rectangle", spot_size=math.pi,
+                  spot_blend=0.0):
+    """A Light as Cycles lights with a Blender light of type `kind` ('SUN', 'POINT', 'SPOT',
+    'AREA') and `power` (a sun's Strength in W/m², the others' Power in W, times 2^Exposure
+    where Blender has it); `vector` the sun's direction of travel or the light's position,
+    `axis` the way a spot or an area light shines, the rest Blender's settings of the same
+    meaning (angle in radians, an area light's size (width, height) along `tangent`, shape
+    "rectangle" or "ellipse"). Measured against Cycles (docs/DECISIONS.md, "The preview's
+    lights are Cycles' lights"): a point light of Power P radiates P / 4 pi W/sr, a spot the
+    same inside its cone, an area light P / pi along its axis, all falling off with distance."""
+    common = dict(color=tuple(color), shadows=bool(shadows))
+    if kind == "SUN":
+        return Light("directional", tuple(vector), intensity=float(power), angle=float(angle), **common)
+    if kind == "POINT":
+        return Light("point", tuple(vector), intensity=float(power) / (4.0 * math.pi), falloff=True,
+                     radius=float(radius), **common)
+    if kind == "SPOT":
+        return Light("spot", tuple(vector), intensity=float(power) / (4.0 * math.pi), axis=tuple(axis),
+                     spot_size=float(spot_size), spot_blend=float(spot_blend), radius=float(radius), **common)
+    if kind == "AREA":
+        return Light("area", tuple(vector), intensity=float(power) / math.pi, axis=tuple(axis),
+                     size=tuple(float(x) for x in size), tangent=tuple(tangent), shape=shape, **common)
+    raise InputError(f"light type: {kind!r}; use 'SUN', 'POINT', 'SPOT' or 'AREA'")
 
 
 def _basis(n):
