@@ -150,7 +150,8 @@ def scene_lights(scene, physical=False):
         if obj.type != 'LIGHT' or obj.hide_render or obj.data.type not in ('SUN', 'POINT', 'SPOT', 'AREA'):
             continue
         data, m = obj.data, np.array(obj.matrix_world, np.float64)
-        position, axis, rgb = tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(data.color)   # lights shine along -Z
+        along, across = _light_axes(m)
+        position, axis, rgb = tuple(m[:3, 3]), tuple(along), tuple(data.color)
         power = float(data.energy) * 2.0 ** float(getattr(data, "exposure", 0.0))
         shadows = bool(data.use_shadow)
         if not physical:
@@ -170,7 +171,7 @@ def scene_lights(scene, physical=False):
             if not getattr(data, "normalize", True):        # Blender 5.0: Power per square metre
                 power *= width * height * (np.pi / 4.0 if ellipse else 1.0)
             lights.append(blender_light('AREA', power, position, rgb, axis=axis, shadows=shadows,
-                                        size=(width, height), tangent=tuple(m[:3, 0]),
+                                        size=(width, height), tangent=tuple(across),
                                         shape="ellipse" if ellipse else "rectangle"))
         if len(lights) == MAX_LIGHTS:
             break
@@ -180,6 +181,21 @@ def scene_lights(scene, physical=False):
 # The widest sun the preview samples: Blender takes up to 180°, where the disk of directions
 # (radius tan(angle / 2)) is infinite.
 SUN_ANGLE_MAX = float(np.radians(179.0))
+
+
+def _light_axes(m):
+    """The unit directions a light shines along (its -Z) and an area light's width lies along
+    (its X) from its world matrix `m`, each rebuilt from the other two axes where a scale of 0
+    flattened it away."""
+    x, y, z = m[:3, 0], m[:3, 1], m[:3, 2]
+
+    def unit(v, fallback):
+        n = np.linalg.norm(v)
+        if n > 0.0:
+            return v / n
+        f = np.linalg.norm(fallback)
+        return fallback / f if f > 0.0 else np.array([0.0, 0.0, 1.0])
+    return -unit(z, np.cross(x, y)), unit(x, np.cross(y, z))
 
 
 def _area_light_size(data, m):

@@ -35,15 +35,15 @@ class Light:
     fall-off with distance: the thesis's Phong model uses a constant light intensity Il =
     color * intensity. `falloff` (point lights): the inverse-square law, intensity then the
     radiant intensity (W/sr, a Blender point light's Power / 4 pi) and color * intensity / d²
-    the irradiance at distance d, as Cycles lights (addon/preview.py, scene_lights).
+    the irradiance at distance d, as Cycles lights (blender_light).
 
     kind "spot" (always the inverse-square law): a point light whose light leaves within a
     cone along `axis` of full angle `spot_size` (radians), its edge softened over `spot_blend`
     (0..1) of the cosine range as Blender's spot lights (smoothstep of (cos - cos half angle) /
     ((1 - cos half angle) · blend)); intensity as a point light's (Power / 4 pi inside the cone).
-    kind "area" (always the inverse-square law): a small Lambertian emitter at `vector` facing
-    `axis`, intensity the radiant intensity along the axis (a Blender area light's Power / pi),
-    times the cosine from the axis, none behind; lit from its centre, so its shadows are hard.
+    kind "area" (always the inverse-square law): a Lambertian emitter at `vector` facing `axis`,
+    intensity the radiant intensity along the axis (a Blender area light's Power / pi), times
+    the cosine from the axis, none behind; of `size` (below), else lit from its centre alone.
     `shadows` False: nothing shadows this light (RenderSettings.shadows turns them all off).
 
     Lights with an extent are sampled, a point of them per shading point and light (drawn by a
@@ -55,7 +55,7 @@ class Light:
     along `tangent`, height across it, metres) with `shape` "rectangle" or "ellipse": the area
     light's surface, sampled evenly, each point lighting as the whole light would from there
     (radiant intensity × the cosine from the axis / d², an unbiased estimate of the area's
-    light). A size of 0 is the small emitter above, lit from its centre."""
+    light)."""
     kind: str = "directional"
     vector: tuple = (0.4, 0.6, -1.0)
     color: tuple = (1.0, 1.0, 1.0)
@@ -132,7 +132,7 @@ class Light:
                 L /= np.linalg.norm(L, axis=1)[:, None]
             return L, np.full(len(p), BIG)
         q = np.broadcast_to(vec[:3], p.shape).copy()
-        if self.kind == "area" and np.any(ext_u[:3]):
+        if self.kind == "area":           # zero half sides leave its centre
             sx, sy = _concentric(u) if ext_u[3] > 0.5 else (2.0 * u[:, 0] - 1.0, 2.0 * u[:, 1] - 1.0)
             q = q + sx[:, None] * ext_u[:3] + sy[:, None] * ext_v[:3]
         elif ext_v[3] > 0.0:

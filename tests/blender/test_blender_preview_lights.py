@@ -194,6 +194,26 @@ def test_the_preview_lights_a_floor_as_cycles_does(clean, black_world, kind):
         assert cycles[..., 0].max() > 5 * cycles[..., 0][lit].min()     # the fall-off is in the picture
 
 
+def test_an_area_light_scaled_flat_keeps_its_facing(clean):
+    """Scale stretches an area light's size (Cycles' too); one scaled to nothing along its X is
+    a line of light, not a light the tracer refuses."""
+    from tracer import RenderSettings
+    preview = ext_module(clean, "preview")
+    lamp = _light('AREA', 50.0, location=(0.0, 0.0, 1.0), rotation=(0.3, 0.0, 0.0))
+    lamp.data.shape, lamp.data.size, lamp.data.size_y = 'RECTANGLE', 0.4, 0.2
+    lamp.scale = (2.0, 1.0, 1.0)
+    bpy.context.view_layer.update()
+    light = preview.scene_lights(bpy.context.scene, physical=True)[0]
+    np.testing.assert_allclose(light.size, (0.8, 0.2), rtol=1e-6)
+    np.testing.assert_allclose(light.axis, (0.0, math.sin(0.3), -math.cos(0.3)), atol=1e-6)
+    lamp.scale = (0.0, 1.0, 1.0)
+    bpy.context.view_layer.update()
+    flat = preview.scene_lights(bpy.context.scene, physical=True)[0]
+    np.testing.assert_allclose(flat.size, (0.0, 0.2), atol=1e-9)
+    np.testing.assert_allclose(flat.axis, light.axis, atol=1e-6)
+    RenderSettings(lights=(flat,)).check()
+
+
 def test_past_eight_lights_the_preview_says_which_it_takes(clean):
     from types import SimpleNamespace
     from tracer.settings import MAX_LIGHTS

@@ -121,7 +121,7 @@ vec3 light_dir(int l, vec3 p, vec2 u, out float dist) {
         return L;
     }
     vec3 q = lv.xyz;
-    if (lv.w > 3.5 && (light_u[l].x != 0.0 || light_u[l].y != 0.0 || light_u[l].z != 0.0)) {
+    if (lv.w > 3.5) {                 // an area light: zero half sides leave its centre
         vec2 c = light_u[l].w > 0.5 ? concentric(u) : 2.0 * u - 1.0;
         q += c.x * light_u[l].xyz + c.y * light_v[l].xyz;
     } else if (disk > 0.0) {
