@@ -15,7 +15,7 @@ their base colour, so the head hides the hair behind it and shadows fall on and 
 They are uploaded when their arrays changed; a scene of more than MESH_TRIANGLE_BUDGET
 triangles shows only the scalp and collider, and the operator says so. Under the physically
 based shading with the scene's lights, the world lights the preview too: a world of one
-colour is the ambient term (world_ambient), so a black world gives no ambient light, as in
+colour is the ambient term (world_radiance), so a black world gives no ambient light, as in
 Cycles, and a grey one its radiance. A scene without lights keeps the tracer's default
 lighting, key light and ambient term both.
 
@@ -210,26 +210,27 @@ def _area_light_size(data, m):
 LUMINANCE = (0.2126, 0.7152, 0.0722)
 
 
-def world_ambient(scene):
-    """The light the scene's world gives, as the preview's ambient term for the physically
-    based shading: (ambient, note). A world of one colour (a Background node with its Color
-    and Strength unlinked, or a world without nodes) lights a diffuse surface nothing shades
-    to base colour x its radiance, which is what the ambient term computes: ambient is the
-    luminance of that colour times the strength. No world, or a node tree whose output gets
-    nothing, gives Cycles no light: 0. A world lit by more than a colour (a texture, a sky, a
-    mix) is not summed here: ambient None (the tracer's default stands) and a note that says so."""
+def world_radiance(scene):
+    """The light the scene's world gives the physically based shading: (rgb, note). A world of
+    one colour (a Background node with its Color and Strength unlinked, or a world without
+    nodes) is an even environment of radiance colour × strength, whose luminance is the
+    preview's ambient term (render_settings): a diffuse surface nothing shades sends base colour
+    × that radiance, which is what the ambient term computes. No world, or a node tree whose
+    output gets nothing, gives Cycles no light: (0, 0, 0). A world lit by more than a colour (a
+    texture, a sky, a mix) is not summed here: rgb None (the tracer's default ambient stands)
+    and a note that says so."""
     world = scene.world
     if world is None:
-        return 0.0, None
+        return (0.0, 0.0, 0.0), None
     uses_nodes = world.use_nodes if bpy.app.version < (5, 0, 0) else True    # 5.0: always, and deprecated
     tree = world.node_tree if uses_nodes else None
     if tree is None:
-        return _luminance(world.color), None
+        return tuple(max(0.0, float(c)) for c in world.color[:3]), None
     outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld"]
     out = next((n for n in outputs if n.is_active_output), outputs[0] if outputs else None)
     surface = None if out is None else out.inputs.get("Surface")
     if surface is None or not surface.is_linked:
-        return 0.0, None
+        return (0.0, 0.0, 0.0), None
     node = surface.links[0].from_node
     color, strength = node.inputs.get("Color"), node.inputs.get("Strength")
     if node.bl_idname != "ShaderNodeBackground" or color.is_linked or strength.is_linked:
@@ -237,7 +238,8 @@ def world_ambient(scene):
         return None, (f"The world {world.name!r} gives more than one colour of light ({node.name!r} feeds its "
                       f"output): the preview lights the hair with its own ambient "
                       f"{RenderSettings().ambient:g}, not the world's")
-    return max(0.0, _luminance(color.default_value) * float(strength.default_value)), None
+    k = max(0.0, float(strength.default_value))
+    return tuple(max(0.0, float(c)) * k for c in color.default_value[:3]), None
 
 
 def lights_note(scene, settings):
@@ -256,7 +258,7 @@ def world_note(scene, settings):
     """What the operator says when the world's light cannot be the preview's ambient, or None."""
     if settings.preview_shading != "chiang" or not settings.preview_scene_lights or not scene_lights(scene):
         return None
-    return world_ambient(scene)[1]
+    return world_radiance(scene)[1]
 
 
 def _luminance(rgb):
@@ -265,8 +267,8 @@ def _luminance(rgb):
 
 def render_settings(scene, settings, hair_obj=None):
     """tracer.RenderSettings from the scalp's preview settings (and, for the "chiang"
-    shading, the hair object's Principled Hair BSDF, the suns' strengths and, where the scene's
-    lights light the preview, the world's light as the ambient term: world_ambient)."""
+    shading, the hair object's Principled Hair BSDF, the lights' strengths and, where the
+    scene's lights light the preview, the world's light as the ambient term: world_radiance)."""
     from tracer import RenderSettings
     kwargs = dict(spp=int(settings.preview_samples), shadows=settings.preview_shadows,
                   shadow_mode=settings.preview_shadow_mode, layers=settings.preview_layers,
@@ -277,11 +279,12 @@ def render_settings(scene, settings, hair_obj=None):
     lights = scene_lights(scene, physical=physical) if settings.preview_scene_lights else ()
     if lights:
         kwargs["lights"] = lights
-        # The world is one of the scene's lights; a scene without lights gets the tracer's
-        # whole default lighting (its key light and its ambient term).
-        ambient = world_ambient(scene)[0] if physical else None
-        if ambient is not None:
-            kwargs["ambient"] = ambient
+        # The world is one of the scene's lights: its radiance's luminance is the ambient term
+        # (docs/DECISIONS.md says why not an environment light sampled with shadow rays); a
+        # scene without lights gets the tracer's whole default lighting (key light and ambient).
+        rgb = world_radiance(scene)[0] if physical else None
+        if rgb is not None:
+            kwargs["ambient"] = _luminance(rgb)
     return RenderSettings(**kwargs)
 
 

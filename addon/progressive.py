@@ -85,7 +85,7 @@ def signature(context, session):
     r = scene.render
     size = (r.resolution_x, r.resolution_y, r.pixel_aspect_x, r.pixel_aspect_y)
     lights = preview.scene_lights(scene, physical=True)      # all a light gives the preview, any shading
-    shading = (preview.world_ambient(scene), hair_material.principled_hair_settings(session.hair))
+    shading = (preview.world_radiance(scene), hair_material.principled_hair_settings(session.hair))
     own, others = scene_data.preview_mesh_objects(scene, context.view_layer, session.scalp)
     meshes = tuple((o.name, _matrix(o), o.data.session_uid) for o in own + others)
     return (settings, size, _matrix(cam), lens, scene.camera == cam, preview.upload_key(session.hair),

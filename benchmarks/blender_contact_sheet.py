@@ -54,6 +54,13 @@ def _node_material(name, kind, rgb, strength=1.0):
     return mat
 
 
+class _PreviewSettings:
+    """The scalp's preview settings render_settings reads, at their defaults (the physically
+    based shading with the scene's lights)."""
+    preview_samples, preview_shadows, preview_shadow_mode, preview_layers = 1, True, "hard", 4
+    preview_shading, preview_min_pixel_width, preview_scene_lights = "chiang", False, True
+
+
 def _studio_lights(sc, studio):
     """The scene's sun removed, the `studio` lights (render_contact) added in its place."""
     import mathutils
@@ -92,7 +99,8 @@ def render_contact(strands, head_vertices, head_triangles, head_rgb, camera_matr
     `studio`: lights in place of the sun, (kind, power, location, target, extent) each: a
     Blender light of that type and power at `location` pointing at `target`, extent its Size
     (AREA) or Radius (POINT, SPOT). Then out["lights"] and out["ambient"] are what the add-on
-    makes of the scene for the preview (addon/preview.py: scene_lights, world_ambient).
+    makes of the scene for the preview (addon/preview.py: render_settings, its lights and the
+    world's).
 
     Returns a dict: rgb, a list of (H, W, 3) linear RGB renders, one per seed (on a black
     film); seconds, their render times; hair, (H, W) the fraction of each pixel the hair
@@ -116,8 +124,8 @@ def render_contact(strands, head_vertices, head_triangles, head_rgb, camera_matr
     if studio is not None:
         _studio_lights(sc, studio)
         from addon import preview
-        out["lights"] = preview.scene_lights(sc, physical=True)
-        out["ambient"] = preview.world_ambient(sc)[0]
+        settings = preview.render_settings(sc, _PreviewSettings())
+        out["lights"], out["ambient"] = settings.lights, settings.ambient
 
     for seed in seeds:
         img, seconds = _render(sc, samples, seed, transparent=False)

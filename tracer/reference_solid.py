@@ -211,15 +211,13 @@ def _shade(cyl, ids, surf, o, d, t, settings, seeds, k):
     s = Surface(p=p, T=cyl.u[ids], N=n, V=d, color=col)
     out = settings.ambient * col
     for l, light in enumerate(settings.lights):
-        vec, lcol = light.packed()
+        lcol = light.packed()[1]
         # The point on the light the shader draws for this shading (its centre without extent).
         L, dist = light.towards(p, light_sample(seeds, k, l, len(settings.lights)))
         lit = np.ones(len(p))
         if settings.shadows and light.shadows:
-            one_point = vec[3] > 0.5 and not any(np.concatenate(light.extent()))
-            lit = _light_through(cyl, p, L, dist, cyl.radius[ids], settings, vec[:3] if one_point else None)
-        if vec[3] > 0.5:                # fall-off, a spot's cone, an area light's cosine
-            lit = lit * light.scale(L, dist)
+            lit = _light_through(cyl, p, L, dist, cyl.radius[ids], settings, light.target())
+        lit = lit * light.scale(L, dist)        # fall-off, a spot's cone, an area light's cosine
         out = out + lit[:, None] * np.asarray(lcol) * model.reference(s, L, settings)
     return out
 

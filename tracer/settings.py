@@ -23,9 +23,9 @@ MAX_SPP = 4096
 SAMPLERS = ("independent", "pixel")
 
 
-LIGHT_KINDS = ("directional", "point", "spot", "area")
+LIGHT_KINDS = ("directional", "point", "spot", "area", "environment")
 # The shader's code for each kind (light_vec's w); a point light with fall-off is 2.
-_KIND_CODE = {"directional": 0.0, "point": 1.0, "spot": 3.0, "area": 4.0}
+_KIND_CODE = {"directional": 0.0, "point": 1.0, "spot": 3.0, "area": 4.0, "environment": 5.0}
 
 
 @dataclass(frozen=True)
@@ -55,7 +55,13 @@ class Light:
     along `tangent`, height across it, metres) with `shape` "rectangle" or "ellipse": the area
     light's surface, sampled evenly, each point lighting as the whole light would from there
     (radiant intensity × the cosine from the axis / d², an unbiased estimate of the area's
-    light)."""
+    light).
+
+    kind "environment": an even world around everything, of radiance color × intensity / 4 pi
+    from every direction (Blender's world of one colour, its Strength: intensity = 4 pi ×
+    Strength); each shading point takes one direction of it, drawn evenly over the sphere, with
+    its shadow ray, so hair and meshes hide the sky from what lies under them, as in Cycles.
+    `vector` plays no part."""
     kind: str = "directional"
     vector: tuple = (0.4, 0.6, -1.0)
     color: tuple = (1.0, 1.0, 1.0)
@@ -79,8 +85,18 @@ class Light:
         rgb = tuple(np.asarray(self.color, np.float64) * self.intensity)
         if self.kind == "directional":
             return (*(v / np.linalg.norm(v)), 0.0), rgb
+        if self.kind == "environment":
+            return (0.0, 0.0, 0.0, _KIND_CODE["environment"]), rgb
         code = 2.0 if self.kind == "point" and self.falloff else _KIND_CODE[self.kind]
         return (*v, code), rgb
+
+    def target(self):
+        """The point every shadow ray toward this light ends at: its position for a point, spot
+        or area light without extent; None for a directional or environment light, or one whose
+        points are sampled."""
+        if self.kind in ("directional", "environment") or any(np.concatenate(self.extent())):
+            return None
+        return tuple(float(x) for x in self.vector)
 
     def cone(self):
         """(vec4, float) as the shader wants them: the unit axis and the cosine of the half
@@ -123,6 +139,11 @@ class Light:
         from .reference.shapes import BIG
         ext_u, ext_v = (np.asarray(e, np.float64) for e in self.extent())
         vec = np.asarray(self.packed()[0], np.float64)
+        if self.kind == "environment":      # evenly over the sphere
+            z = 1.0 - 2.0 * u[:, 0]
+            r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+            phi = 2.0 * np.pi * u[:, 1]
+            return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1), np.full(len(p), BIG)
         if self.kind == "directional":
             L = np.broadcast_to(-vec[:3], p.shape).copy()
             if ext_v[3] > 0.0:
@@ -149,7 +170,7 @@ class Light:
         directions toward the light are L (N, 3) and distances dist (N,): 1 without fall-off,
         else 1 / dist² times the spot's cone or the area light's cosine (the references' model;
         the shader's is light_at in shaders/trace_main.glsl)."""
-        if self.kind == "directional" or (self.kind == "point" and not self.falloff):
+        if self.kind in ("directional", "environment") or (self.kind == "point" and not self.falloff):
             return np.ones(len(dist))
         f = 1.0 / np.maximum(dist * dist, 1e-30)
         if self.kind == "point":
@@ -168,6 +189,8 @@ class Light:
         v = np.asarray(self.vector, np.float64)
         if v.shape != (3,) or not np.all(np.isfinite(v)):
             raise InputError(f"light vector: {self.vector}; expected three finite numbers")
+        if self.kind == "environment" and self.falloff:
+            raise InputError("light falloff: an environment light is infinitely far; use falloff with a point light")
         if self.kind == "directional" and np.linalg.norm(v) == 0:
             raise InputError("light vector: a directional light needs a non-zero direction")
         if self.kind == "directional" and self.falloff:

@@ -12,14 +12,16 @@ one delta sun, max bounces 0, a black world, a box pixel filter, linear float ou
 preview: its default settings as tracer.settings.RenderSettings gives them (listed below,
 read when the section runs), with the same sun, the head at the same base colour (under the
 default, physically based shading the preview's meshes are Lambertian as Cycles' diffuse
-surface: colour / pi × irradiance × cos) and the ambient term the add-on gives it under a
-black world: 0 (addon/preview.py, world_ambient: with the scene's lights and this shading the
-world's radiance is the ambient term). The last table measures that rule on the first
-preset: Cycles under a black world and under Blender's default world (grey, radiance
-DEFAULT_WORLD) beside the sun, the preview with the world's ambient and with the fixed 0.08
-the add-on gave every scene before; and, in place of the sun, an artist's lights under that
-world (studio_lights: a key area light and a fill sphere light, their shadows soft), which
-the preview takes as Render Preview does, read from Cycles' own scene by the add-on.
+surface: colour / pi × irradiance × cos) and what the add-on makes of a black world: no
+ambient term (addon/preview.py, render_settings: with the scene's lights and this shading a
+world of one colour is the ambient term, its radiance's luminance). The last table measures
+that rule on the first preset: Cycles under a black world and under Blender's default world
+(grey, radiance DEFAULT_WORLD) beside the sun, the preview with the world as the add-on takes
+it, with the fixed 0.08 the add-on gave every scene before, and with the world as an
+environment light sampled with shadow rays (tracer.Light("environment"), tried); and, in
+place of the sun, an artist's lights under each world (studio_lights: a key area light and a
+fill sphere light, their shadows soft), which the preview takes as Render Preview does, read
+from Cycles' own scene by the add-on.
 
 Error (benchmarks/region_error.py): over the hair pixels (where Cycles' hair covers at least
 half the pixel) and over the head pixels (where Cycles' head covers at least half), in
@@ -219,17 +221,23 @@ def run(sec, cfg):
         cyc_w = render_contact(strands, head.vertices, head.triangles, HEAD_RGB, matrix, size, SUN, SUN_STRENGTH,
                                hair, cycles_samples, mask_seeds=(), world=DEFAULT_WORLD)
         numbers["world"], grey = {}, cyc_w["rgb"][0]
-        for world, cycles_img, ambient, label in (
-                (0.0, ref, 0.0, "0, the world's (the add-on's rule)"),
-                (0.0, ref, defaults.ambient, f"{defaults.ambient:g}, fixed (before)"),
-                (DEFAULT_WORLD, grey, DEFAULT_WORLD, f"{DEFAULT_WORLD:g}, the world's (the add-on's rule)"),
-                (DEFAULT_WORLD, grey, defaults.ambient, f"{defaults.ambient:g}, fixed (before)")):
-            e = e_refined if (world, ambient) == (0.0, 0.0) else compare(
-                renderer.render(camera, dataclasses.replace(refined, ambient=ambient)), cover_refined, cycles_img,
-                ref_hair, ref_cover)
+        environment = tracer.Light("environment", color=(DEFAULT_WORLD,) * 3, intensity=4 * np.pi)
+        with_world = dataclasses.replace(refined, lights=refined.lights + (environment,))
+        for world, cycles_img, settings, label in (
+                (0.0, ref, refined, "none (the add-on's rule for a black world)"),
+                (0.0, ref, dataclasses.replace(refined, ambient=defaults.ambient),
+                 f"an ambient term of {defaults.ambient:g} (before)"),
+                (DEFAULT_WORLD, grey, dataclasses.replace(refined, ambient=DEFAULT_WORLD),
+                 f"an ambient term of the world's radiance, {DEFAULT_WORLD:g} (the add-on's rule)"),
+                (DEFAULT_WORLD, grey, with_world, "an environment light of the world's radiance, sampled with "
+                                                  "shadow rays (tried)"),
+                (DEFAULT_WORLD, grey, dataclasses.replace(refined, ambient=defaults.ambient),
+                 f"an ambient term of {defaults.ambient:g} (before)")):
+            e = e_refined if settings is refined else compare(
+                renderer.render(camera, settings), cover_refined, cycles_img, ref_hair, ref_cover)
             conv_rows.append(["black" if world == 0 else f"grey, radiance {world:g} (Blender's default world)",
                               label, _cell(e["hair"]), _cell(e["head"])])
-            numbers["world"][f"world {world:g}, ambient {ambient:g}"] = _numbers(e)
+            numbers["world"][f"world {world:g}: {label}"] = _numbers(e)
         # An artist's lights: Blender's default world, a key area light and a fill sphere light,
         # both read by the add-on for the preview (addon/preview.py) as Render Preview does.
         for world in (0.0, DEFAULT_WORLD):
@@ -240,7 +248,7 @@ def run(sec, cfg):
             e = compare(renderer.render(camera, studio), cover_refined, cyc_l["rgb"][0], ref_hair, ref_cover)
             conv_rows.append([("black" if world == 0 else f"grey, radiance {world:g}") + f", a key area light "
                               f"({KEY_SIZE:g} m square) and a fill sphere light ({FILL_RADIUS:g} m) in place of "
-                              "the sun", f"{cyc_l['ambient']:g}, the world's; the lights as the add-on reads them",
+                              "the sun", "the lights and the world as the add-on reads them",
                               _cell(e["hair"]), _cell(e["head"])])
             numbers["world"][f"world {world:g}, studio lights"] = _numbers(e)
         conv_name = name
@@ -254,7 +262,7 @@ def run(sec, cfg):
                "mean ratio", "hair coverage IoU"], rows,
               caption="Each time beside its error against the Cycles image of the same preset:")
     if conv_rows:
-        sec.table(["Cycles' world", "the preview's ambient term", "hair: MAE / RMSE (relative); mean ratio",
+        sec.table(["Cycles' world", "the world in the preview", "hair: MAE / RMSE (relative); mean ratio",
                    "head: MAE / RMSE (relative); mean ratio"],
                   conv_rows, caption=f"The world's light ({conv_name}, the preview at {REFINED_SPP} spp, against "
                                      "Cycles under that world):")

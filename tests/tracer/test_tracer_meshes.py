@@ -181,6 +181,33 @@ def test_an_area_light_lights_a_plane_as_its_surface_does(meshed, shape):
     assert centre_only > 1.15 * expected.mean()
 
 
+def test_an_environment_lights_an_open_floor_by_its_radiance_and_a_tile_shades_it(meshed):
+    """An even world of radiance W: a floor nothing hides sends base colour × W (the mean of
+    many pixels at 64 directions each), and under a tile floating low over it much less (the
+    tile hides most of its sky); the image against both float64 references' same directions."""
+    W = 0.3
+    env = Light("environment", intensity=4 * np.pi * W)
+    floor, tile = plane(0.0, 2.0), plane(0.05, 0.3)
+    cam = Camera.look_at((0.0, -0.01, 3.0), (0, 0, 0), up=(0, 1, 0), size=(40, 40), type="ORTHO", ortho_scale=3.0)
+    settings = RenderSettings(shadows=True, ambient=0.0, spp=64, lights=(env,))
+    meshed.set_strands(make_strands([[[5, 5, 5], [5, 5, 5.1]]], radius=0.01))
+    meshed.set_meshes([(*floor, GREY)])
+    open_floor = meshed.render(cam, settings)[..., 0]
+    inside = np.zeros((40, 40), bool)
+    inside[8:32, 8:32] = True           # the floor's pixels away from its edge
+    assert abs(open_floor[inside].mean() / (GREY[0] * W) - 1.0) < 0.02
+    img, ref = _matches_reference(meshed, make_strands([[[5, 5, 5], [5, 5, 5.1]]], radius=0.01),
+                                  [(*floor, GREY), (*tile, (0.0, 0.0, 0.0))], cam, settings)
+    tile_px = img[..., 0] < 1e-6        # the black tile from above (8 × 8 pixels)
+    assert 40 < tile_px.sum() < 120
+    near = np.zeros((40, 40), bool)     # the tile grown by one pixel each way
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            near |= np.roll(np.roll(tile_px, dy, axis=0), dx, axis=1)
+    ring = near & ~tile_px              # the floor just beyond the tile's edge
+    assert ring.sum() > 20 and img[..., 0][ring].mean() < 0.85 * GREY[0] * W
+
+
 def test_a_sun_with_an_angle_casts_a_soft_shadow(meshed):
     strand = make_strands([[[-0.5, 0, 0.3], [0.5, 0, 0.3]]], radius=0.01)
     floor = plane(0.0, 1.0)

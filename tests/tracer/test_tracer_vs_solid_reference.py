@@ -42,14 +42,15 @@ SCENES = {
         RenderSettings(shadows=True, lights=(
             Light("spot", (0.6, -1.0, 1.6), intensity=3.0, axis=(-0.3, 0.9, -0.9), spot_size=0.5, spot_blend=0.5),
             Light("area", (-0.8, -0.6, 1.2), intensity=1.5, axis=(0.6, 0.5, -0.6), shadows=False)))),
-    "curls, lights with an extent (a sun 3° wide, a sphere, a rectangle), soft shadows, 4 spp": (
+    "curls, lights with an extent (a sun 3° wide, a sphere, a rectangle, an environment), 4 spp": (
         lambda: curls(24, 12, radius=0.015),
         Camera.look_at((1.2, -1.8, 1.2), (0, 0, 0.5), fov_deg=40, size=(64, 64)),
         RenderSettings(shadows=True, spp=4, lights=(
             Light("directional", (0.2, 0.5, -1.0), intensity=2.0, angle=np.radians(3.0)),
             Light("point", (0.8, -0.9, 1.3), intensity=1.0, falloff=True, radius=0.3),
             Light("area", (-0.8, -0.6, 1.4), intensity=1.5, axis=(0.6, 0.5, -0.7), tangent=(1.0, 0.0, 0.0),
-                  size=(0.8, 0.5))))),
+                  size=(0.8, 0.5)),
+            Light("environment", intensity=4 * np.pi * 0.1)))),
     "orthographic, Kajiya-Kay": (
         lambda: curls(20, 10, radius=0.01),
         Camera.look_at((0, -3, 0.5), (0, 0, 0.5), fov_deg=30, size=(72, 72), type="ORTHO", ortho_scale=1.1),

@@ -30,10 +30,9 @@ def _lights(settings, p, seeds, k):
     for l, light in enumerate(settings.lights):
         u = light_sample(seeds, k, l, len(settings.lights))
         L, dist = light.towards(p, u)
-        vec, lcol = light.packed()
+        lcol = light.packed()[1]
         shadowed = settings.shadows and light.shadows
-        one_point = vec[3] > 0.5 and not any(np.concatenate(light.extent()))
-        yield L, dist, np.asarray(lcol) * light.scale(L, dist)[:, None], vec[:3] if one_point else None, shadowed
+        yield L, dist, np.asarray(lcol) * light.scale(L, dist)[:, None], light.target(), shadowed
 
 
 def _hair_transmittance(cyl, p, L, dist, own, tmin, settings, target):

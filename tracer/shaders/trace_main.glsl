@@ -12,7 +12,8 @@ uniform vec2 centre_px;       // the optical axis in the whole image's pixels (C
 
 uniform vec4 light_vec[NUM_LIGHTS];   // w = 0: xyz is the direction light travels; w = 1: position;
                                       // w = 2: position, with the inverse-square fall-off; 3: a spot
-                                      // light's position, 4: an area light's (both falling off)
+                                      // light's position, 4: an area light's (both falling off);
+                                      // 5: an even environment (xyz unused)
 uniform vec3 light_col[NUM_LIGHTS];
 uniform vec4 light_axis[NUM_LIGHTS];  // spot and area: the unit axis it shines along; w: a spot's
                                       // cosine of its half angle
@@ -114,6 +115,11 @@ vec3 light_dir(int l, vec3 p, vec2 u, out float dist) {
     vec4 lv = light_vec[l];
     float disk = light_v[l].w;
     vec3 t, b;
+    if (lv.w > 4.5) {                 // an environment: a direction evenly over the sphere
+        float z = 1.0 - 2.0 * u.x, r = sqrt(max(1.0 - z * z, 0.0)), phi = 6.283185307179586 * u.y;
+        dist = BIG;
+        return vec3(r * cos(phi), r * sin(phi), z);
+    }
     if (lv.w < 0.5) {
         vec3 L = -lv.xyz;
         dist = BIG;
@@ -139,7 +145,7 @@ vec3 light_dir(int l, vec3 p, vec2 u, out float dist) {
 // area light's cosine from its axis (tracer.settings.Light.scale, the references' model).
 vec3 light_at(int l, vec3 L, float dist) {
     float w = light_vec[l].w;
-    if (w < 1.5) return light_col[l];
+    if (w < 1.5 || w > 4.5) return light_col[l];
     float f = 1.0 / max(dist * dist, 1e-30);
     float c = -dot(L, light_axis[l].xyz);
     if (w > 3.5) f *= max(c, 0.0);
