@@ -86,6 +86,24 @@ def test_a_strand_shadows_a_plane(meshed):
     assert np.isclose(grey[..., 0], lit_level, atol=1e-4).sum() > 500
 
 
+def _out_of_view():
+    """One strand far from every camera here: the renderer needs strands; these scenes are meshes."""
+    return make_strands([[[5, 5, 5], [5, 5, 5.1]]], radius=0.01)
+
+
+def _floor_points(cam):
+    """Per pixel of `cam`, (H, W, 3): where its centre ray meets the floor plane(0.0, 2.0),
+    lifted to where the renderer shades it (MESH_SHADOW_OFFSET × the mesh's diagonal above it);
+    and (H, W) whether the ray meets the floor in front of the camera, away from its edge."""
+    w, h = cam.size
+    x, y = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    o, d = cam.rays(x, y)
+    t = -o[..., 2] / d[..., 2]
+    hit = o + t[..., None] * d
+    on_floor = (t > 0) & np.all(np.abs(hit)[..., :2] < 0.99, axis=-1)
+    return hit + [0.0, 0.0, layout.MESH_SHADOW_OFFSET * np.hypot(4.0, 4.0)], on_floor
+
+
 def _emitted(kind, to_light, dist):
     """What leaves a light of radiant intensity 1 toward points seeing it along to_light (unit,
     (..., 3)) at dist, written out from Blender's lights: a spot of 70° and blend 0.4 pointing
@@ -121,16 +139,11 @@ def test_lights_light_a_plane_by_the_radiometry_of_their_kind(meshed, name):
     cam = Camera.look_at((0.2, -1.6, 1.4), (0, 0, 0), size=(64, 48), fov_deg=45)
     settings = RenderSettings(shadows=True, ambient=0.0, lights=(Light(vector=light, intensity=3.0,
                                                                        **LIGHT_KINDS[name]),))
-    meshed.set_strands(make_strands([[[5, 5, 5], [5, 5, 5.1]]], radius=0.01))     # out of view
+    meshed.set_strands(_out_of_view())
     meshed.set_meshes([(*floor, GREY)])
     img = meshed.render(cam, settings).astype(np.float64)
     h, w = img.shape[:2]
-    x, y = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
-    o, d = cam.rays(x, y)
-    t = -o[..., 2] / d[..., 2]
-    on_floor = (t > 0) & np.all(np.abs(o + t[..., None] * d)[..., :2] < 0.99, axis=-1)
-    # Shaded where its shadow rays start: MESH_SHADOW_OFFSET × the mesh's diagonal above it.
-    p = o + t[..., None] * d + [0.0, 0.0, layout.MESH_SHADOW_OFFSET * np.hypot(4.0, 4.0)]
+    p, on_floor = _floor_points(cam)
     to_light = np.asarray(light) - p
     dist = np.linalg.norm(to_light, axis=-1)
     to_light /= dist[..., None]
@@ -156,13 +169,10 @@ def test_an_area_light_lights_a_plane_as_its_surface_does(meshed, shape):
     floor = plane(0.0, 2.0)
     cam = Camera.look_at((0.0, 0.0, 1.5), (0, 0, 0), up=(0, 1, 0), size=(24, 24), type="ORTHO", ortho_scale=0.4)
     settings = RenderSettings(shadows=True, ambient=0.0, spp=64, lights=(light,))
-    meshed.set_strands(make_strands([[[5, 5, 5], [5, 5, 5.1]]], radius=0.01))
+    meshed.set_strands(_out_of_view())
     meshed.set_meshes([(*floor, GREY)])
     img = meshed.render(cam, settings).astype(np.float64)[..., 0]
-    x, y = np.meshgrid(np.arange(24) + 0.5, np.arange(24) + 0.5)
-    o, d = cam.rays(x, y)
-    p = (o + (-o[..., 2] / d[..., 2])[..., None] * d).reshape(-1, 3)
-    p[:, 2] += layout.MESH_SHADOW_OFFSET * np.hypot(4.0, 4.0)
+    p = _floor_points(cam)[0].reshape(-1, 3)
     # The light's surface: radiance L = I / area, irradiance = ∫ L cos θ_light cos θ_floor / d² dA.
     g = (np.arange(120) + 0.5) / 120 * 2 - 1
     gu, gv = np.meshgrid(g, g)
@@ -190,13 +200,13 @@ def test_an_environment_lights_an_open_floor_by_its_radiance_and_a_tile_shades_i
     floor, tile = plane(0.0, 2.0), plane(0.05, 0.3)
     cam = Camera.look_at((0.0, -0.01, 3.0), (0, 0, 0), up=(0, 1, 0), size=(40, 40), type="ORTHO", ortho_scale=3.0)
     settings = RenderSettings(shadows=True, ambient=0.0, spp=64, lights=(env,))
-    meshed.set_strands(make_strands([[[5, 5, 5], [5, 5, 5.1]]], radius=0.01))
+    meshed.set_strands(_out_of_view())
     meshed.set_meshes([(*floor, GREY)])
     open_floor = meshed.render(cam, settings)[..., 0]
     inside = np.zeros((40, 40), bool)
     inside[8:32, 8:32] = True           # the floor's pixels away from its edge
     assert abs(open_floor[inside].mean() / (GREY[0] * W) - 1.0) < 0.02
-    img, ref = _matches_reference(meshed, make_strands([[[5, 5, 5], [5, 5, 5.1]]], radius=0.01),
+    img, ref = _matches_reference(meshed, _out_of_view(),
                                   [(*floor, GREY), (*tile, (0.0, 0.0, 0.0))], cam, settings)
     tile_px = img[..., 0] < 1e-6        # the black tile from above (8 × 8 pixels)
     assert 40 < tile_px.sum() < 120

@@ -41,6 +41,15 @@ float unit_of(uint h) {
     return float(h >> 8u) * (1.0 / 16777216.0);
 }
 
+// This draw's sample (the independent sampler) or group of samples (the pixel sampler).
+uniform int sample_index;
+
+// The pixel's hash of `seed` (this draw's sample or group and the pixel's place in the image):
+// each use of random numbers in a pixel starts from a seed of its own.
+uint pixel_hash(int px, int py, uint seed) {
+    return hash32(hash32(hash32(uint(sample_index) ^ seed) ^ uint(py)) ^ uint(px));
+}
+
 // The seed of this sample's (or this pixel sampler walk's) points on lights with an extent,
 // set by main; light_sample(k, l): the two numbers for light l at the pixel's k-th shading.
 uint light_seed;
@@ -302,14 +311,6 @@ void sample_ray(vec3 o, vec3 d, vec2 q, out vec3 so, out vec3 sd) {
 #else
     sd = normalize(d + q.x * px_du + q.y * px_dv);
 #endif
-}
-
-uniform int sample_index;       // the group of samples this draw takes
-
-// The pixel's hash of `seed` (this draw's group and the pixel's place in the image): each use
-// of random numbers in a pixel starts from a seed of its own.
-uint pixel_hash(int px, int py, uint seed) {
-    return hash32(hash32(hash32(uint(sample_index) ^ seed) ^ uint(py)) ^ uint(px));
 }
 
 // The offset of a sample drawn evenly, by u in [0, 1), among those of `mask` (bit s: sample
@@ -586,13 +587,11 @@ void main() {
 // early, silently); all samples in one invocation with several layers and shadow rays ran
 // past it and dropped hits, so the work of one invocation is kept to one sample (the pixel
 // sampler above shares one walk between the samples instead).
-uniform int sample_index;
-
 void main() {
     int px = int(gl_FragCoord.x) + pixel_origin.x;
     int py = int(image_size.y) - 1 - int(gl_FragCoord.y) + pixel_origin.y;   // row 0 = top
     vec2 jit = sample_jitter(sample_index, px, py);
-    light_seed = hash32(hash32(hash32(uint(sample_index) ^ 0x27d4eb2du) ^ uint(py)) ^ uint(px));
+    light_seed = pixel_hash(px, py, 0x27d4eb2du);
     vec3 o, d; float len;
     camera_ray(float(px) + jit.x, float(py) + jit.y, o, d, len);
     float widen_per_t = 0.0, widen_const = 0.0;
