@@ -7,10 +7,11 @@
 // once (footprint_mask) and keeps the PIX_M nearest distinct cylinders any sample hits,
 // each with the mask of the samples it covers (with one layer, each sample's own nearest
 // cylinder instead). trace_main.glsl then composites each sample's own hits (at most LAYERS
-// per sample, as the independent sampler does) and shades the heaviest distinct cylinders
-// once each, on the ray of a sample drawn among those that meet it, one more drawn by weight
-// standing for the rest (with one layer, one set of shadow rays a pixel, cast from a strand
-// drawn by its light: "The pixel sampler is unbiased").
+// per sample, as the independent sampler does) and shades distinct cylinders once each, on
+// the ray of a sample drawn among those that meet it: with layers the PIX_SHADE heaviest;
+// with one layer the PIX_SHADE_ONE heaviest (so every strand of a walk of up to that many
+// samples), with one set of shadow rays a pixel, cast from a strand drawn by its light; and
+// one more, drawn by weight, standing for the rest ("The pixel sampler is unbiased").
 // docs/DECISIONS.md, "Samples of one pixel share the walk".
 #if PIXEL
 const int PN = PIX_GROUP;                   // samples per walk (settings: at most 25)
