@@ -45,9 +45,10 @@ unless that is the only way out; so a strand let go by the surface bends back to
 direction gradually instead of kinking. The root never moves.
 """
 import hashlib
+import time
 import weakref
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 
 import numpy as np
@@ -862,9 +863,13 @@ class CollisionStats:
     points_inside_before: int = 0
     largest_move: float = 0.0
     unresolved: int = 0
+    # Seconds spent resolving, summed over the blocks (thread time: blocks grown side by side
+    # overlap, so this can exceed the wall time it took). Not part of what a run did.
+    seconds: float = field(default=0.0, compare=False)
 
     def add(self, other):
-        for name in ("strands", "points", "strands_moved", "points_moved", "points_inside_before", "unresolved"):
+        for name in ("strands", "points", "strands_moved", "points_moved", "points_inside_before", "unresolved",
+                     "seconds"):
             setattr(self, name, getattr(self, name) + getattr(other, name))
         self.largest_move = max(self.largest_move, other.largest_move)
 
@@ -1441,14 +1446,18 @@ class StrandCollision:
             _KEY_CHECKS.popitem(last=False)
 
     def apply(self, points, counts, radius, sel=None, threads=None):
-        """Points (float32) of strands `sel` (None: all) moved out of the collider."""
-        new, moved, self.last = resolve_strands(self.collider, points, counts, radius, self.margin, threads,
-                                                in_place=True)
+        """(points (float32) of strands `sel` (None: all) moved out of the collider, the
+        CollisionStats of this call). Calls for disjoint strands may run side by side:
+        each writes only its own strands' `moved` (the caller keeps `last`)."""
+        t0 = time.perf_counter()
+        new, moved, stats = resolve_strands(self.collider, points, counts, radius, self.margin, threads,
+                                            in_place=True)
         if sel is None:
             self.moved = moved
         else:
             self.moved[sel] = moved
-        return new
+        stats.seconds = time.perf_counter() - t0
+        return new, stats
 
     def report(self):
         return CollisionReport(self.collider.name, int(self.moved.sum()), self.keys_inside, self.last)

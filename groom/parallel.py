@@ -25,22 +25,27 @@ def cpu_threads():
     return os.cpu_count() or 1
 
 
+def _pool(threads):
+    """The process's pool of `threads` worker threads, made on first use and kept: starting
+    threads on every call cost more than a small job itself. Keyed by process too: a forked
+    child inherits the pool but not its threads."""
+    key = (os.getpid(), threads)
+    pool = _POOLS.get(key)
+    if pool is None:
+        pool = _POOLS[key] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix=_PREFIX)
+    return pool
+
+
 def run_jobs(jobs, threads=None, here=None):
     """Call every job() (no arguments), on up to `threads` threads (default: one per CPU),
     and return their results in order. `here`: one more job that the calling thread runs
-    meanwhile; its result comes last. The worker threads are made once per process and
-    kept: starting threads on every call cost more than a small job itself."""
+    meanwhile; its result comes last (the worker threads: _pool)."""
     threads = min(threads or cpu_threads(), len(jobs))
     # A job that itself runs jobs would wait for the workers it occupies: it runs them itself.
     nested = threading.current_thread().name.startswith(_PREFIX)
     if nested or threads < 1 or (threads == 1 and (here is None or cpu_threads() == 1)):
         return [job() for job in jobs] + ([here()] if here else [])
-    # Keyed by process too: a forked child inherits the pool but not its threads.
-    key = (os.getpid(), threads)
-    pool = _POOLS.get(key)
-    if pool is None:
-        pool = _POOLS[key] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix=_PREFIX)
-    futures = [pool.submit(job) for job in jobs]
+    futures = [_pool(threads).submit(job) for job in jobs]
     try:
         mine = [here()] if here else []
     finally:
@@ -48,6 +53,38 @@ def run_jobs(jobs, threads=None, here=None):
         for f in futures:
             f.exception()  # waits for it
     return [f.result() for f in futures] + mine
+
+
+def run_each(jobs, threads=None, done=None):
+    """run_jobs for jobs that each do a large share of the work (a block of strands), on up to
+    `threads` worker threads, with done(i) called in the calling thread as job i (in order)
+    has finished (progress reports stay on the thread that asked for them). Each job's own
+    run_jobs then run in its thread (nested), so the threads split the work by jobs, not
+    every call: numpy calls on arrays of a few thousand items do not share two cores (the
+    interpreter between them takes turns), a job of its own per thread does."""
+    threads = min(threads or cpu_threads(), len(jobs))
+    nested = threading.current_thread().name.startswith(_PREFIX)
+    if nested or threads <= 1:
+        out = []
+        for i, job in enumerate(jobs):
+            out.append(job())
+            if done is not None:
+                done(i)
+        return out
+    futures = [_pool(threads).submit(job) for job in jobs]
+    try:
+        for i, f in enumerate(futures):
+            f.exception()
+            if done is not None:
+                done(i)
+    finally:
+        # Whatever fails (a job, or done), no job may still be writing when the caller goes on.
+        for f in futures:
+            f.cancel()
+        for f in futures:
+            if not f.cancelled():
+                f.exception()
+    return [f.result() for f in futures]
 
 
 def ranges(n, threads=None, size=RANGE_SIZE, min_size=MIN_SPLIT):

@@ -10,7 +10,8 @@ wisps, resolution, interpolation, clump, collision, radius, colour; the collider
 once per process, as Blender's Generate reuses it); Blender's is the node tree's evaluation
 alone (its result is not even copied out), so the comparison leans towards Blender. Both use
 every core: Blender's node through its task scheduler, groom through one worker thread per
-CPU for its whole-array numpy work. Beside the wall-clock times, the process CPU time of the
+CPU, each growing a block of strands of its own from 2 × 32,768 strands on (below that, each
+stage's whole-array numpy work split over the threads). Beside the wall-clock times, the process CPU time of the
 same runs (all threads): on a shared machine other work stretches wall time far more than
 the CPU time a job needs.
 """
@@ -106,23 +107,6 @@ class _Cpu:
         return float(np.median(self.seconds[1:] or self.seconds))
 
 
-class _StageClock:
-    """A progress callback that keeps when each stage began, so one timed run also says
-    what its collision cost."""
-
-    def __init__(self):
-        self.marks = []
-
-    def __call__(self, fraction, stage):
-        self.marks.append((time.perf_counter(), stage))
-
-    def collision_seconds(self):
-        """Seconds from each "moving hair out of the collider" to the next stage, summed (a
-        large head repeats its stages a block of strands at a time)."""
-        return sum(b[0] - a[0] for a, b in zip(self.marks, self.marks[1:])
-                   if a[1] == "moving hair out of the collider")
-
-
 def _single_run(job, data, count, budget, side="ours"):
     """(Timing of one call of job, its result), for the counts where the runs of `measure`
     would not fit: TooSlow when the largest row measured so far, scaled linearly to
@@ -187,13 +171,11 @@ def run(sec, cfg):
             sec.not_measured(f"{count:,} strands", "skipped to stay inside the section's time budget")
             continue
         params = base.replace(count=int(count))
-        clock = _StageClock()
         costs = []
 
         def job():
-            clock.marks.clear()
-            out = groom.generate(scalp, keys, params, collider=collider, progress=clock)
-            costs.append(clock.collision_seconds())
+            out = groom.generate(scalp, keys, params, collider=collider)
+            costs.append(out.collision.last.seconds)
             return out
         try:
             our_cpu = _Cpu(job)
@@ -242,7 +224,9 @@ def run(sec, cfg):
                       "process, one call of each in turn, so that both see the same state of the machine). "
                       f"From {SINGLE_RUN_COUNT:,} strands on (*1 run*), one timed run each side and no "
                       "warm-up (the smaller rows have warmed both up): five would not fit the section's budget. "
-                      "*of which collision*: the collision stage of the same runs (median). *CPU*: "
+                      "*of which collision*: the collision's own time in the same runs (median; where the blocks of "
+                      "strands grow side by side, the threads' time summed, which can exceed its share of the "
+                      "wall time). *CPU*: "
                       "process CPU seconds of the same runs, all threads. *load average*: the machine's 1-minute "
                       "load average after the row (above its core count, other work competed for the cores).")
     sec.text("*Blender output*: strands × points, the same count and the average of groom's adaptive counts. "
@@ -345,17 +329,16 @@ def _presets(sec, cfg, groom, scalp, collider):
             continue
         placement = groom.load_preset(name).place_keys(scalp)
         params = placement.params.replace(count=count)
-        clock = _StageClock()
         t0 = time.perf_counter()
         plain = groom.generate(scalp, placement.keys, params.replace(collision=False))
         t_plain = time.perf_counter() - t0
         t0 = time.perf_counter()
-        held = groom.generate(scalp, placement.keys, params, collider=collider, progress=clock)
+        held = groom.generate(scalp, placement.keys, params, collider=collider)
         t_held = time.perf_counter() - t0
         before, after = inside_shares(collider, plain.strands), inside_shares(collider, held.strands)
         rows.append([name, f"{before[0]:.1%}", f"{before[1]:.2%}", f"{after[0]:.1%}", f"{after[1]:.2%}",
-                     f"{held.collision.strands_moved / count:.1%}", fmt_time(clock.collision_seconds()),
-                     f"{clock.collision_seconds() / max(t_held, 1e-9):.0%}", fmt_time(t_plain)])
+                     f"{held.collision.strands_moved / count:.1%}", fmt_time(held.collision.last.seconds),
+                     f"{held.collision.last.seconds / max(t_held, 1e-9):.0%}", fmt_time(t_plain)])
         sec.summary.append(f"{name}: strands inside the head {before[0]:.1%} → {after[0]:.1%}, points "
                            f"{before[1]:.2%} → {after[1]:.2%}")
     if rows:

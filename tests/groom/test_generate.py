@@ -344,21 +344,50 @@ def test_adaptive_strands_end_without_a_sliver_segment(scalp):
     assert length.min() > 1e-6
 
 
-@pytest.mark.parametrize("resolution, variation", [("adaptive", 0.02), ("fixed", 0.02), ("adaptive", 0.0)])
-def test_growing_in_blocks_changes_no_number(scalp, resolution, variation):
+@pytest.mark.parametrize("resolution, variation, side_by_side", [("adaptive", 0.02, False), ("fixed", 0.02, False),
+                                                                  ("adaptive", 0.0, False), ("adaptive", 0.02, True),
+                                                                  ("fixed", 0.0, True)])
+def test_growing_in_blocks_changes_no_number(scalp, resolution, variation, side_by_side, monkeypatch):
     """Blocks of 200 strands against one block, on the wavy preset with
     its clump and collision: every array, the resolution notes, the collision's report and an
     incremental update spanning blocks. Without per-point colour variation the blocks' points
-    and attributes are written straight into the whole's arrays; with it, copied there."""
+    and attributes are written straight into the whole's arrays; with it, copied there.
+    side_by_side: the blocks grown on the worker threads at once (as from
+    generate.PARALLEL_BLOCK strands a block on), reporting progress from the calling thread."""
+    import importlib
+    import threading
     from groom import default_collider, load_preset
+    from groom.parallel import cpu_threads
+    module = importlib.import_module("groom.generate")
+
+    grown_on = []
+
+    def blocks_do(call):
+        """call() with the blocks side by side or not, whatever their size, noting the
+        threads the blocks grew on."""
+        grow = module._Grower._grow
+
+        def noted(self, *args, **kwargs):
+            grown_on.append(threading.current_thread())
+            return grow(self, *args, **kwargs)
+        with monkeypatch.context() as m:
+            m.setattr(module, "PARALLEL_BLOCK", 100 if side_by_side else 10 ** 9)
+            m.setattr(module._Grower, "_grow", noted)
+            return call()
     placement = load_preset("wavy").place_keys(scalp)
     params = placement.params.replace(count=3000, seed=4, resolution_mode=resolution,
                                       points_per_strand=96 if resolution == "adaptive" else 24,
                                       color_variation_point=(variation,) * 3)
     keys = list(placement.keys)
     one = Generator(scalp, keys, params, collider=default_collider(), block_strands=10_000)
-    blocks = Generator(scalp, keys, params, collider=default_collider(), block_strands=200)
-    a, b = one.generate(), blocks.generate()
+    reports = []
+    blocks = Generator(scalp, keys, params, collider=default_collider(), block_strands=200,
+                       progress=lambda f, stage: reports.append((f, threading.current_thread())))
+    a, b = one.generate(), blocks_do(blocks.generate)
+    assert {t for _, t in reports} == {threading.current_thread()}
+    workers = {t for t in grown_on if t is not threading.current_thread()}
+    assert len(grown_on) >= 3000 // 200 and len(workers) == (min(2, cpu_threads()) if side_by_side else 0)
+    assert [f for f, _ in reports] == sorted(f for f, _ in reports) and reports[-1][0] == 1.0
     _same(a, b)
     assert a.collision.strands_moved == b.collision.strands_moved > 0
     assert a.collision.last == b.collision.last
@@ -368,6 +397,6 @@ def test_growing_in_blocks_changes_no_number(scalp, resolution, variation):
     k = keys[3]
     reshaped = KeyStrand(k.points * [1.0, 1.0, 1.0] + np.linspace(0, 0.01, len(k.points))[:, None] * [1, 0, 0],
                          kind=k.kind, color=k.color, root_radius=k.root_radius, group=k.group)
-    a, b = one.update_keys({3: reshaped}), blocks.update_keys({3: reshaped})
+    a, b = one.update_keys({3: reshaped}), blocks_do(lambda: blocks.update_keys({3: reshaped}))
     assert blocks.last_recomputed > 200
     _same(a, b)

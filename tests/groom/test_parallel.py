@@ -3,7 +3,7 @@ import threading
 
 import pytest
 
-from groom.parallel import ranges, run_jobs
+from groom.parallel import ranges, run_each, run_jobs
 
 
 @pytest.mark.parametrize("n", [0, 1, 4095, 8192, 100001])
@@ -36,3 +36,53 @@ def test_a_failing_job_raises_in_the_caller_after_the_others_finished():
 def test_jobs_that_run_jobs_do_not_wait_for_themselves():
     out = run_jobs([lambda: run_jobs([lambda: 1, lambda: 2], threads=2) for _ in range(4)], threads=2)
     assert out == [[1, 2]] * 4
+
+
+def test_run_each_reports_from_the_calling_thread_in_order_and_nests_each_jobs_work():
+    caller = threading.current_thread()
+    reported = []
+
+    def job(i):
+        # The job's own run_jobs stay on its thread.
+        inner = run_jobs([lambda: threading.current_thread(), lambda: threading.current_thread()], threads=2)
+        return i, threading.current_thread(), inner
+
+    def done(i):
+        reported.append((i, threading.current_thread()))
+    out = run_each([lambda i=i: job(i) for i in range(5)], threads=2, done=done)
+    assert [o[0] for o in out] == list(range(5))
+    assert all(o[1] is not caller and o[2] == [o[1], o[1]] for o in out)
+    assert reported == [(i, caller) for i in range(5)]
+
+
+def test_run_each_on_one_thread_runs_in_the_caller():
+    caller = threading.current_thread()
+    reported = []
+    out = run_each([lambda i=i: (i, threading.current_thread()) for i in range(3)], threads=1, done=reported.append)
+    assert out == [(i, caller) for i in range(3)] and reported == [0, 1, 2]
+
+
+def test_run_each_raises_after_every_started_job_finished():
+    finished = []
+
+    def slow():
+        threading.Event().wait(0.05)
+        finished.append(1)
+    with pytest.raises(ZeroDivisionError):
+        run_each([slow, lambda: 1 / 0, slow, slow], threads=2)
+    assert len(finished) == 3
+
+    # A failing report stops the jobs not started yet; none still runs when it raises.
+    finished.clear()
+    running = []
+
+    def tracked():
+        running.append(1)
+        threading.Event().wait(0.05)
+        finished.append(1)
+
+    def stop(i):
+        raise KeyboardInterrupt
+    with pytest.raises(KeyboardInterrupt):
+        run_each([tracked] * 8, threads=2, done=stop)
+    assert len(finished) == len(running) < 8
