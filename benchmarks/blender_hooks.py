@@ -30,6 +30,21 @@ def _median(fn, runs):
     return statistics.median(times)
 
 
+def _medians_in_turn(fns, runs):
+    """Median seconds of each of `fns`, after a warm-up each, called one after another in
+    `runs` rounds, so that all see the same state of a shared machine (measured one after
+    the other, a host whose speed drifts moves their ratio)."""
+    for fn in fns:
+        fn()
+    times = [[] for _ in fns]
+    for _ in range(runs):
+        for fn, out in zip(fns, times):
+            t = time.perf_counter()
+            fn()
+            out.append(time.perf_counter() - t)
+    return [statistics.median(t) for t in times]
+
+
 def _active(obj):
     bpy.context.view_layer.objects.active = obj
 
@@ -63,7 +78,8 @@ class BlenderHooks:
             setattr(self, name, importlib.import_module(f"{addon}.{name}"))
 
     def generate_timings(self, scalp, count=100_000, runs=5):
-        """Seconds: `operator` (Generate pressed: read scene, groom, write the Curves object),
+        """Seconds: `operator` (Generate pressed: read scene, groom, write the Curves object,
+        and Blender's undo step after it), `operator_no_undo` (the same without the undo step),
         `groom` (groom.Generator(...).generate() alone on the same arrays and collider), `write`
         (strands -> Curves object alone) and `read` (scalp + keys -> arrays), plus the
         strand/point counts. The collider is built once beforehand (groom caches it), as a second
@@ -80,16 +96,22 @@ class BlenderHooks:
             params = groom_params(settings)
             result = Generator(scalp_data, keys, params, collider=collider).generate()
 
-            def operator():
+            def operator(undo=True):
                 _active(scalp)
-                if bpy.ops.hair.generate() != {'FINISHED'}:
+                if bpy.ops.hair.generate('EXEC_DEFAULT', undo) != {'FINISHED'}:
                     raise RuntimeError("Generate failed")
 
+            op, op_no_undo, model = _medians_in_turn(
+                [operator, lambda: operator(False),
+                 lambda: Generator(scalp_data, keys, params, collider=collider).generate()], runs)
             out = {
                 "strands": result.strands.num_strands,
                 "points": result.strands.num_points,
-                "operator_s": _median(operator, runs),
-                "groom_s": _median(lambda: Generator(scalp_data, keys, params, collider=collider).generate(), runs),
+                "operator_s": op,
+                # The operator called without Blender's undo step: what the step after it costs
+                # (the undo system stores the new Curves datablock) is the difference.
+                "operator_no_undo_s": op_no_undo,
+                "groom_s": model,
                 "write_s": _median(lambda: hair.write_hair(scalp, result.strands, result.root_uv), runs),
                 "read_s": _median(lambda: hair.read_inputs(scalp, bpy.context.evaluated_depsgraph_get()), runs),
             }

@@ -96,7 +96,7 @@ FULL = Config(
     # 1,000,000 strands: ~61 M cylinders, split over two buffer textures (anchors, accel).
     anc_counts=(10000, 100000, 1000000),
     limits={"generation": 520, "geometry": 300, "rendering": 240, "anchors": 2200, "scaling": 300,
-            "skips": 180, "stress": 100, "gpu": 20, "integration": 240,
+            "skips": 180, "stress": 100, "gpu": 20, "integration": 320,
             "export": 420, "versions": 600, "preview_defaults": 1800, "contact_sheet": 1500,
             "accel": 1300, "hair_shading": 1200, "meshes": 300, "preview_refinement": 900},
 )

@@ -6,7 +6,7 @@ write the Curves object) to a finished Curves object, against groom alone on the
 arrays; time from "Render Preview" (`hair.render_preview`: camera, render, pixels into the
 "Hair Preview" image) to pixels, against the tracer alone. Both measured by
 `benchmarks/blender_hooks.py` driving this checkout's add-on (median of runs after a warm-up,
-same process).
+same process; Generate, Generate without Blender's undo step and groom alone called in turn).
 
 Issue 5: export time and file size per format for one groom, and the `.tfx` resampling
 error (largest distance from the original strand to the resampled one) per vertex count.
@@ -50,9 +50,12 @@ def _extension(sec, cfg):
         g = hooks.generate_timings(scalp, count=count, runs=cfg.runs)
         rows = [["Generate → Curves object", f"{g['strands']:,} strands, {g['points']:,} points",
                  fmt_time(g["operator_s"]), fmt_time(g["groom_s"]), f"{ratio(g['operator_s'], g['groom_s']):.2f}",
-                 f"read scene {fmt_time(g['read_s'])}, write Curves {fmt_time(g['write_s'])}"]]
+                 f"read scene {fmt_time(g['read_s'])}, write Curves {fmt_time(g['write_s'])}; the operator without "
+                 f"Blender's undo step after it {fmt_time(g['operator_no_undo_s'])} "
+                 f"({ratio(g['operator_no_undo_s'], g['groom_s']):.2f}× groom)"]]
         sec.summary.append(f"Generate {fmt_time(g['operator_s'])} vs groom {fmt_time(g['groom_s'])} "
-                           f"({ratio(g['operator_s'], g['groom_s']):.2f}×) at {g['strands']:,} strands")
+                           f"({ratio(g['operator_s'], g['groom_s']):.2f}×; without Blender's undo step "
+                           f"{ratio(g['operator_no_undo_s'], g['groom_s']):.2f}×) at {g['strands']:,} strands")
         if not over_budget(sec, 0.8):
             p = hooks.preview_timings(scalp, runs=cfg.runs)
             w, h = p["size"]
