@@ -117,15 +117,16 @@ def _block_workers(n):
 # Strands a block needs before the blocks are grown side by side, one per thread, rather than
 # one at a time with each stage's work split over the threads. Measured on 2 cores with
 # `wavy`, alternating the two in one process: at 100,000 strands (two blocks of 50,000) side
-# by side took 0.87-0.89 of the wall time and 0.80-0.83 of the CPU time; at 10,000 (two of
-# 5,000) 1.2 times the wall time, as each block's collision walk is left with a few hundred
-# strands a step.
+# by side took 0.85-0.90 of the wall time and 0.80-0.88 of the CPU time (four runs); at
+# 10,000 (two of 5,000) 1.2 times the wall time, as each block's collision walk is left with
+# a few hundred strands a step.
 PARALLEL_BLOCK = 32768
 
 
 def _block_size(n, most, workers):
     """Strands per block of n: at most `most`, and as many blocks as a multiple of the
-    workers, so that no thread waits at the end while another grows a block."""
+    workers, so each thread grows as many strands (not always as much work: a block whose
+    strands collide takes longer, docs/DECISIONS.md)."""
     parts = max(-(-n // max(int(most), 1)), workers)
     parts = -(-parts // workers) * workers
     return -(-n // parts)
