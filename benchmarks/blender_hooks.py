@@ -20,16 +20,6 @@ import numpy as np
 import bpy
 
 
-def _median(fn, runs):
-    fn()
-    times = []
-    for _ in range(runs):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times)
-
-
 def _medians_in_turn(fns, runs):
     """Median seconds of each of `fns`, after a warm-up each, called one after another in
     `runs` rounds, so that all see the same state of a shared machine (measured one after
@@ -43,6 +33,11 @@ def _medians_in_turn(fns, runs):
             fn()
             out.append(time.perf_counter() - t)
     return [statistics.median(t) for t in times]
+
+
+def _median(fn, runs):
+    """Median seconds of `runs` calls of fn after a warm-up."""
+    return _medians_in_turn([fn], runs)[0]
 
 
 def _active(obj):

@@ -36,14 +36,18 @@ def _pool(threads):
     return pool
 
 
+def _on_worker():
+    """Whether the calling thread is one of the pool's: a job that itself runs jobs would
+    wait for the workers it occupies, so it runs them itself."""
+    return threading.current_thread().name.startswith(_PREFIX)
+
+
 def run_jobs(jobs, threads=None, here=None):
     """Call every job() (no arguments), on up to `threads` threads (default: one per CPU),
     and return their results in order. `here`: one more job that the calling thread runs
     meanwhile; its result comes last (the worker threads: _pool)."""
     threads = min(threads or cpu_threads(), len(jobs))
-    # A job that itself runs jobs would wait for the workers it occupies: it runs them itself.
-    nested = threading.current_thread().name.startswith(_PREFIX)
-    if nested or threads < 1 or (threads == 1 and (here is None or cpu_threads() == 1)):
+    if _on_worker() or threads < 1 or (threads == 1 and (here is None or cpu_threads() == 1)):
         return [job() for job in jobs] + ([here()] if here else [])
     futures = [_pool(threads).submit(job) for job in jobs]
     try:
@@ -63,8 +67,7 @@ def run_each(jobs, threads=None, done=None):
     every call: numpy calls on arrays of a few thousand items do not share two cores (the
     interpreter between them takes turns), a job of its own per thread does."""
     threads = min(threads or cpu_threads(), len(jobs))
-    nested = threading.current_thread().name.startswith(_PREFIX)
-    if nested or threads <= 1:
+    if _on_worker() or threads <= 1:
         out = []
         for i, job in enumerate(jobs):
             out.append(job())

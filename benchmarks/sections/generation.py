@@ -11,9 +11,9 @@ once per process, as Blender's Generate reuses it); Blender's is the node tree's
 alone (its result is not even copied out), so the comparison leans towards Blender. Both use
 every core: Blender's node through its task scheduler, groom through one worker thread per
 CPU, each growing a block of strands of its own from 2 × 32,768 strands on (below that, each
-stage's whole-array numpy work split over the threads). Beside the wall-clock times, the process CPU time of the
-same runs (all threads): on a shared machine other work stretches wall time far more than
-the CPU time a job needs.
+stage's whole-array numpy work split over the threads). Beside the wall-clock times, the
+process CPU time of the same runs (all threads): on a shared machine other work stretches
+wall time far more than the CPU time a job needs.
 """
 import json
 import os
