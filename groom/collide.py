@@ -867,6 +867,12 @@ class CollisionStats:
     # overlap, so this can exceed the wall time it took). Not part of what a run did.
     seconds: float = field(default=0.0, compare=False)
 
+    def add_walk(self, walked):
+        """walk_into's (points moved, points unresolved, largest move) added to these."""
+        self.points_moved += walked[0]
+        self.unresolved += walked[1]
+        self.largest_move = max(self.largest_move, walked[2])
+
     def add(self, other):
         for name in ("strands", "points", "strands_moved", "points_moved", "points_inside_before", "unresolved",
                      "seconds"):
@@ -878,12 +884,10 @@ def resolve_strands(collider, points, counts, radius, margin, threads=None, dtyp
     """Strands moved out of the collider (see the module's notes): returns (points (P,3) of
     `dtype`, moved (S,) bool, CollisionStats). points (P,3), counts (S,), radius (P,) per
     point; margin in scene units; in_place: move `points` themselves (no copy of them). The
-    strands are looked at in ranges on `threads` threads, and those that must move are
-    walked in one part per thread (parts of at least _MIN_WALK_PART), or parts of
-    _WALK_PART strands when there are more (the walk goes point by point, and each part
-    pays its steps' overhead once; the bound keeps
-    its arrays to some 100 MB); each strand's numbers depend only on itself, never on its
-    range or part."""
+    strands are looked at in ranges on `threads` threads (first_pass), and those that must
+    move are walked in parts (walk_into); each strand's numbers depend only on itself, never
+    on its range or part (so the two steps may also run for shares of the strands in
+    separate processes, groom.generate)."""
     counts = np.asarray(counts, np.int64)
     points, radius = np.asarray(points), np.asarray(radius)
     offsets = np.zeros(len(counts), np.int64)
@@ -893,27 +897,52 @@ def resolve_strands(collider, points, counts, radius, margin, threads=None, dtyp
     stats = CollisionStats(strands=len(counts), points=int(counts.sum()))
     if not len(counts):
         return out, moved, stats
-    found = run_jobs([partial(_offending, collider, points, offsets, counts, radius, margin, lo, hi)
-                      for lo, hi in ranges(len(counts), threads)], threads)
-    strands = np.concatenate([f[0] for f in found])
-    k0 = np.concatenate([f[1] for f in found])
-    root_value = np.concatenate([f[2] for f in found])
-    stats.points_inside_before = sum(f[3] for f in found)
+    strands, k0, root_value, stats.points_inside_before = first_pass(
+        collider, points, offsets, counts, radius, margin, ranges(len(counts), threads), threads)
     if not strands.size:
         return out, moved, stats
-    n_parts = max(min(-(-len(strands) // _MIN_WALK_PART), threads or cpu_threads()), -(-len(strands) // _WALK_PART))
-    parts = np.array_split(np.arange(len(strands)), n_parts)
-    walked = run_jobs([partial(_walk_strands, collider, points, offsets, counts, radius, margin, strands[p], k0[p],
-                               root_value[p]) for p in parts if len(p)], threads)
-    for part, (rows, new, changed, unresolved, largest) in zip([p for p in parts if len(p)], walked):
-        ch = _indices(changed)
-        out[rows[ch]] = _take(new, ch)
-        moved[strands[part]] = np.logical_or.reduceat(changed, np.cumsum(counts[strands[part]]) - counts[strands[part]])
-        stats.points_moved += int(changed.sum())
-        stats.unresolved += unresolved
-        stats.largest_move = max(stats.largest_move, largest)
+    moved[strands], walked = walk_into(collider, out, points, offsets, counts, radius, margin, strands, k0,
+                                       root_value, threads)
+    stats.add_walk(walked)
     stats.strands_moved = int(moved.sum())
     return out, moved, stats
+
+
+def first_pass(collider, points, offsets, counts, radius, margin, parts, threads=None):
+    """The strands among the ranges `parts` [(lo, hi), ...] that must move: (their indices,
+    the first point of each that is too close, their roots' sampled distance, points found
+    deeper than their radius: CollisionStats.points_inside_before), the ranges looked at on
+    `threads` threads."""
+    found = run_jobs([partial(_offending, collider, points, offsets, counts, radius, margin, lo, hi)
+                      for lo, hi in parts], threads)
+    if not found:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), 0
+    return (np.concatenate([f[0] for f in found]), np.concatenate([f[1] for f in found]),
+            np.concatenate([f[2] for f in found]), sum(f[3] for f in found))
+
+
+def walk_into(collider, out, points, offsets, counts, radius, margin, strands, k0, root_value, threads=None):
+    """Walks `strands` (from first_pass) out of the collider, reading `points` and writing the
+    points that move into `out` (which may be `points`: a strand reads only its own points):
+    (moved (len(strands),) bool, (points moved, points unresolved, largest move)). One part
+    per thread (parts of at least _MIN_WALK_PART), or parts of _WALK_PART strands when there
+    are more (the walk goes point by point, and each part pays its steps' overhead once; the
+    bound keeps its arrays to some 100 MB)."""
+    n_parts = max(min(-(-len(strands) // _MIN_WALK_PART), threads or cpu_threads()), -(-len(strands) // _WALK_PART))
+    parts = [p for p in np.array_split(np.arange(len(strands)), n_parts) if len(p)]
+    walked = run_jobs([partial(_walk_strands, collider, points, offsets, counts, radius, margin, strands[p], k0[p],
+                               root_value[p]) for p in parts], threads)
+    moved = np.zeros(len(strands), bool)
+    points_moved, unresolved, largest = 0, 0, 0.0
+    for part, (rows, new, changed, part_unresolved, part_largest) in zip(parts, walked):
+        ch = _indices(changed)
+        out[rows[ch]] = _take(new, ch)
+        cnt = counts[strands[part]]
+        moved[part] = np.logical_or.reduceat(changed, np.cumsum(cnt) - cnt)
+        points_moved += int(changed.sum())
+        unresolved += part_unresolved
+        largest = max(largest, part_largest)
+    return moved, (points_moved, unresolved, largest)
 
 
 def _offending(collider, points, offsets, counts, radius, margin, lo, hi):

@@ -15,6 +15,7 @@ of any size to a file in the memory of one block.
 import mmap
 import os
 import shutil
+import time
 import warnings
 from dataclasses import dataclass
 from functools import partial
@@ -37,8 +38,9 @@ from .keys import KeyStrand
 from .params import GroomParams
 from .sampling import sample_roots
 from .scalp import Scalp
-from .parallel import MIN_SPLIT, cpu_threads, ranges, run_each, run_jobs
-from .collide import CollisionReport, CollisionStats, StrandCollision
+from . import processes
+from .parallel import MIN_SPLIT, cpu_threads, one_thread, ranges, run_each, run_jobs
+from .collide import CollisionReport, CollisionStats, StrandCollision, first_pass, walk_into
 from .shaping import clump_arguments, shape_strands, shaping_bound
 from .wisps import check_groups, guide_weights_by_guide, root_groups_for
 
@@ -330,15 +332,16 @@ class _Grower:
         self._note_resolution(idx, res.met, tol, res.needed)
         return res.sigma, res.counts
 
-    def _grow(self, context, roots, transforms, g, w, frac, ids, idx, report, plan=None, into=None):
+    def _grow(self, context, roots, transforms, g, w, frac, ids, idx, report, plan=None, into=None, collide=True):
         """Points and attributes (points, counts, radius, colour, alpha) of one block of
         strands from their per-strand inputs, component-major: roots (3, n), transforms (9,
         n), guides g (3, n), weights w (3, n), length fractions and ids (n,); idx: where they
         lie among the strands (a slice or indices), for the resolution and collision notes;
         plan: their _plan, made here when None; into: None or (points, radius, colour, alpha)
         arrays of the block's rows of the whole result, written where the work allows (the
-        arrays returned are then those). The sixth item returned: the collision's
-        CollisionStats of the block, or None without a collider."""
+        arrays returned are then those); collide False: the caller moves them out of the
+        collider itself. The sixth item returned: the collision's CollisionStats of the
+        block, or None without a collider (or collide False)."""
         p = self.params
         radii, rows = context["radii"], context["rows"]
         report(0.0, "growing strands")
@@ -365,7 +368,7 @@ class _Grower:
         shape_strands(pts, counts, sigma, frac, transforms, g[0], ids, rows, p, threads)
         del sigma
         stats = None
-        if self._collision is not None:
+        if self._collision is not None and collide:
             report(0.6, "moving hair out of the collider")
             pts, stats = self._collision.apply(pts, counts, attrs[0], idx, threads)
         return (pts, counts) + tuple(attrs) + (stats,)
@@ -399,6 +402,92 @@ class _Grower:
         return [partial(fill, lo, hi) for lo, hi in ranges(len(ids))], out
 
 
+def _keep_rows(rows, grown):
+    """Copy into the result's rows what _grow made in arrays of its own (the work does not
+    always allow writing in place)."""
+    for whole, part in zip(rows, grown[:1] + grown[2:5]):
+        if not np.may_share_memory(whole, part):
+            whole[...] = part
+
+
+class _WorkerGrower(_Grower):
+    """A worker process's side of Generator._grown_in_processes: grows blocks from the
+    inputs the parent sends, with the parent's keys' rows and collider (_worker_spec)."""
+
+    def __init__(self, spec):
+        self.params, self._samples, self.context = spec["params"], spec["samples"], spec["context"]
+        self._key_data = [{"color": c} for c in spec["colors"]]
+        self.progress = None
+        self._collision = None
+        if spec["collider"] is not None:
+            c = object.__new__(StrandCollision)
+            c.collider, c.margin, c.keys_inside = processes.kept(spec["collider"]), spec["margin"], ()
+            c.moved, c.last = None, CollisionStats()
+            self._collision = c
+        self.notes = None
+
+    def _note_resolution(self, idx, met, asked, needed):
+        self.notes = (met, asked, needed)
+
+
+def _first_pass_of(c, out, offsets, counts, lo, hi):
+    """collide.first_pass of strands lo..hi of a run's arrays `out` (points, radius, ...),
+    with the seconds it took (None without a collider c)."""
+    if c is None:
+        return None
+    t0 = time.perf_counter()
+    found = first_pass(c.collider, out[0], offsets, counts, out[1], c.margin,
+                       [(lo + a, lo + b) for a, b in ranges(hi - lo)])
+    return found + (time.perf_counter() - t0,)
+
+
+def _walk_share(c, points, radius, offsets, counts, k0, root_value):
+    """collide.walk_into of strands at `offsets` with `counts` points, in place in `points`:
+    (moved, (points moved, unresolved, largest move), seconds)."""
+    t0 = time.perf_counter()
+    moved, totals = walk_into(c.collider, points, points, offsets, counts, radius, c.margin,
+                              np.arange(len(counts)), k0, root_value)
+    return moved, totals, time.perf_counter() - t0
+
+
+def _worker_walk(points, radius, offsets, counts, k0, root_value):
+    """_walk_share in a worker, on the parent's shared points and radii (handles)."""
+    g = processes.STATE["grower"]
+    return _walk_share(g._collision, processes.open_shared(points), processes.open_shared(radius), offsets, counts,
+                       k0, root_value)
+
+
+def _worker_setup(spec):
+    processes.STATE.clear()
+    processes.STATE["grower"] = _WorkerGrower(spec)
+
+
+def _worker_plan(i, inputs):
+    """(counts, resolution notes or None) of block i; its inputs and plan stay here."""
+    g = processes.STATE["grower"]
+    g.notes = None
+    plan = g._plan(g.context, inputs[0], inputs[2], inputs[3], inputs[4], slice(0, len(inputs[4])))
+    processes.STATE[i] = (inputs, plan)
+    return plan[1], g.notes
+
+
+def _worker_grow(i, handles, lo, hi, offsets, first):
+    """Block i grown into rows lo..hi of the parent's shared arrays (handles), then its
+    collision's first pass (_first_pass_of; offsets: its strands' first rows, the first
+    being strand `first` of the run)."""
+    g = processes.STATE["grower"]
+    inputs, plan = processes.STATE.pop(i)
+    whole = tuple(processes.open_shared(h) for h in handles)
+    rows = tuple(a[lo:hi] for a in whole)
+    grown = g._grow(g.context, *inputs, slice(0, len(inputs[4])), _quiet, plan, into=rows, collide=False)
+    del plan
+    _keep_rows(rows, grown)
+    counts = grown[1]
+    del grown
+    found = _first_pass_of(g._collision, (whole[0][lo:hi], whole[1][lo:hi]), offsets - lo, counts, 0, len(counts))
+    return None if found is None else (found[0] + first,) + found[1:]
+
+
 class Generator(_Grower):
     """Incremental generator. `generate()` gives the full result; `update_keys({i: KeyStrand})`
     replaces keys and returns the new result, recomputing only affected strands.
@@ -421,6 +510,8 @@ class Generator(_Grower):
         self.keys = _check_inputs(scalp, keys, params)
         self.scalp, self.params = scalp, params
         p = params
+        if _block_workers(p.count if samples is None else len(samples.ids)) > 1:
+            processes.start(cpu_threads() - 1)
         if samples is None:
             samples = sample_roots(scalp, p.count, p.seed, p.sampling_mode)
         self.samples = samples
@@ -539,6 +630,21 @@ class Generator(_Grower):
                 self._collision.last = grown[5]
             self._report(0.95, "writing strands")
             return grown[:5]
+        if workers > 1 and processes.available() and processes.try_lock():
+            try:
+                return self._grown_in_processes(context, blocks, block, workers,
+                                                slice(None) if sel is None else sel)
+            except processes.WorkerDied as e:
+                # Deterministic either way: the same strands grow on threads instead.
+                processes.disable(str(e))
+                warnings.warn(f"{e}; growing on threads from now on", RuntimeWarning, stacklevel=3)
+            finally:
+                processes.unlock()
+        return self._grown_on_threads(context, blocks, block, workers)
+
+    def _grown_on_threads(self, context, blocks, block, workers):
+        """_strands' blocks grown side by side on `workers` threads (or one after another
+        on one); block(i): (block i's inputs as _grow takes them, its idx)."""
         # Each block's curve parameters first (they hold 8 bytes a point), so the arrays of
         # the whole result are made once and each block's points written into them; the
         # blocks' own arrays then come and go one at a time per thread. The blocks run side
@@ -562,21 +668,162 @@ class Generator(_Grower):
             # point, nor the fresh pages of a block's own arrays).
             grown = self._grow(context, *inputs, idx, _quiet, plan, into=tuple(whole[rows] for whole in out))
             del plan
-            for whole, part in zip(out, grown[:1] + grown[2:5]):
-                if not np.may_share_memory(whole, part):
-                    whole[rows] = part
+            _keep_rows(tuple(whole[rows] for whole in out), grown)
             return grown[5]
-        stage = "growing strands" + (", moving them out of the collider" if self._collision is not None else "")
+        stage = self._growing_stage()
         self._report(0.35, stage)
         found = run_each([partial(grow, i) for i in range(len(blocks))], workers,
                          lambda i: self._report(0.35 + 0.6 * (i + 1) / len(blocks), stage))
+        self._keep_stats(found)
+        self._report(0.95, "writing strands")
+        return out[0], counts, out[1], out[2], out[3]
+
+    def _growing_stage(self):
+        return "growing strands" + (", moving them out of the collider" if self._collision is not None else "")
+
+    def _keep_stats(self, found):
+        """The collision's stats of the blocks (CollisionStats each) as the run's."""
         if self._collision is not None:
             stats = CollisionStats()
             for part in found:
                 stats.add(part)
             self._collision.last = stats
+
+    def _grown_in_processes(self, context, blocks, block, workers, run_idx):
+        """_grown_on_threads with the blocks dealt out to this process (block i for i %
+        workers == 0, on a thread of its pool) and workers - 1 worker processes
+        (groom.processes), which keep each block's curve parameters between its placement
+        and its growing and write its points into the result's shared arrays. The collision
+        then goes in two steps over the whole: each block's first pass where it grew, and
+        the walk of the strands found, shared out by their points (the strands that collide
+        lie mostly in one part of the scalp, so in few blocks). The numbers are the same:
+        each strand's depend on it alone. WorkerDied when a worker is lost."""
+        helpers = processes.workers(workers - 1)
+        owner = [i % workers for i in range(len(blocks))]
+        here = one_thread()
+        futures, shared, seconds = [], [], []
+        c = self._collision
+
+        def collect(send, job, done=None):
+            """Sends job i to its worker (send(i): its message) or runs job(i) here, then
+            takes the answers in block order, done(i) after each."""
+            nonlocal futures
+            for i in range(len(blocks)):
+                if owner[i]:
+                    helpers[owner[i] - 1].send(*send(i))
+            futures = [None if owner[i] else here.submit(job, i) for i in range(len(blocks))]
+            got = []
+            for i in range(len(blocks)):
+                got.append(helpers[owner[i] - 1].receive() if owner[i] else futures[i].result())
+                if done is not None:
+                    done(i)
+            return got
+        try:
+            spec = self._worker_spec(context)
+            for w in helpers:
+                if c is not None:
+                    w.keep(processes.token(c.collider), c.collider)
+                w.send(_worker_setup, spec)
+            setup = [w.pending for w in helpers]     # answers (None) to take before the plans'
+            for w, n in zip(helpers, setup):
+                for _ in range(n):
+                    w.receive()
+
+            def plan(i):
+                inputs, idx = block(i)
+                return self._plan(context, inputs[0], inputs[2], inputs[3], inputs[4], idx), None
+            self._report(0.2, "placing the points")
+            planned = collect(lambda i: (_worker_plan, i, block(i)[0]), plan,
+                              lambda i: self._report(0.2 + 0.15 * (i + 1) / len(blocks), "placing the points"))
+            plans = []
+            for i, (made, notes) in enumerate(planned):
+                if notes is not None:
+                    self._note_resolution(block(i)[1], *notes)
+                plans.append((None, made) if owner[i] else made)    # a worker's curve parameters stay there
+            del planned
+            starts = np.concatenate([[0], np.cumsum([int(c_.sum()) for _, c_ in plans])])
+            counts = np.concatenate([c_ for _, c_ in plans])
+            total = int(starts[-1])
+            shared = [processes.shared_empty(shape) for shape in ((total, 3), total, (total, 3), total)]
+            out = tuple(a.array for a in shared)
+            handles = [a.handle for a in shared]
+            edges = np.concatenate([[0], np.cumsum([hi - lo for lo, hi in blocks])])
+            offsets = np.zeros(len(counts), np.int64)
+            np.cumsum(counts[:-1], out=offsets[1:])
+
+            def grow(i):
+                inputs, idx = block(i)
+                plan, plans[i] = plans[i], None
+                rows = tuple(whole[int(starts[i]):int(starts[i + 1])] for whole in out)
+                grown = self._grow(context, *inputs, idx, _quiet, plan, into=rows, collide=False)
+                del plan
+                _keep_rows(rows, grown)
+                del grown
+                return _first_pass_of(c, out, offsets, counts, int(edges[i]), int(edges[i + 1]))
+            stage = self._growing_stage()
+            self._report(0.35, stage)
+            found = collect(lambda i: (_worker_grow, i, handles, int(starts[i]), int(starts[i + 1]),
+                                       offsets[edges[i]:edges[i + 1]], int(edges[i])), grow,
+                            lambda i: self._report(0.35 + (0.45 if c is not None else 0.6) * (i + 1) / len(blocks),
+                                                   stage))
+            if c is not None:
+                self._report(0.8, "moving hair out of the collider")
+                stats = self._walk_shared(c, helpers, here, out, handles, offsets, counts, found, workers, run_idx)
+                self._collision.last = stats
+        except BaseException:
+            # No job of this run may still be running when the caller goes on, and the
+            # workers' state is not known: they go, and the next run starts new ones.
+            for f in futures:
+                if f is not None:
+                    f.cancel()
+                    if not f.cancelled():
+                        f.exception()
+            processes.discard(helpers)
+            raise
+        finally:
+            for a in shared:
+                a.close()
         self._report(0.95, "writing strands")
         return out[0], counts, out[1], out[2], out[3]
+
+    def _walk_shared(self, c, helpers, here, out, handles, offsets, counts, found, workers, run_idx):
+        """The collision walk of the strands the blocks' first passes `found` (a
+        _first_pass_of each), shared out between this process and the workers with as many
+        of the strands' points each, written into the result's shared arrays: the run's
+        CollisionStats, with c.moved set for the run's strands (run_idx)."""
+        strands = np.concatenate([f[0] for f in found])
+        k0 = np.concatenate([f[1] for f in found])
+        root_value = np.concatenate([f[2] for f in found])
+        stats = CollisionStats(strands=len(counts), points=int(counts.sum()),
+                               points_inside_before=sum(f[3] for f in found), seconds=sum(f[4] for f in found))
+        moved = np.zeros(len(counts), bool)
+        if strands.size:
+            # Each share gets about as many points left to walk (each strand's past its first offence).
+            left = np.cumsum(counts[strands] - k0)
+            cuts = np.searchsorted(left, left[-1] * np.arange(1, workers) / workers)
+            shares = np.split(np.arange(len(strands)), cuts)
+            for w, share in zip(helpers, shares[1:]):
+                w.send(_worker_walk, handles[0], handles[1], offsets[strands[share]], counts[strands[share]],
+                       k0[share], root_value[share])
+            mine = here.submit(_walk_share, c, out[0], out[1], offsets[strands[shares[0]]],
+                               counts[strands[shares[0]]], k0[shares[0]], root_value[shares[0]])
+            walked = [mine.result()] + [w.receive() for w in helpers[:len(shares) - 1]]
+            for share, (share_moved, totals, took) in zip(shares, walked):
+                moved[strands[share]] = share_moved
+                stats.add_walk(totals)
+                stats.seconds += took
+        stats.strands_moved = int(moved.sum())
+        c.moved[run_idx] = moved
+        return stats
+
+    def _worker_spec(self, context):
+        """What a worker process's _WorkerGrower is made of (picklable; the collider goes by
+        its token, sent once per worker with Worker.keep)."""
+        c = self._collision
+        return {"params": self.params, "samples": self._samples, "context": context,
+                "colors": [d["color"] for d in self._key_data],
+                "collider": None if c is None else processes.token(c.collider),
+                "margin": None if c is None else c.margin}
 
     def _note_resolution(self, idx, met, asked, needed):
         """Keeps per strand the tolerance its polyline is bound to, the one asked and the

@@ -16,6 +16,7 @@ RANGE_SIZE = 8192
 
 _POOLS = {}
 _PREFIX = "groom-worker"
+_SERIAL = False
 
 
 def cpu_threads():
@@ -36,10 +37,23 @@ def _pool(threads):
     return pool
 
 
+def one_thread():
+    """The pool of one worker thread: a job on it runs its own jobs itself (_on_worker), as
+    the share of the work this thread is left with when worker processes have the rest."""
+    return _pool(1)
+
+
 def _on_worker():
-    """Whether the calling thread is one of the pool's: a job that itself runs jobs would
-    wait for the workers it occupies, so it runs them itself."""
-    return threading.current_thread().name.startswith(_PREFIX)
+    """Whether the calling thread is one of the pool's (a job that itself runs jobs would
+    wait for the workers it occupies, so it runs them itself), or this is a worker process
+    of groom.processes (its CPU is the share it was started for)."""
+    return _SERIAL or threading.current_thread().name.startswith(_PREFIX)
+
+
+def run_serially():
+    """From now on this process runs every job on the calling thread (a worker process)."""
+    global _SERIAL
+    _SERIAL = True
 
 
 def run_jobs(jobs, threads=None, here=None):

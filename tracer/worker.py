@@ -9,16 +9,15 @@ set_meshes, render, stats, quit. Only the parent that spawned the worker writes 
 because both ends are this package.
 """
 import dataclasses
-import importlib.util
 import os
-import pickle
 import queue
-import struct
 import subprocess
 import sys
 import threading
 
-_HEADER = struct.Struct("<Q")
+from hairio import pipes
+from hairio.pipes import read_message, write_message
+
 # Packages the worker imports that may live elsewhere than the tracer: in Blender the
 # extension's wheels are in its own site-packages, which only the parent has on sys.path.
 _PACKAGES = ("numpy", "moderngl", "glcontext")
@@ -35,51 +34,13 @@ _BOOT = ("import os, sys\n"
 _PASSED_ENV = ("KEYSTRAND_GL_BACKEND",)
 
 
-def import_root(name):
-    """The sys.path folder that `name` (a top-level module or package) imports from, found
-    without importing it; None when it is not importable."""
-    try:
-        spec = importlib.util.find_spec(name)
-    except (ImportError, ValueError):
-        return None
-    if spec is None or not spec.has_location or not spec.origin:
-        return None
-    folder = os.path.dirname(os.path.abspath(spec.origin))
-    return os.path.dirname(folder) if spec.submodule_search_locations is not None else folder
-
-
 def package_paths():
     """The folders numpy, moderngl and glcontext import from in this process, each once."""
-    paths = []
-    for path in (import_root(name) for name in _PACKAGES):
-        if path and path not in paths:
-            paths.append(path)
-    return paths
+    return pipes.package_paths(_PACKAGES)
 
 
 class WorkerError(RuntimeError):
     """The worker died, timed out or failed; the next call starts a fresh one."""
-
-
-def _read_exact(stream, n):
-    buf = bytearray()
-    while len(buf) < n:
-        chunk = stream.read(n - len(buf))
-        if not chunk:
-            raise EOFError("stream closed")
-        buf += chunk
-    return bytes(buf)
-
-
-def read_message(stream):
-    (n,) = _HEADER.unpack(_read_exact(stream, _HEADER.size))
-    return pickle.loads(_read_exact(stream, n))
-
-
-def write_message(stream, obj):
-    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
-    stream.write(_HEADER.pack(len(data)) + data)
-    stream.flush()
 
 
 def serve(inp, out):

@@ -344,27 +344,33 @@ def test_adaptive_strands_end_without_a_sliver_segment(scalp):
     assert length.min() > 1e-6
 
 
-@pytest.mark.parametrize("resolution, variation, side_by_side", [("adaptive", 0.02, False), ("fixed", 0.02, False),
-                                                                  ("adaptive", 0.0, False), ("adaptive", 0.02, True),
-                                                                  ("fixed", 0.0, True)])
+@pytest.mark.parametrize("resolution, variation, side_by_side", [("adaptive", 0.02, None), ("fixed", 0.02, None),
+                                                                  ("adaptive", 0.0, None), ("adaptive", 0.02, "threads"),
+                                                                  ("fixed", 0.0, "threads"),
+                                                                  ("adaptive", 0.02, "processes"),
+                                                                  ("fixed", 0.0, "processes")])
 def test_growing_in_blocks_changes_no_number(scalp, resolution, variation, side_by_side, monkeypatch):
     """Blocks of 200 strands against one block, on the wavy preset with
     its clump and collision: every array, the resolution notes, the collision's report and an
     incremental update spanning blocks. Without per-point colour variation the blocks' points
     and attributes are written straight into the whole's arrays; with it, copied there.
-    side_by_side: the blocks grown on the worker threads at once (as from
-    generate.PARALLEL_BLOCK strands a block on), reporting progress from the calling thread."""
+    side_by_side: the blocks grown at once (as from generate.PARALLEL_BLOCK strands a block
+    on), on the worker threads ("threads") or dealt out to this process's one worker thread
+    and worker processes ("processes", where groom.processes.available()), reporting
+    progress from the calling thread either way."""
     import importlib
     import threading
-    from groom import default_collider, load_preset
+    from groom import default_collider, load_preset, processes
     from groom.parallel import cpu_threads
     module = importlib.import_module("groom.generate")
-
+    if side_by_side == "processes" and not processes.available():
+        pytest.skip("worker processes need Linux's memfd")
+    monkeypatch.setenv(processes.ENV_SWITCH, "1" if side_by_side == "processes" else "0")
     grown_on = []
 
     def blocks_do(call):
         """call() with the blocks side by side or not, whatever their size, noting the
-        threads the blocks grew on."""
+        threads the blocks of this process grew on."""
         grow = module._Grower._grow
 
         def noted(self, *args, **kwargs):
@@ -386,7 +392,13 @@ def test_growing_in_blocks_changes_no_number(scalp, resolution, variation, side_
     a, b = one.generate(), blocks_do(blocks.generate)
     assert {t for _, t in reports} == {threading.current_thread()}
     workers = {t for t in grown_on if t is not threading.current_thread()}
-    assert len(grown_on) >= 3000 // 200 and len(workers) == (min(2, cpu_threads()) if side_by_side else 0)
+    n_blocks, sides = 3000 // 200, min(2, cpu_threads())
+    if side_by_side == "processes" and sides > 1:
+        # This process grew its share (every second block) on its one thread; the others grew
+        # in a worker process.
+        assert len(grown_on) == -(-n_blocks // sides) and len(workers) == 1
+    else:
+        assert len(grown_on) >= n_blocks and len(workers) == (sides if side_by_side else 0)
     assert [f for f, _ in reports] == sorted(f for f, _ in reports) and reports[-1][0] == 1.0
     _same(a, b)
     assert a.collision.strands_moved == b.collision.strands_moved > 0
@@ -394,9 +406,12 @@ def test_growing_in_blocks_changes_no_number(scalp, resolution, variation, side_
     if resolution == "adaptive":
         for x, y in zip(one._resolution, blocks._resolution):
             np.testing.assert_array_equal(x, y)
+    assert np.array_equal(one._collision.moved, blocks._collision.moved)
     k = keys[3]
     reshaped = KeyStrand(k.points * [1.0, 1.0, 1.0] + np.linspace(0, 0.01, len(k.points))[:, None] * [1, 0, 0],
                          kind=k.kind, color=k.color, root_radius=k.root_radius, group=k.group)
     a, b = one.update_keys({3: reshaped}), blocks_do(lambda: blocks.update_keys({3: reshaped}))
     assert blocks.last_recomputed > 200
     _same(a, b)
+    assert np.array_equal(one._collision.moved, blocks._collision.moved)
+    assert a.collision == b.collision

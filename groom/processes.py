@@ -1,0 +1,290 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Worker processes for the blocks of a large groom, where the platform lets them share
+memory (Linux: memfd).
+
+Threads share one interpreter, and much of growing a block is numpy calls on a few thousand
+items at a time (the collision walk's steps, the placement's bins), between which a thread
+holds the interpreter: two threads took turns more than they ran side by side
+(docs/DECISIONS.md, "Blocks of strands in worker processes"). A worker process has an
+interpreter of its own. Each worker is a plain Python started on this package (`python -c`,
+with the parent's numpy), kept for the life of the process, fed jobs as pickled (function,
+arguments) messages on its stdin (hairio.pipes) and answering each, in order, with its
+result or its exception. Large arrays do not travel through the pipe: `shared_empty` makes
+an array in a memory file of its own that a worker maps (`open_shared`), so a block's points
+are written once, where the result keeps them. Jobs run serially in a worker
+(parallel.run_serially): its CPU is the share it was started for.
+"""
+import atexit
+import collections
+import mmap
+import os
+import pickle
+import queue
+import subprocess
+import sys
+import threading
+import traceback
+import uuid
+
+import numpy as np
+
+from hairio.pipes import package_paths, read_message, write_message
+
+from . import parallel
+
+# "0" keeps every block in this process (threads only).
+ENV_SWITCH = "KEYSTRAND_GROOM_PROCESSES"
+_APPEND_ENV = "KEYSTRAND_GROOM_APPEND_PATH"
+_BOOT = ("import os, sys\n"
+         f"for p in os.environ.get({_APPEND_ENV!r}, '').split(os.pathsep):\n"
+         "    if p and p not in sys.path:\n"
+         "        sys.path.append(p)\n"
+         "from groom.processes import serve\n"
+         "serve()\n")
+# Objects a worker keeps between jobs (keep / kept): a collider is some 25 MB, sent once.
+_KEPT_MOST = 2
+
+# The workers of this process, by pid (a forked child inherits the list, not the processes).
+_WORKERS = {}
+# One caller at a time hands out the workers (jobs and answers of two callers would mix);
+# another caller meanwhile grows its blocks on threads (try_lock).
+_LOCK = threading.Lock()
+# Why worker processes are off in this process (by pid), once one was lost.
+_DISABLED = {}
+
+# Worker side: what jobs leave for later jobs of the same run, and kept objects.
+STATE = {}
+_KEPT = collections.OrderedDict()
+
+
+class WorkerDied(RuntimeError):
+    """A worker process exited or could not be started; the caller grows on threads instead."""
+
+
+def available():
+    """Whether blocks may grow in worker processes here: Linux (memory files shared by
+    /proc/<pid>/fd), unless $KEYSTRAND_GROOM_PROCESSES is "0" or a worker was lost."""
+    return (sys.platform.startswith("linux") and hasattr(os, "memfd_create")
+            and os.environ.get(ENV_SWITCH, "1") != "0" and _DISABLED.get(os.getpid()) is None)
+
+
+def disable(reason):
+    """No more worker processes in this process (one could not start, or died): `reason`."""
+    _DISABLED[os.getpid()] = reason
+
+
+def try_lock():
+    """Take the workers for one run (True), or False when another thread has them."""
+    return _LOCK.acquire(blocking=False)
+
+
+def unlock():
+    _LOCK.release()
+
+
+class Worker:
+    """One worker process: send(fn, *args) queues a job, receive() returns the oldest
+    unanswered job's result or raises its exception (WorkerDied when the process is gone)."""
+
+    def __init__(self):
+        package_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join([package_root] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
+        env[_APPEND_ENV] = os.pathsep.join(package_paths(("numpy",)))
+        try:
+            self._proc = subprocess.Popen([sys.executable, "-c", _BOOT], stdin=subprocess.PIPE,
+                                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+        except OSError as e:
+            raise WorkerDied(f"groom worker process could not start ({sys.executable}: {e})") from None
+        self._stderr = collections.deque(maxlen=20)
+        self.pending = 0
+        self.known = []             # tokens of the objects it keeps, oldest first
+        # Answers are read as they come, on a thread of their own: a worker blocked writing an
+        # answer nobody reads would stop reading the jobs still being sent to it.
+        self._answers = queue.Queue()
+        threading.Thread(target=self._pump, daemon=True).start()
+        threading.Thread(target=self._drain, daemon=True).start()
+
+    def _pump(self):
+        try:
+            while True:
+                self._answers.put(read_message(self._proc.stdout))
+        except Exception:   # EOF: the worker is gone (its stderr says why)
+            self._answers.put(None)
+
+    def _drain(self):
+        for line in self._proc.stderr:
+            self._stderr.append(line.decode(errors="replace"))
+
+    def alive(self):
+        return self._proc.poll() is None
+
+    def _died(self, during):
+        self.stop()
+        return WorkerDied(f"groom worker process died {during}; its last words: "
+                          f"{''.join(self._stderr).strip()[-600:]!r}")
+
+    def send(self, fn, *args):
+        try:
+            write_message(self._proc.stdin, (fn, args))
+        except (BrokenPipeError, OSError, ValueError):
+            raise self._died(f"before {fn.__name__}") from None
+        self.pending += 1
+
+    def keep(self, token, obj):
+        """Have the worker keep obj under token for later jobs (sent once per worker)."""
+        if token not in self.known:
+            self.send(_keep, token, obj)
+            # The worker keeps the _KEPT_MOST sent last, as this list does.
+            self.known = (self.known + [token])[-_KEPT_MOST:]
+
+    def receive(self):
+        answer = self._answers.get()
+        if answer is None:
+            self._answers.put(None)     # every later receive meets the same end
+            raise self._died("during a job")
+        self.pending -= 1
+        if answer[0] == "ok":
+            return answer[1]
+        raise answer[1]
+
+    def drain(self):
+        """Receive every pending answer, dropping results and errors (after a failed run)."""
+        while self.pending:
+            try:
+                self.receive()
+            except WorkerDied:
+                return
+            except Exception:
+                pass
+
+    def stop(self):
+        proc = self._proc
+        if proc.poll() is None:
+            try:
+                proc.stdin.close()
+                proc.wait(timeout=2)
+            except (OSError, subprocess.TimeoutExpired):
+                proc.kill()
+        self.pending = 0
+
+
+def workers(n):
+    """n running worker processes of this process (started where missing)."""
+    pool = _WORKERS.setdefault(os.getpid(), [])
+    pool[:] = [w for w in pool if w.alive()]
+    while len(pool) < n:
+        pool.append(Worker())
+    return pool[:n]
+
+
+def start(n):
+    """Start n workers ahead of a run that will want them (their start overlaps the run's
+    first work); off for the rest of the process when one cannot start."""
+    if not available():
+        return
+    try:
+        workers(n)
+    except WorkerDied as e:
+        disable(str(e))
+
+
+def discard(found):
+    """Stop these workers (after a run that failed: what they hold is not known)."""
+    for w in found:
+        w.stop()
+    pool = _WORKERS.get(os.getpid(), [])
+    pool[:] = [w for w in pool if w not in found]
+
+
+@atexit.register
+def _stop_all():
+    for w in _WORKERS.get(os.getpid(), []):
+        w.stop()
+
+
+def token(obj):
+    """A name for obj that stays the same for its life (and for copies of its __dict__)."""
+    return obj.__dict__.setdefault("_worker_token", uuid.uuid4().hex)
+
+
+# --- shared memory --------------------------------------------------------------------------
+
+class Shared:
+    """An array in a memory file of its own: `array` here, `handle` for a worker's
+    open_shared. close() once the workers have mapped it (the memory stays while the array
+    or a view of it lives)."""
+
+    def __init__(self, shape, dtype):
+        dtype = np.dtype(dtype)
+        shape = tuple(int(s) for s in np.atleast_1d(shape))
+        nbytes = int(np.prod(shape)) * dtype.itemsize
+        self.fd = os.memfd_create("keystrand-groom", os.MFD_CLOEXEC)
+        try:
+            os.ftruncate(self.fd, max(nbytes, 1))
+            buf = mmap.mmap(self.fd, max(nbytes, 1))
+        except OSError:
+            os.close(self.fd)
+            raise
+        self.array = np.frombuffer(buf, dtype, int(np.prod(shape))).reshape(shape)
+        self.handle = (os.getpid(), self.fd, shape, dtype.str)
+
+    def close(self):
+        if self.fd >= 0:
+            os.close(self.fd)
+            self.fd = -1
+
+
+def shared_empty(shape, dtype=np.float32):
+    return Shared(shape, dtype)
+
+
+def open_shared(handle):
+    """The array of a Shared made by the parent process (its handle), mapped here."""
+    pid, fd, shape, dtype = handle
+    own = os.open(f"/proc/{pid}/fd/{fd}", os.O_RDWR)
+    try:
+        n = int(np.prod(shape)) * np.dtype(dtype).itemsize
+        buf = mmap.mmap(own, max(n, 1))
+    finally:
+        os.close(own)
+    return np.frombuffer(buf, np.dtype(dtype), int(np.prod(shape))).reshape(shape)
+
+
+# --- the worker's side ----------------------------------------------------------------------
+
+def _keep(token_, obj):
+    _KEPT[token_] = obj
+    _KEPT.move_to_end(token_)
+    while len(_KEPT) > _KEPT_MOST:
+        _KEPT.popitem(last=False)
+
+
+def kept(token_):
+    """An object the parent sent with Worker.keep."""
+    return _KEPT[token_]
+
+
+def serve():
+    """A worker process's loop: jobs from stdin until it closes, answers on stdout. Anything
+    else the jobs print goes to stderr (stdout carries only answers)."""
+    parallel.run_serially()
+    # The modules of the jobs to come, loaded while the parent still samples its roots.
+    import groom.generate  # noqa: F401
+    inp = sys.stdin.buffer
+    out = os.fdopen(os.dup(1), "wb")
+    os.dup2(2, 1)
+    while True:
+        try:
+            fn, args = read_message(inp)
+        except EOFError:
+            return
+        try:
+            answer = ("ok", fn(*args))
+        except Exception as e:  # the caller raises it: its job failed, not the worker
+            try:
+                pickle.dumps(e)
+                answer = ("error", e)
+            except Exception:
+                answer = ("error", RuntimeError(f"{type(e).__name__}: {e}\n{traceback.format_exc()}"))
+        write_message(out, answer)
