@@ -377,7 +377,8 @@ def test_growing_in_blocks_changes_no_number(scalp, resolution, variation, side_
             grown_on.append(threading.current_thread())
             return grow(self, *args, **kwargs)
         with monkeypatch.context() as m:
-            m.setattr(module, "PARALLEL_BLOCK", 100 if side_by_side else 10 ** 9)
+            for name in ("PARALLEL_BLOCK", "PROCESS_BLOCK"):
+                m.setattr(module, name, 100 if side_by_side else 10 ** 9)
             m.setattr(module._Grower, "_grow", noted)
             return call()
     placement = load_preset("wavy").place_keys(scalp)

@@ -81,6 +81,7 @@ def test_a_lost_worker_leaves_the_groom_to_threads_with_the_same_numbers(scalp, 
     placement = load_preset("wavy").place_keys(scalp)
     params = placement.params.replace(count=1200, seed=3)
     monkeypatch.setattr(module, "PARALLEL_BLOCK", 100)
+    monkeypatch.setattr(module, "PROCESS_BLOCK", 100)
     monkeypatch.setattr(processes, "_DISABLED", {})
     monkeypatch.setenv(processes.ENV_SWITCH, "0")
     expected = Generator(scalp, placement.keys, params, collider=default_collider(), block_strands=200).generate()
