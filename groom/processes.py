@@ -203,6 +203,35 @@ def _stop_all():
         w.stop()
 
 
+def workers_peak_mb():
+    """The peak resident memory of this process's worker processes, summed, in MiB (Linux's
+    VmHWM; 0 without workers). Pages of the shared arrays count where they were written."""
+    total = 0.0
+    for w in _WORKERS.get(os.getpid(), []):
+        try:
+            with open(f"/proc/{w._proc.pid}/status") as f:
+                total += next((int(line.split()[1]) / 1024.0 for line in f if line.startswith("VmHWM:")), 0.0)
+        except OSError:
+            pass
+    return total
+
+
+def workers_cpu_seconds():
+    """CPU seconds (user + system) this process's worker processes have used so far, summed
+    (Linux's /proc/<pid>/stat; 0 without workers): a run's CPU time is this process's plus
+    the change in these."""
+    total = 0.0
+    tick = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+    for w in _WORKERS.get(os.getpid(), []):
+        try:
+            with open(f"/proc/{w._proc.pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            total += (int(fields[11]) + int(fields[12])) / tick
+        except (OSError, IndexError, ValueError):
+            pass
+    return total
+
+
 def token(obj):
     """A name for obj that stays the same for its life (and for copies of its __dict__)."""
     return obj.__dict__.setdefault("_worker_token", uuid.uuid4().hex)
@@ -222,10 +251,15 @@ class Shared:
         self.fd = os.memfd_create("keystrand-groom", os.MFD_CLOEXEC)
         try:
             os.ftruncate(self.fd, max(nbytes, 1))
+            # The pages made here at once, not by each process's first writes side by side:
+            # 100,000 strands of wavy in a process with Blender beside, alternating, took 0.86
+            # against 0.97 s (median of 10).
+            os.posix_fallocate(self.fd, 0, max(nbytes, 1))
             buf = mmap.mmap(self.fd, max(nbytes, 1))
-        except OSError:
+        except OSError as e:
             os.close(self.fd)
-            raise
+            raise MemoryError(f"groom: no room for {nbytes / 2 ** 20:,.0f} MiB of shared memory for the strands "
+                              f"({e.strerror}); generate fewer strands or points per strand") from None
         self.array = np.frombuffer(buf, dtype, int(np.prod(shape))).reshape(shape)
         self.handle = (os.getpid(), self.fd, shape, dtype.str)
 

@@ -9,11 +9,12 @@ normals as "up" vectors. groom's time includes everything it does (root sampling
 wisps, resolution, interpolation, clump, collision, radius, colour; the collider is built
 once per process, as Blender's Generate reuses it); Blender's is the node tree's evaluation
 alone (its result is not even copied out), so the comparison leans towards Blender. Both use
-every core: Blender's node through its task scheduler, groom through one worker thread per
-CPU, each growing a block of strands of its own from 2 × 32,768 strands on (below that, each
-stage's whole-array numpy work split over the threads). Beside the wall-clock times, the
-process CPU time of the same runs (all threads): on a shared machine other work stretches
-wall time far more than the CPU time a job needs.
+every core: Blender's node through its task scheduler, groom through one worker process per
+CPU beside its own (groom.processes, Linux; elsewhere threads), each growing blocks of strands
+of its own from 2 × 2,048 strands on (below that, each stage's whole-array numpy work split over
+the threads). Beside the wall-clock times, the CPU time of the same runs (all threads, and
+groom's worker processes): on a shared machine other work stretches wall time far more than
+the CPU time a job needs.
 """
 import json
 import os
@@ -44,7 +45,10 @@ base = hwm_mb()
 t0 = time.perf_counter()
 r = groom.generate(scalp, placement.keys, params, collider=collider)
 t = time.perf_counter() - t0
-print(json.dumps({{"base_mb": base, "peak_rss_mb": hwm_mb(), "points": int(r.strands.num_points), "time": t}}))
+from groom import processes
+own, workers = hwm_mb(), processes.workers_peak_mb()
+print(json.dumps({{"base_mb": base, "peak_rss_mb": own + workers, "own_mb": own, "workers_mb": workers,
+                  "points": int(r.strands.num_points), "time": t}}))
 """
 
 _BLENDER_MEMORY_CHILD = """
@@ -90,6 +94,12 @@ def blender_inputs(scalp, keys, params, result, points):
     return result.roots, root_up, key_pts, key_up
 
 
+def cpu_seconds():
+    """CPU seconds of this process and of groom's worker processes so far."""
+    from groom import processes
+    return time.process_time() + processes.workers_cpu_seconds()
+
+
 class _Cpu:
     """`job` that also keeps the process CPU seconds (every thread) of each call."""
 
@@ -97,9 +107,9 @@ class _Cpu:
         self.job, self.seconds = job, []
 
     def __call__(self):
-        c0 = time.process_time()
+        c0 = cpu_seconds()
         out = self.job()
-        self.seconds.append(time.process_time() - c0)
+        self.seconds.append(cpu_seconds() - c0)
         return out
 
     def median(self):
@@ -265,9 +275,9 @@ def _one_cpu(sec, cfg, groom, scalp, keys, base, collider, data):
         for _ in range(max(int(cfg.runs), MIN_RUNS)):
             for side in sides:
                 os.sched_setaffinity(0, cpus if side == "all" else {min(cpus)})
-                c0, t0 = time.process_time(), time.perf_counter()
+                c0, t0 = cpu_seconds(), time.perf_counter()
                 groom.generate(scalp, keys, params, collider=collider)
-                sides[side].append((time.perf_counter() - t0, time.process_time() - c0))
+                sides[side].append((time.perf_counter() - t0, cpu_seconds() - c0))
     finally:
         os.sched_setaffinity(0, cpus)
     med = {side: (float(np.median([r[0] for r in v])), float(np.median([r[1] for r in v]))) for side, v in sides.items()}
@@ -367,7 +377,9 @@ def _memory(sec, cfg):
     if not over_budget(sec, 0.85):
         try:
             ours = run_child(_MEMORY_CHILD.format(preset=PRESET, count=count), timeout=600)
-            rows.append(["groom.generate in process (collision on)", f"{ours['peak_rss_mb']:.0f}",
+            split = (f" ({ours['own_mb']:.0f} + {ours['workers_mb']:.0f} in its worker processes)"
+                     if ours["workers_mb"] else "")
+            rows.append(["groom.generate in process (collision on)", f"{ours['peak_rss_mb']:.0f}{split}",
                          f"{ours['base_mb']:.0f}", fmt_time(ours["time"])])
         except Exception as e:
             rows.append(["groom.generate in process (collision on)", f"not measured: {e}", "", ""])
@@ -382,7 +394,8 @@ def _memory(sec, cfg):
             rows.append(["Interpolate Curves (bpy process)", f"not measured: {e}", "", ""])
     sec.table(["job", "peak RSS of the process (MiB)", "RSS before the job (MiB)", "time"], rows,
               caption=f"Peak memory at {count:,} strands of {PRESET}, each job in a fresh process (RSS = whole "
-                      "process including the interpreter, numpy and the collider). The command grows and writes a "
+                      "process including the interpreter, numpy and the collider; in process with the peaks of the "
+                      "worker processes its blocks grow in added, groom.processes). The command grows and writes a "
                       "block of 65,536 strands at a time; in process the result itself takes 32 bytes a point "
                       "(1.9 GB at 1M strands of wavy), so 2 GB cannot hold it there.")
     best = streamed or ours
