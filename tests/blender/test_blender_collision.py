@@ -104,6 +104,27 @@ def test_every_preset_on_add_head_s_scalp_ends_outside_the_head(clean, name):
     assert (d >= radius + 0.5 * scalp.keystrand_hair.collision_margin).all()
 
 
+def test_a_large_groom_grows_in_a_worker_process_with_the_same_numbers(clean, monkeypatch):
+    """From 2 x 2,048 strands Generate's blocks grow partly in a worker process of groom's
+    (a plain Python beside Blender, groom.processes; Linux): the hair is the same, bit for
+    bit, as grown on threads in Blender's process."""
+    import os
+    from groom import processes
+    if not processes.available() or processes.parallel.cpu_threads() < 2:
+        pytest.skip("worker processes need Linux's memfd and a second CPU")
+    head, scalp = add_head()
+    assert bpy.ops.hair.load_preset(preset="wavy") == {'FINISHED'}
+    monkeypatch.setenv(processes.ENV_SWITCH, "0")
+    on_threads = hair_arrays(generate(scalp, 5000))
+    monkeypatch.setenv(processes.ENV_SWITCH, "1")
+    before = processes.workers_cpu_seconds()
+    in_processes = hair_arrays(generate(scalp, 5000))
+    assert [w.alive() for w in processes._WORKERS[os.getpid()]] == [True] * (processes.parallel.cpu_threads() - 1)
+    assert processes.workers_cpu_seconds() > before
+    for a, b in zip(on_threads, in_processes):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_without_collision_the_same_hair_goes_through_the_head(clean):
     """The check above can fail: the same preset grown with Collision off has points inside."""
     head, scalp = add_head()
