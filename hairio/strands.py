@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The strand arrays of SPEC §0, validated once where they enter."""
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -54,6 +54,18 @@ class Guides:
                 "guide_weights": self.weights}
 
 
+def _checked_extras(guides, root_uv, n_s):
+    """(guides, root_uv (S, 2) float32 or None) of n_s strands, checked."""
+    if guides is not None and not isinstance(guides, Guides):
+        raise InputError(f"guides: expected hairio.Guides, got {type(guides).__name__}")
+    if guides is not None and len(guides.index) != n_s:
+        raise InputError(f"guides: {len(guides.index)} rows for {n_s} strands; one row per strand")
+    if root_uv is not None:
+        root_uv = check_finite("root_uv", to_float32(
+            "root_uv", check_shape("root_uv", as_array("root_uv", root_uv), (n_s, 2))))
+    return guides, root_uv
+
+
 @dataclass(frozen=True, eq=False)
 class Strands:
     """points (P,3) f32, counts (S,) i32, radius (P,) f32, color (P,3) f32 linear RGB,
@@ -101,19 +113,15 @@ class Strands:
             raise InputError("radius: negative values; radii must be >= 0")
         if n_p and (alpha.min() < 0 or alpha.max() > 1):
             raise InputError("alpha: values outside [0, 1]; clamp them first")
-        if guides is not None and not isinstance(guides, Guides):
-            raise InputError(f"guides: expected hairio.Guides, got {type(guides).__name__}")
-        if guides is not None and len(guides.index) != n_s:
-            raise InputError(f"guides: {len(guides.index)} rows for {n_s} strands; one row per strand")
-        if root_uv is not None:
-            root_uv = check_finite("root_uv", to_float32(
-                "root_uv", check_shape("root_uv", as_array("root_uv", root_uv), (n_s, 2))))
+        guides, root_uv = _checked_extras(guides, root_uv, n_s)
         return cls(points, counts, radius, np.ascontiguousarray(color), alpha, wisp, guides, root_uv)
 
     def with_guides(self, guides=None, root_uv=None):
-        """A copy carrying `guides` (a Guides) and `root_uv` (S, 2), each checked."""
-        return Strands.from_arrays(self.points, self.counts, self.radius, self.color, self.alpha,
-                                   self.wisp, guides=guides, root_uv=root_uv)
+        """A copy carrying `guides` (a Guides) and `root_uv` (S, 2), each checked; the strand
+        arrays are this Strands' own, checked when it was made (at 100,000 strands of 62
+        points checking them again took 0.1 s of each Generate)."""
+        guides, root_uv = _checked_extras(guides, root_uv, len(self.counts))
+        return replace(self, guides=guides, root_uv=root_uv)
 
     @classmethod
     def empty(cls):
