@@ -181,12 +181,14 @@ def workers(n):
 def start(n):
     """Start n workers ahead of a run that will want them (their start overlaps the run's
     first work); off for the rest of the process when one cannot start."""
-    if not available():
+    if not available() or not try_lock():   # another thread's run has the workers: they are up
         return
     try:
         workers(n)
     except WorkerDied as e:
         disable(str(e))
+    finally:
+        unlock()
 
 
 def discard(found):
