@@ -278,7 +278,10 @@ def shared_empty(shape, dtype=np.float32):
 def open_shared(handle):
     """The array of a Shared made by the parent process (its handle), mapped here."""
     pid, fd, shape, dtype = handle
-    own = os.open(f"/proc/{pid}/fd/{fd}", os.O_RDWR)
+    try:
+        own = os.open(f"/proc/{pid}/fd/{fd}", os.O_RDWR)
+    except OSError as e:   # a sandbox that hides other processes' files: the caller grows on threads
+        raise WorkerDied(f"a groom worker process cannot map its parent's shared memory ({e})") from None
     try:
         n = int(np.prod(shape)) * np.dtype(dtype).itemsize
         buf = mmap.mmap(own, max(n, 1))

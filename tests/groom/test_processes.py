@@ -43,6 +43,16 @@ def test_a_worker_maps_the_parents_shared_array_not_a_copy(worker):
     assert (seen[500] == -1.0).all() and seen[499, 0] == 1497.0
 
 
+def test_shared_memory_a_worker_cannot_map_is_reported_as_a_lost_worker(worker):
+    shared = processes.shared_empty(10)
+    handle = shared.handle
+    shared.close()                     # the file is gone from /proc/<pid>/fd
+    worker.send(processes.open_shared, handle)
+    with pytest.raises(processes.WorkerDied, match="cannot map"):
+        worker.receive()
+    assert worker.alive()
+
+
 def test_a_worker_keeps_what_it_was_sent_once(worker):
     big = np.arange(10)
     worker.keep("ten", big)
