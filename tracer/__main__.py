@@ -278,8 +278,9 @@ def build_parser():
         r.add_argument(flag, type=float, dest=field, metavar="X", default=getattr(defaults, field),
                        help=f"chiang model: {what} (default %(default)s)")
     r.add_argument("--accel", choices=ACCELS, default=DEFAULT_ACCEL,
-                   help="what rays walk: the uniform grid or the BVH over cylinders; same image "
-                        "(default %(default)s)")
+                   help="what rays walk: beams (camera rays and shadow rays toward suns look up lists made "
+                        "for them; the grid for the rest), the uniform grid, or the BVH over cylinders; same "
+                        "image (default %(default)s)")
     r.add_argument("--camera", default="auto",
                    help="auto (frame the strands' and meshes' bounds from the front) or EYE:TARGET:FOV as "
                         "x,y,z:tx,ty,tz:degrees, e.g. 0,-3,1:0,0,1:40 (default %(default)s)")
@@ -359,9 +360,13 @@ def main(argv=None):
     print(f"read {t1 - t0:.3f} s: {strands.num_strands} strands, {st['num_cylinders']} cylinders"
           + (f", {st['num_triangles']} mesh triangles" if st["num_triangles"] else ""))
     print(f"upload {st['upload_s']:.3f} s (cylinders {st['cylinders_s']:.3f} s)")
-    if args.accel == "grid":
-        print(f"grid build {st['grid_s']:.3f} s: {st['grid_dims']} cells, {st['grid_refs']} references")
-    else:
+    after = renderer.stats.as_dict()
+    if renderer.accel == "beams" and after["beams_s"] is not None:
+        print(f"beams {after['beams_s']:.3f} s (last tile): camera {after['camera_beams']}, "
+              f"{after['beam_refs']} references")
+    if after["grid_refs"] is not None:
+        print(f"grid build {after['grid_s']:.3f} s: {after['grid_dims']} cells, {after['grid_refs']} references")
+    if renderer.accel == "bvh":
         print(f"BVH build {st['accel_s']:.3f} s: {st['bvh_pieces']} pieces, {st['bvh_entries']} nodes and leaves")
     print(f"render {render_s:.3f} s at {size[0]}x{size[1]}, {args.spp} spp"
           + (" in one walk a pixel (sampler pixel)" if settings.sampler == "pixel" else "")

@@ -15,6 +15,7 @@ from .gpu_build import set_uniforms
 from .grid import Grid
 from .mesh_upload import MESH_BUFFERS
 from .scene_buffers import split_part_names
+from .scene_beams import CAMERA_BUFFERS, SUN_BUFFERS
 from .scene_grid import WIDE
 from .shader_source import shader_source
 from .settings import pixel_group
@@ -25,12 +26,15 @@ from .shading import shading_model
 RENDER_COPIES = 3
 # The trace program's buffers per accelerator, on texture units 0, 1, 2, and with meshes 3, 4, 5.
 TRACE_BUFFERS = {"grid": ("tex_cyl", "tex_idx", "tex_cell"), "bvh": ("tex_cyl", "tex_node", "tex_order")}
+TRACE_BUFFERS["beams"] = TRACE_BUFFERS["grid"]
 # Then, on units 6, 7, ..., the parts past the first of buffers split over the driver's limit
 # (tracer/scene_buffers.py); a scene within it binds none of them.
 SPLIT_PARTS = split_part_names()
 # Then the pixel sampler's wide grid (tracer/scene_grid.py, build_wide_grid), when it walks
 # one beside the scene's grid.
 WIDE_BUFFERS = WIDE
+# Then the beams (tracer/scene_beams.py): the camera's, then each sun slot's.
+BEAM_BUFFERS = CAMERA_BUFFERS + tuple(n for pair in SUN_BUFFERS for n in pair)
 
 _VERTEX = """#version 330 core
 void main() {   // one triangle that covers the screen; the scissor picks the pixels
@@ -40,13 +44,18 @@ void main() {   // one triangle that covers the screen; the scissor picks the pi
 """
 
 
-def trace_files(settings, meshes=False, accel="grid"):
+def trace_files(settings, meshes=False, accel="grid", walk=True):
     """The trace program's files in dependency order (tracer/shaders/trace_scene.glsl lists
     them): the scene, the shape, the accelerator interface and the structure that implements
-    it (`accel`: "grid" or "bvh"), with `meshes` the triangles and their grid, the shading
-    model of `settings`, the tracer's main."""
+    it (`accel`: "grid" or "bvh"; "beams": the beams, after the grid when some ray walks it,
+    `walk`), with `meshes` the triangles and their grid, the shading model of `settings`, the
+    tracer's main."""
     mesh_files = ["shapes_triangle.glsl", "accel_mesh_grid.glsl"] if meshes else []
-    return (["trace_scene.glsl", "shapes_cylinder.glsl", "accel.glsl", "sampler_pixel.glsl", f"accel_{accel}.glsl"]
+    if accel == "beams":
+        structure = (["accel_grid.glsl"] if walk else []) + ["accel_beams.glsl"]
+    else:
+        structure = [f"accel_{accel}.glsl"]
+    return (["trace_scene.glsl", "shapes_cylinder.glsl", "accel.glsl", "sampler_pixel.glsl"] + structure
             + mesh_files
             + [shading_model(settings.shading).glsl, "trace_main.glsl"])
 
@@ -59,14 +68,16 @@ class Drawer:
         self._programs = {}
         self._fbos = {}
 
-    def program(self, settings, camera, layers, meshes=False, accel="grid", parts=(1, 1), wide=False, group=1):
+    def program(self, settings, camera, layers, meshes=False, accel="grid", parts=(1, 1), wide=False, group=1,
+                beams=(False, 0, True)):
         """`parts`: buffer textures holding the cylinders and the cell lists (tracer/scene_buffers.py);
         `wide`: the pixel sampler walks a grid of its own (WIDE_BUFFERS); `group`: the pixel
-        sampler's samples a walk (settings.pixel_group)."""
+        sampler's samples a walk (settings.pixel_group); `beams` (accel "beams"): whether the
+        camera has beams, how many sun slots are used, whether some ray walks the grid."""
         key = (layers, settings.shadows and (1 if settings.shadow_mode == "hard" else 2),
                settings.shading, len(settings.lights), settings.spp_n, settings.min_pixel_width,
                camera.type, settings.count, bool(meshes), layout.glsl_header(), accel, settings.sampler,
-               tuple(parts), bool(wide), group)
+               tuple(parts), bool(wide), group, tuple(beams))
         prog = self._programs.get(key)
         if prog is None:
             defines = {
@@ -83,12 +94,15 @@ class Drawer:
                 "CYL_PARTS": parts[0],
                 "IDX_PARTS": parts[1],
                 "WIDE_GRID": int(bool(wide)),
+                "CAMERA_BEAMS": int(beams[0]),
+                "SUN_BEAMS": int(beams[1]),
+                "WALK": int(beams[2]),
             }
             program = self.ctx.program(vertex_shader=_VERTEX,
-                                       fragment_shader=shader_source(330, trace_files(settings, meshes, accel),
-                                                                     defines))
-            set_samplers(program, **{name: unit for unit, name in
-                                     enumerate(TRACE_BUFFERS[accel] + MESH_BUFFERS + SPLIT_PARTS + WIDE_BUFFERS)})
+                                       fragment_shader=shader_source(
+                                           330, trace_files(settings, meshes, accel, beams[2]), defines))
+            set_samplers(program, **{name: unit for unit, name in enumerate(
+                TRACE_BUFFERS[accel] + MESH_BUFFERS + SPLIT_PARTS + WIDE_BUFFERS + BEAM_BUFFERS)})
             prog = (program, self.ctx.vertex_array(program, []))
             self._programs[key] = prog
         return prog
@@ -132,12 +146,14 @@ class Drawer:
         check_memory(f"camera size {w}x{h}", (RENDER_COPIES + settings.count) * w * h * 16,
                      "render a smaller image, or in tiles (python -m tracer render writes any size band by band)")
 
-    def draw(self, buffers, structure, camera, settings, layers, box, mesh_grid=None, mesh_offset=0.0, wide=None):
+    def draw(self, buffers, structure, camera, settings, layers, box, mesh_grid=None, mesh_offset=0.0, wide=None,
+             beams=None):
         """The image (H, W, 4) float32, row 0 = top, and the summed work counters (4,):
         pixels in `box` (x0, y0, x1, y1; None: none) traced, the rest background.
-        `structure`: the scene's Grid, or its BVH (tracer/bvh.py). With `mesh_grid` the
-        meshes uploaded with it are traced too. `wide`: the Grid the pixel sampler walks, in
-        WIDE_BUFFERS unless it is `structure` itself."""
+        `structure`: the scene's Grid, or its BVH (tracer/bvh.py); None with `beams` when no
+        ray walks one. With `mesh_grid` the meshes uploaded with it are traced too. `wide`:
+        the Grid the pixel sampler walks, in WIDE_BUFFERS unless it is `structure` itself.
+        `beams`: tracer.scene_beams.BeamPlan (accel "beams")."""
         import moderngl
         w, h = camera.size
         fbo = self.framebuffer(w, h, settings.count)
@@ -147,26 +163,32 @@ class Drawer:
         counts = np.zeros(4)
         if box is not None:
             meshes = mesh_grid is not None
-            accel = "grid" if isinstance(structure, Grid) else "bvh"
-            parts = (buffers.parts("tex_cyl"), buffers.parts("tex_idx") if accel == "grid" else 1)
+            walk = structure is not None
+            accel = "beams" if beams is not None else ("grid" if isinstance(structure, Grid) else "bvh")
+            suns = 0 if beams is None else max([k + 1 for k in beams.light_sun if k >= 0], default=0)
+            switches = (False, 0, True) if beams is None else (beams.camera is not None, suns, walk)
+            parts = (buffers.parts("tex_cyl"), buffers.parts("tex_idx") if accel != "bvh" and walk else 1)
             pixel = settings.sampler == "pixel"
             own = pixel and wide is not None and wide is not structure
             # The pixel sampler takes a group of a pixel's samples a draw, the other one sample.
             group = pixel_group(settings.spp, layers) if pixel else 1
             draws = settings.spp // group
-            prog, vao = self.program(settings, camera, layers, meshes, accel, parts, own, group)
+            prog, vao = self.program(settings, camera, layers, meshes, accel, parts, own, group, switches)
             buffers.bind(TRACE_BUFFERS[accel] + (MESH_BUFFERS if meshes else ("",) * len(MESH_BUFFERS))
-                         + SPLIT_PARTS + (WIDE_BUFFERS if own else ()))
+                         + SPLIT_PARTS + (WIDE_BUFFERS if own else ("",) * len(WIDE_BUFFERS))
+                         + (BEAM_BUFFERS if beams is not None else ()))
+            if beams is not None:
+                _set_beam_uniforms(prog, beams)
             if own:
                 set_uniforms(prog, wide_lo=tuple(float(x) for x in wide.lo),
                              wide_cell_size=tuple(float(x) for x in wide.cell_size),
                              wide_dims=tuple(int(x) for x in wide.dims))
             set_uniforms(prog, cyl_split=buffers.part_size("tex_cyl"), idx_split=buffers.part_size("tex_idx"))
-            if accel == "grid":
+            if accel != "bvh" and walk:
                 set_uniforms(prog, grid_lo=tuple(float(x) for x in structure.lo),
                              cell_size=tuple(float(x) for x in structure.cell_size),
                              dims=tuple(int(x) for x in structure.dims))
-            else:
+            elif accel == "bvh":
                 set_uniforms(prog, bvh_entries=int(buffers.stats.bvh_entries))
             _set_uniforms(prog, camera, settings)
             if meshes:
@@ -249,3 +271,29 @@ def _set_uniforms(prog, camera, settings):
                  material=(settings.ambient, settings.diffuse, settings.specular, settings.shininess),
                  mpw_cap=float(settings.min_pixel_width_cap), t_eps=float(settings.transmittance_eps))
     set_uniforms(prog, **shading_model(settings.shading).uniforms(settings))
+
+
+def _set_beam_uniforms(prog, beams):
+    """The camera's and the suns' beams (tracer/scene_beams.py, BeamPlan) as the trace shader
+    reads them (shaders/accel_beams.glsl)."""
+    cam = beams.camera
+    if cam is not None:
+        f = cam.frame
+        set_uniforms(prog, beam_box=(int(f.box[0]), int(f.box[1]), int(f.bin_px), int(f.dims[0])),
+                     beam_rows=int(f.dims[1]), beam_keys=(float(f.key0), float(f.key_step)))
+    suns = [b for b in beams.suns]
+    used = max([k + 1 for k in beams.light_sun if k >= 0], default=0)
+    if used:
+        frames = [suns[k].frame if suns[k] is not None else None for k in range(used)]
+        pick = lambda fn, dtype: np.array([fn(f) if f is not None else fn(None) for f in frames], dtype)  # noqa: E731
+        zero3 = (0.0, 0.0, 0.0)
+        for name, fn, dtype in (
+                ("sun_u", lambda f: f.axes[0] if f else zero3, np.float32),
+                ("sun_v", lambda f: f.axes[1] if f else zero3, np.float32),
+                ("sun_w", lambda f: f.axes[2] if f else zero3, np.float32),
+                ("sun_frame", lambda f: (f.offset[0], f.offset[1], f.key0, f.key_step) if f else (0.0,) * 4, np.float32),
+                ("sun_dims", lambda f: tuple(int(d) for d in f.dims) if f else (0, 0), np.int32)):
+            if name in prog:
+                prog[name].write(pick(fn, dtype).tobytes())
+    if "light_sun" in prog:
+        prog["light_sun"].write(np.array(beams.light_sun, np.int32).tobytes())

@@ -3,11 +3,13 @@
 KEYSTRAND_GL_BACKEND asks for (tracer/gl_context.py), and the compute passes compiled in it.
 Every Renderer of the process shares them."""
 from .gl_context import create_context
+from .gpu_beams import BeamBuilder
 from .gpu_build import GpuBuilder
 
 _CONTEXT = None
 _BACKEND = None
 _BUILDER = None
+_BEAM_BUILDER = None
 
 
 def shared_context():
@@ -30,3 +32,11 @@ def gpu_builder():
     if _BUILDER is None:
         _BUILDER = GpuBuilder(shared_context())
     return _BUILDER
+
+
+def beam_builder():
+    """The beams' compute passes of the shared context (tracer/gpu_beams.py)."""
+    global _BEAM_BUILDER
+    if _BEAM_BUILDER is None:
+        _BEAM_BUILDER = BeamBuilder(shared_context())
+    return _BEAM_BUILDER

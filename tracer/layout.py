@@ -78,6 +78,29 @@ BVH_NODE = -1
 # Slots of the primary rays' near-first walk's stack (kept in registers; shaders/accel_bvh.glsl).
 BVH_SHORT_STACK = 16
 
+# --- Beams (tracer/beams.py, shaders/accel_beams.glsl, shaders/beams_build.glsl) -----------
+# A beam entry is one 32-bit word: the cylinder id in the low BEAM_ID_BITS bits, the depth
+# slice of its key above them (BEAM_SLICES slices over the scene's depth range).
+BEAM_ID_BITS = 26
+BEAM_SLICES = 64
+# References one family's lists may hold (one buffer texture's worth and then some room).
+BEAM_MAX_REFS = 96_000_000
+# Bins one family may have (its bin table is one ivec2 texel a bin).
+BEAM_MAX_BINS = 1 << 22
+# The scan of the bins' counts (beams_build.glsl) sums this many bins per invocation.
+BEAM_SCAN_CHUNK = 256
+# The listing's own margin, in bins: covers the float32 rounding of the shaders' projection
+# (bins are compared with coordinates of at most a few thousand bins).
+BEAM_BIN_EPS = 1e-3
+# A key is filed this fraction of a slice low, so that float32 rounding cannot put an entry in
+# a slice that starts past its key (the walks stop at a slice's start).
+BEAM_SLICE_EPS = 1e-4
+# A capsule nearer the camera's plane than this fraction of the scene's depth range, or one
+# whose listing could take more than this many bins, leaves the family without beams (its
+# rays walk the grid): tracer/beams.py, BeamsUnfit.
+BEAM_NEAR_FRACTION = 1e-4
+BEAM_MAX_BINS_PER_CYLINDER = 4096
+
 # --- Pixel sampler (RenderSettings.sampler "pixel", shaders/sampler_pixel.glsl) -------------
 # Distinct cylinders one walk keeps (the nearest hit by any of its samples; with one layer
 # each sample keeps its own nearest instead); cylinders shaded per walk, the heaviest, each
@@ -121,6 +144,8 @@ def glsl_header():
         "EMPTY_BLOCK": EMPTY_BLOCK,
         "LEAF_MAX": LEAF_MAX, "LEAF_BITS": LEAF_BITS, "PIECE_BITS": PIECE_BITS, "MAX_PIECES": MAX_PIECES,
         "WALK_TEXELS": WALK_TEXELS, "BVH_NODE": BVH_NODE, "BVH_SHORT_STACK": BVH_SHORT_STACK,
+        "BEAM_ID_BITS": BEAM_ID_BITS, "BEAM_SLICES": BEAM_SLICES, "BEAM_SCAN_CHUNK": BEAM_SCAN_CHUNK,
+        "BEAM_BIN_EPS": float(BEAM_BIN_EPS), "BEAM_SLICE_EPS": float(BEAM_SLICE_EPS),
         "PIX_M": PIXEL_LIST, "PIX_SHADE": PIXEL_SHADE, "PIX_SHADE_ONE": PIXEL_SHADE_ONE, "GROUP": GROUP, "MAX_VISITS": MAX_VISITS, "MAX_REPEATS": MAX_REPEATS,
     }
     lines = ["// Generated from tracer/layout.py when the program is made: edit the numbers there."]

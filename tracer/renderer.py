@@ -26,6 +26,7 @@ from .meshes import mesh_set
 from .mesh_upload import upload_meshes
 from .scene_buffers import SceneBuffers
 from .scene_bvh import build_scene_bvh, bvh_bounds
+from .scene_beams import BeamPlan, BeamState, beam_scene_box, camera_beams, order_camera_beams, sun_beams, sun_slots
 from .scene_grid import build_scene_grid, build_wide_grid, grid_indices, grid_refs
 from .settings import ACCELS, DEFAULT_ACCEL, GRID_WIDEN_CAP, RenderSettings, pixel_group
 from .stats import RenderStats
@@ -46,18 +47,24 @@ class Renderer:
         scenes past that get an InputError.
         `build`: where cylinders and grid are made — "gpu" (compute shaders, GL 4.3+),
         "numpy", or "auto" (the GPU where the driver has compute shaders).
-        `accel`: what rays walk — "grid" (tracer/grid.py) or "bvh" (tracer/bvh.py, built in
-        numpy whatever the build)."""
+        `accel`: what rays walk — "beams" (tracer/beams.py: camera rays and shadow rays toward
+        suns look up their family's bins; other rays walk the grid, built only when some ray
+        needs it; built by the compute passes, so with the numpy build the grid instead),
+        "grid" (tracer/grid.py) or "bvh" (tracer/bvh.py, built in numpy whatever the build)."""
         self.ctx = shared_context()
         if accel not in ACCELS:
             raise InputError(f"accel: expected one of {', '.join(ACCELS)}, got {accel!r}")
-        self.accel = accel
         if build not in BUILDS:
             raise InputError(f"build: expected one of {', '.join(BUILDS)}, got {build!r}")
         if build == "gpu" and not compute_available(self.ctx):
             raise InputError(f"build: 'gpu' needs compute shaders (OpenGL 4.3); this driver offers "
                              f"{self.ctx.info['GL_VERSION']}; use 'numpy' or 'auto'")
         self.build = "numpy" if build == "numpy" or not compute_available(self.ctx) else "gpu"
+        # Beams are built by the compute passes (a camera or light change then uploads nothing);
+        # with the numpy build every ray walks the grid.
+        if accel == "beams" and self.build == "numpy":
+            accel = "grid"
+        self.accel = accel
         self.stats = RenderStats(gl_backend=context_backend(), accel=accel)
         self.buffers = SceneBuffers(self.ctx, max_buffer_texels or self.ctx.info["GL_MAX_TEXTURE_BUFFER_SIZE"],
                                     self.stats)
@@ -67,6 +74,7 @@ class Renderer:
         self._upload = GpuUpload(self.buffers) if self.build == "gpu" else NumpyUpload(self.buffers)
         self._drawer = Drawer(self.ctx)
         self._widened_last = False   # the last render asked for minimum pixel width (set_strands)
+        self.beam_state = BeamState()   # accel "beams": the beams kept between renders
 
     @property
     def max_buffer_texels(self):
@@ -190,7 +198,17 @@ class Renderer:
         self.stats.num_cylinders = self.scene.num_cylinders
 
     def _build_structure(self, bounds=None, refit=False):
-        """The grid or the BVH of the scene, built and uploaded; the seconds uploading."""
+        """The grid or the BVH of the scene, built and uploaded; the seconds uploading. With
+        beams nothing is built here: a render builds the beams it needs (and the grid, when
+        some ray needs one)."""
+        if self.accel == "beams":
+            self.scene.grid = self.scene.bvh = self.scene.wide_grid = None
+            self.scene.box = beam_scene_box(self.scene.plan, bounds, GRID_WIDEN_CAP) if self.scene.num_cylinders \
+                else None
+            self.beam_state.forget()
+            self.stats.grid_s = self.stats.accel_s = 0.0
+            self.stats.accel_bytes = 0
+            return 0.0
         if self.accel == "grid":
             self.scene.bvh = None
             upload_s = build_scene_grid(self.scene, self.buffers, self.build == "gpu", bounds)
@@ -223,8 +241,49 @@ class Renderer:
 
     @property
     def structure(self):
-        """The scene's grid or BVH, whichever `accel` asked for."""
-        return self.scene.grid if self.accel == "grid" else self.scene.bvh
+        """The scene's grid or BVH, whichever `accel` asked for (with beams the grid, or None
+        while no ray has needed it)."""
+        return self.scene.bvh if self.accel == "bvh" else self.scene.grid
+
+    def _grid_for_beams(self, settings):
+        """With beams: the scene's grid, built now if it is not there yet (some ray needs it),
+        padded for minimum pixel width where that is on."""
+        scene = self.scene
+        if settings.min_pixel_width and scene.grid_pad < GRID_WIDEN_CAP:
+            scene.grid_pad = GRID_WIDEN_CAP
+            scene.grid = None
+        if scene.grid is None and scene.num_cylinders:
+            upload_s = build_scene_grid(scene, self.buffers, self.build == "gpu")
+            self.stats.upload_s += upload_s
+            self.stats.grid_rebuilds += 1
+        return scene.grid
+
+    def _beam_plan(self, camera, settings, box):
+        """What a render with beams walks (tracer/scene_beams.py, BeamPlan): the camera's
+        beams over the traced pixels `box`, sun beams for the shadowed suns, and the grid
+        where some ray is left to it; records what it built in the stats."""
+        st, gpu, state = self.stats, self.build == "gpu", self.beam_state
+        ox, oy = camera.pixel_origin
+        whole = (box[0] + ox, box[1] + oy, box[2] + ox, box[3] + oy)
+        pad = GRID_WIDEN_CAP if settings.min_pixel_width else 1.0
+        cam, cam_s = camera_beams(state, self.scene, self.buffers, camera, whole, pad, gpu)
+        if settings.sampler == "pixel":
+            cam_s += order_camera_beams(state, self.buffers)
+        suns, light_sun, sun_s = [None] * len(state.suns), [], 0.0
+        for light, slot in zip(settings.lights, sun_slots(settings)):
+            if slot < 0:
+                light_sun.append(-1)
+                continue
+            beams, s = sun_beams(state, self.scene, self.buffers, light, slot, gpu)
+            sun_s += s
+            suns[slot] = beams
+            light_sun.append(slot if beams is not None else -1)
+        plan = BeamPlan(cam, suns, light_sun)
+        st.beams_s = cam_s + sun_s
+        st.camera_beams = (f"{cam.frame.bin_px} px bins" if cam is not None else f"none: {state.camera_why}")
+        st.beam_refs = (cam.refs if cam is not None else 0) + sum(b.refs for b in suns if b is not None)
+        shadowed = [settings.shadows and light.shadows for light in settings.lights]
+        return plan, cam is None or any(s and k < 0 for s, k in zip(shadowed, light_sun))
 
     # --- rendering ----------------------------------------------------------------------
     def effective_layers(self, settings):
@@ -253,8 +312,8 @@ class Renderer:
         (grid or BVH) and the meshes' box can cover; None when nothing can be seen."""
         strands_box = None
         if self.scene.num_cylinders:
-            strands_box = ((self.scene.grid.lo, self.scene.grid.hi) if self.accel == "grid"
-                           else bvh_bounds(self.scene.bvh))
+            strands_box = {"beams": lambda: self.scene.box, "grid": lambda: (self.scene.grid.lo, self.scene.grid.hi),
+                           "bvh": lambda: bvh_bounds(self.scene.bvh)}[self.accel]()
         boxes = [b for b in (strands_box, (self.mesh_grid.lo, self.mesh_grid.hi) if self.meshes is not None
                              else None) if b is not None]
         if not boxes:
@@ -272,21 +331,38 @@ class Renderer:
         settings = self.sampler_for(settings)
         self._widened_last = settings.min_pixel_width
         pixel = settings.sampler == "pixel"
-        wide = self._wide_grid() if pixel and self.accel == "grid" else None
+        box = self.screen_bounds(camera)
+        beams, walk = None, True
+        if self.accel == "beams" and box is not None:
+            if self.scene.num_cylinders:
+                beams, walk = self._beam_plan(camera, settings, box)
+                if walk:
+                    self._grid_for_beams(settings)
+            else:       # meshes alone: no strand to walk at all
+                beams, walk = BeamPlan(None, [None] * len(self.beam_state.suns), [-1] * len(settings.lights)), False
+        # The pixel sampler walks its grid only for camera rays (with beams, when the camera
+        # has none).
+        grid_camera = self.accel == "grid" or (self.accel == "beams" and (beams is None or beams.camera is None))
+        wide = self._wide_grid() if pixel and grid_camera and self.scene.grid is not None else None
         # Minimum pixel width widens strands, and the pixel sampler's samples stray up to a pixel
         # from the ray it walks: both want every cylinder listed where its widened capsule
         # reaches. The pixel sampler gets a grid of its own beside the scene's (_wide_grid),
         # unless that does not fit one buffer; a BVH's pixel walk grows each box by the
         # samples' reach itself (shaders/accel_bvh.glsl), so its boxes stay as they are.
-        padded_for_pixel = pixel and wide is None and self.accel == "grid"
-        if (settings.min_pixel_width or padded_for_pixel) and self.scene.grid_pad < GRID_WIDEN_CAP:
+        padded_for_pixel = pixel and wide is None and grid_camera and self.scene.grid is not None
+        if (settings.min_pixel_width or padded_for_pixel) and self.scene.grid_pad < GRID_WIDEN_CAP \
+                and self.accel != "beams":
             self.scene.grid_pad = GRID_WIDEN_CAP
             self._build_structure(refit=True)      # a BVH keeps its tree: wider boxes only
             self.stats.grid_rebuilds += 1
-        box = self.screen_bounds(camera)
+        elif padded_for_pixel and self.scene.grid_pad < GRID_WIDEN_CAP:
+            self.scene.grid_pad = GRID_WIDEN_CAP
+            self.scene.grid = None
+            self._grid_for_beams(settings)
         layers = self.effective_layers(settings)
-        img, counts = self._drawer.draw(self.buffers, self.structure, camera, settings, layers, box, self.mesh_grid,
-                                        0.0 if self.meshes is None else self.meshes.shadow_offset(), wide)
+        img, counts = self._drawer.draw(self.buffers, self.structure if walk else None, camera, settings, layers,
+                                        box, self.mesh_grid, 0.0 if self.meshes is None else self.meshes.shadow_offset(),
+                                        wide, beams)
         st = self.stats
         st.render_s = time.perf_counter() - t0
         st.renders += 1

@@ -154,7 +154,7 @@ class SceneBuffers:
 
     def upload(self, name, data, components, dtype, slack=0):
         """`data` (texels x components) into buffer `name`, followed by `slack` zero texels."""
-        data = np.ascontiguousarray(data, np.float32 if dtype == "f4" else np.int32)
+        data = np.ascontiguousarray(data, {"f4": np.float32, "i4": np.int32, "u4": np.uint32}[dtype])
         texels = len(data)
         store = self.store(name, texels + slack, components, dtype)
         store.write(data)

@@ -396,8 +396,10 @@ class RenderSettings:
 # llvmpipe, 512², CPU time): the grid; the BVH took 1.27x its time on the real straight.hair,
 # 1.5x on 1,000 and 10,000 wavy strands and 1.17x on 100,000 (1.0-1.6x over three runs on a
 # shared machine), with 2-5x fewer cylinder tests per ray, and builds in numpy 1-3.4x slower.
-ACCELS = ("grid", "bvh")
-DEFAULT_ACCEL = "grid"
+# "beams" (tracer/beams.py): camera rays and shadow rays toward suns look up a bin of their
+# family's beams, nearest first; other rays walk the grid, built only when some ray needs it.
+ACCELS = ("beams", "grid", "bvh")
+DEFAULT_ACCEL = "beams"
 
 # The grid lists every cylinder with its radius times this factor, so minimum pixel width can
 # widen a radius up to it without hits falling outside the cells the cylinder is listed in.

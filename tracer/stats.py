@@ -14,7 +14,10 @@ class RenderStats:
     and leaves), bvh_pieces; accel ("grid" or "bvh") and accel_bytes (the structure's
     buffers; for the grid its lists and cell table). Of the last set_meshes: num_triangles,
     mesh_s. Of the pixel sampler's wide grid (built on its first render of new strands,
-    beside the scene's grid): wide_grid_s, wide_grid_refs. Of the last render: render_s, layers_max (layers the shader was
+    beside the scene's grid): wide_grid_s, wide_grid_refs. Of the last render with beams
+    (accel "beams"): beams_s (seconds building beams; 0 when the last ones were kept),
+    camera_beams (the camera's bin size, or why it has none and walks the grid), beam_refs
+    (entries of the camera's and the suns' lists). Of the last render: render_s, layers_max (layers the shader was
     compiled for), screen_box and traversed_pixels (the projected bounds that were traced),
     and with RenderSettings(count=True) the counters shadow_rays, layers_traced,
     cells_visited, cylinder_tests (summed over samples). gl_backend: the shared context's
@@ -44,6 +47,9 @@ class RenderStats:
     bvh_pieces: Optional[int] = None
     wide_grid_s: Optional[float] = None
     wide_grid_refs: Optional[int] = None
+    beams_s: Optional[float] = None
+    camera_beams: Optional[str] = None
+    beam_refs: Optional[int] = None
     layers_max: Optional[int] = None
     screen_box: Optional[tuple] = None
     traversed_pixels: Optional[int] = None

@@ -48,6 +48,10 @@ class Scene:
     # The pixel sampler's own grid (radii widened by GRID_WIDEN_CAP) beside an unpadded one,
     # built on its first render of these strands (tracer/scene_grid.py, build_wide_grid).
     wide_grid: Optional[Grid] = None
+    # With beams (Renderer(accel="beams")): the box every capsule lies in (widened for minimum
+    # pixel width), which frames the beams and the traced pixels; the grid is then built only
+    # when some ray needs it.
+    box: Optional[tuple] = None
 
     @property
     def cylinders(self):
@@ -56,7 +60,7 @@ class Scene:
         return self.cylinders_
 
     def forget(self):
-        self.strands = self.grid = self.wide_grid = self.bvh = self.plan = self.cylinders_ = None
+        self.strands = self.grid = self.wide_grid = self.bvh = self.plan = self.cylinders_ = self.box = None
         self.num_cylinders = None
 
     def set_plan(self, strands, plan):

@@ -29,14 +29,27 @@ def pytest_configure(config):
     config.add_cleanup(stop)
 
 
-@pytest.fixture(scope="session", params=["gpu", "numpy"])
-def renderer(request):
-    """One renderer per build (one GL context for all) for the whole session, as in
-    production: every renderer test runs with cylinders and grid made by the compute
-    shaders and by numpy. Drivers without compute shaders (macOS) have only the numpy build."""
+def _session_renderer(build, accel=None):
     from tracer import Renderer
     from tracer.gpu_build import compute_available
     from tracer.gl_state import shared_context
-    if request.param == "gpu" and not compute_available(shared_context()):
+    if build == "gpu" and not compute_available(shared_context()):
         pytest.skip("this driver has no compute shaders (OpenGL 4.3); the numpy build covers it")
-    return Renderer(build=request.param)
+    return Renderer(build=build) if accel is None else Renderer(build=build, accel=accel)
+
+
+@pytest.fixture(scope="session", params=["gpu", "numpy"])
+def renderer(request):
+    """One renderer per build (one GL context for all) for the whole session, as in
+    production: every renderer test runs with cylinders and structures made by the compute
+    shaders and by numpy, with the default accelerator (beams: with the GPU build the
+    camera's and the suns', with the numpy build the suns'; the grid for the rest). Drivers
+    without compute shaders (macOS) have only the numpy build."""
+    return _session_renderer(request.param)
+
+
+@pytest.fixture(scope="session", params=["gpu", "numpy"])
+def grid_renderer(request):
+    """The session's renderer per build with the uniform grid as its accelerator (tests of the
+    grid itself)."""
+    return _session_renderer(request.param, "grid")

@@ -51,14 +51,14 @@ def _needed_texels(r):
 @pytest.mark.parametrize("build", BUILDS)
 def test_a_scene_at_the_buffer_limit_renders_and_one_past_it_is_refused(build):
     s = curls(20, 12, seed=3, alpha=0.6)
-    free = Renderer(build=build)
+    free = Renderer(build=build, accel="grid")
     free.set_strands(s)
     want = free.render(_camera(s), SETTINGS)
     limit = _needed_texels(free)
-    exact = Renderer(max_buffer_texels=limit, build=build)
+    exact = Renderer(max_buffer_texels=limit, build=build, accel="grid")
     exact.set_strands(s)
     np.testing.assert_array_equal(exact.render(_camera(s), SETTINGS), want)
-    tight = Renderer(max_buffer_texels=limit - 1, build=build)
+    tight = Renderer(max_buffer_texels=limit - 1, build=build, accel="grid")
     with pytest.raises(InputError, match="scene too large for this GPU: tex_.* needs .* texels"):
         tight.set_strands(s)
     # No half-built scene is left to trace.
@@ -84,7 +84,7 @@ def _unsplit(build, settings):
     """The dense scene, its camera, a renderer holding it in one buffer each, and its image."""
     s = _dense()
     cam = _camera(s, (48, 44))
-    whole = Renderer(build=build)
+    whole = Renderer(build=build, accel="grid")
     whole.set_strands(s)
     return s, cam, whole, whole.render(cam, settings)
 
@@ -97,7 +97,7 @@ def test_a_scene_split_over_several_buffers_renders_as_the_unsplit_scene(build):
     assert want[..., 3].max() > 0
     seen = set()
     for idx_parts in (4, 3, 2):
-        split = Renderer(max_buffer_texels=_split_limit(whole, idx_parts), build=build)
+        split = Renderer(max_buffer_texels=_split_limit(whole, idx_parts), build=build, accel="grid")
         split.set_strands(s)
         seen.add((split.buffers.parts("tex_cyl"), split.buffers.parts("tex_idx")))
         # The same data, read back across the parts, and the same image and work.
@@ -114,7 +114,7 @@ def test_a_scene_split_over_several_buffers_renders_as_the_unsplit_scene(build):
 def test_the_pixel_sampler_renders_a_split_scene_as_the_unsplit_scene(build):
     s, cam, whole, want = _unsplit(build, PIXEL)      # its grid padded for the pixel's reach
     assert want[..., 3].max() > 0
-    split = Renderer(max_buffer_texels=_split_limit(whole, 3), build=build)
+    split = Renderer(max_buffer_texels=_split_limit(whole, 3), build=build, accel="grid")
     split.set_strands(s)
     got = split.render(cam, PIXEL)
     assert split.buffers.parts("tex_idx") == 3
@@ -127,9 +127,9 @@ def test_updates_of_a_split_scene_render_as_a_fresh_unsplit_upload(build, monkey
     monkeypatch.setattr(strand_upload, "UPLOAD_CHUNK", 16)
     s = _dense()
     cam = _camera(s, (40, 40))
-    whole = Renderer(build=build)
+    whole = Renderer(build=build, accel="grid")
     whole.set_strands(s)
-    r = Renderer(max_buffer_texels=_split_limit(whole, 4), build=build)
+    r = Renderer(max_buffer_texels=_split_limit(whole, 4), build=build, accel="grid")
     r.set_strands(s)
     assert r.buffers.parts("tex_cyl") == 2
     # Strands in the first part, across the boundary and in the last part.
@@ -144,7 +144,7 @@ def test_updates_of_a_split_scene_render_as_a_fresh_unsplit_upload(build, monkey
             pts[a:a + s.counts[i]] += rng.normal(0, 0.01, 3).astype(np.float32)
         s = type(s).from_arrays(pts, s.counts, radius=s.radius, color=s.color, alpha=s.alpha)
         r.update_strands(changed, s)
-        fresh = Renderer(build=build)
+        fresh = Renderer(build=build, accel="grid")
         fresh.set_strands(s)
         n = fresh.num_cylinders * TEXELS_PER_CYL
         assert r.buffers["tex_cyl"].read(n) == fresh.buffers["tex_cyl"].read(n)
@@ -154,12 +154,12 @@ def test_updates_of_a_split_scene_render_as_a_fresh_unsplit_upload(build, monkey
 @pytest.mark.parametrize("build", BUILDS)
 def test_a_scene_past_what_the_split_holds_is_refused_by_name(build):
     s = _dense()
-    whole = Renderer(build=build)
+    whole = Renderer(build=build, accel="grid")
     whole.set_strands(s)
     # The cell lists would need one part more than the split allows; the rest fits.
     limit = -(-(whole.stats.grid_refs + IDX_SLACK) // (MAX_BUFFER_PARTS + 1))
     assert limit >= max(-(-whole.num_cylinders // MAX_BUFFER_PARTS) * TEXELS_PER_CYL, len(s.points))
-    tight = Renderer(max_buffer_texels=limit, build=build)
+    tight = Renderer(max_buffer_texels=limit, build=build, accel="grid")
     with pytest.raises(InputError, match=f"tex_idx needs .* splits one buffer over at most {MAX_BUFFER_PARTS}"):
         tight.set_strands(s)
     assert tight.num_cylinders is None and tight.grid is None
@@ -190,14 +190,14 @@ def test_buffers_kept_from_a_bigger_scene_render_a_smaller_one_like_fresh_ones(b
     # Buffers are reused when they are big enough: whatever the bigger scene left past the
     # end of the smaller one's data must not be read.
     big, small = curls(60, 16, seed=1, alpha=0.5), curls(15, 9, seed=2, alpha=0.7)
-    reused = Renderer(build=build)
+    reused = Renderer(build=build, accel="grid")
     reused.set_strands(big)
     reused.render(_camera(big), SETTINGS)
     kept = {name: store.glo for name, store in reused.buffers.items()}
     reused.set_strands(small)
     assert {name: store.glo for name, store in reused.buffers.items()} == kept     # really reused
     a = reused.render(_camera(small), SETTINGS)
-    fresh = Renderer(build=build)
+    fresh = Renderer(build=build, accel="grid")
     fresh.set_strands(small)
     b = fresh.render(_camera(small), SETTINGS)
     assert a[..., 3].max() > 0
@@ -211,7 +211,7 @@ def test_updates_across_upload_chunks_equal_a_fresh_upload(build, monkeypatch):
     # cross chunk boundaries with and without whole chunks between, and sit side by side.
     monkeypatch.setattr(strand_upload, "UPLOAD_CHUNK", 16)
     s = curls(40, 7)
-    r = Renderer(build=build)
+    r = Renderer(build=build, accel="grid")
     r.set_strands(s)
     cam = _camera(s, (48, 40))
     rng = np.random.default_rng(4)
@@ -224,7 +224,7 @@ def test_updates_across_upload_chunks_equal_a_fresh_upload(build, monkeypatch):
         before = r.stats.bytes_uploaded
         r.update_strands(changed, s)
         sent = r.stats.bytes_uploaded - before
-        fresh = Renderer(build=build)
+        fresh = Renderer(build=build, accel="grid")
         fresh.set_strands(s)
         n = r.num_cylinders * TEXELS_PER_CYL
         np.testing.assert_array_equal(np.frombuffer(r.buffers["tex_cyl"].read(n), np.float32),

@@ -21,7 +21,7 @@ pytestmark = pytest.mark.skipif(not compute_available(shared_context()),
 
 @pytest.fixture(scope="module")
 def gpu():
-    return Renderer(build="gpu")
+    return Renderer(build="gpu", accel="grid")
 
 
 def _gpu_cylinder_texels(r):
@@ -104,7 +104,7 @@ def test_gpu_and_numpy_builds_render_the_same_image(gpu, shadows):
                               lights=(Light(vector=(0.3, 0.5, -1.0)),))
     gpu.set_strands(s)
     a = gpu.render(cam, settings)
-    cpu = Renderer(build="numpy")
+    cpu = Renderer(build="numpy", accel="grid")
     cpu.set_strands(s)
     b = cpu.render(cam, settings)
     assert (a[..., 3] > 0).mean() > 0.05
@@ -129,7 +129,7 @@ def test_update_on_the_gpu_equals_a_fresh_upload(gpu):
     texels = _gpu_cylinder_texels(gpu).copy()
     cam = _scene_camera(s2)
     img = gpu.render(cam)
-    fresh = Renderer(build="gpu")
+    fresh = Renderer(build="gpu", accel="grid")
     fresh.set_strands(s2)
     before = fresh.stats.bytes_uploaded
     np.testing.assert_array_equal(texels, _gpu_cylinder_texels(fresh))
@@ -145,14 +145,14 @@ def test_a_cylinder_too_big_for_one_invocation_falls_back_to_the_numpy_grid(monk
     tiny = [np.array([p, p + [0, 0, 0.002]]) for p in rng.uniform(0, 1, (3000, 3))]
     fat = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
     s = make_strands(tiny + [fat], radius=np.concatenate([np.full(6000, 2e-4), [0.03, 0.03]]))
-    gpu = Renderer(build="gpu")
+    gpu = Renderer(build="gpu", accel="grid")
     gpu.set_strands(s)
     g = gpu.grid
     span = np.prod(np.minimum(g.dims, np.ceil(1.0 / g.cell_size) + 1))
     assert span > layout.MAX_VISITS
     assert gpu.stats.grid_build == "numpy"
     cam = _scene_camera(s)
-    cpu = Renderer(build="numpy")
+    cpu = Renderer(build="numpy", accel="grid")
     cpu.set_strands(s)
     img = gpu.render(cam)
     assert (img[..., 3] > 0).mean() > 0.01
@@ -186,7 +186,7 @@ def test_update_with_repeated_points_elsewhere_equals_a_fresh_upload(gpu):
                 pts[a:a + s.counts[i]] += np.asarray(shift, np.float32)
         s = type(s).from_arrays(pts, s.counts, radius=s.radius, color=s.color, alpha=s.alpha)
         gpu.update_strands(moved, s)
-        fresh = Renderer(build="gpu")
+        fresh = Renderer(build="gpu", accel="grid")
         fresh.set_strands(s)
         assert gpu.num_cylinders == fresh.num_cylinders == len(strands_to_cylinders(s))
         np.testing.assert_array_equal(_gpu_cylinder_texels(gpu), _gpu_cylinder_texels(fresh))

@@ -49,7 +49,7 @@ def test_cli_renders_an_npz_and_prints_times(tmp_path, capsys):
     img = _decode_png(out.read_bytes())
     assert img.shape == (24, 32, 4) and img[..., 3].max() > 0
     text = capsys.readouterr().out
-    assert "upload" in text and "grid build" in text and "render" in text
+    assert "upload" in text and "beams" in text and "render" in text
 
 
 def test_cli_sampler_pixel_gives_the_coverage_one_pass_per_sample_gives(tmp_path, capsys):

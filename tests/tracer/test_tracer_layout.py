@@ -48,7 +48,7 @@ def test_the_bend_limit_moves_both_builds_together(monkeypatch, limit):
     s = _bent_strands()
     c = strands_to_cylinders(s)
     assert _joint_is_cap(c).all() == (limit < BEND_DEG) and _joint_is_cap(c).any() == (limit < BEND_DEG)
-    gpu, cpu = Renderer(build="gpu"), Renderer(build="numpy")
+    gpu, cpu = Renderer(build="gpu", accel="grid"), Renderer(build="numpy", accel="grid")
     gpu.set_strands(s)
     cpu.set_strands(s)
     n = len(c)
@@ -87,10 +87,10 @@ def test_no_shader_spells_a_layout_constant():
         assert "4 * id" not in text and "id << 2" not in text, f"{path.name} spells the texels per cylinder"
 
 
-def test_both_builds_lay_the_same_frame(renderer):
+def test_both_builds_lay_the_same_frame(grid_renderer):
     s = _bent_strands()
-    renderer.set_strands(s)
-    numpy_build = Renderer(build="numpy")
+    grid_renderer.set_strands(s)
+    numpy_build = Renderer(build="numpy", accel="grid")
     numpy_build.set_strands(s)
     for field in ("lo", "cell_size", "dims"):
-        np.testing.assert_array_equal(getattr(renderer.grid, field), getattr(numpy_build.grid, field))
+        np.testing.assert_array_equal(getattr(grid_renderer.grid, field), getattr(numpy_build.grid, field))

@@ -166,25 +166,26 @@ def test_pixel_sampler_with_meshes_and_both_accelerators(accel):
 
 
 # --- A scene dense enough for llvmpipe's loop cap -----------------------------------------------
-def test_dense_scene_keeps_every_hit(renderer):
+def test_dense_scene_keeps_every_hit(grid_renderer):
     """8,000 faint strands (alpha 0.05, 4 layers) packed in front of the camera: a pixel's walk
     crosses the whole tuft, hundreds of candidates, before its samples have their layers. A
     loop cap reached silently would end walks early and drop hits, leaving the pixel sampler's
     alpha below the independent sampler's, whose invocations each walk one sample; and one
-    invocation does one walk, not one per sample (the counters say so)."""
+    invocation does one walk, not one per sample (the counters say so). On the grid, whose
+    walks test the most candidates (the beams' walk of the same scene: test_tracer_beams.py)."""
     rng = np.random.default_rng(3)
     t = np.linspace(0.0, 1.0, 24)[:, None]
     lines = []
     for _ in range(8000):
         a, b = rng.uniform(-0.25, 0.25, 3), rng.uniform(-0.25, 0.25, 3)
         lines.append(a + t * (b - a) + 0.02 * np.sin(9 * t + rng.uniform(0, 6)))
-    renderer.set_strands(make_strands(lines, radius=0.0008, alpha=0.05))
+    grid_renderer.set_strands(make_strands(lines, radius=0.0008, alpha=0.05))
     cam = Camera.look_at((0.0, -1.6, 0.0), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
-    ind = renderer.render(cam, RenderSettings(spp=4, count=True))
-    ind_tests = renderer.stats.cylinder_tests
-    pix = renderer.render(cam, RenderSettings(sampler="pixel", spp=4, count=True))
-    pix_tests = renderer.stats.cylinder_tests
-    assert renderer.stats.layers_max == 4
+    ind = grid_renderer.render(cam, RenderSettings(spp=4, count=True))
+    ind_tests = grid_renderer.stats.cylinder_tests
+    pix = grid_renderer.render(cam, RenderSettings(sampler="pixel", spp=4, count=True))
+    pix_tests = grid_renderer.stats.cylinder_tests
+    assert grid_renderer.stats.layers_max == 4
     assert pix_tests / pix[..., 3].size > 300, "not dense enough to prove anything"
     assert pix_tests < 2 * ind_tests        # one walk a pixel (four would be ~4x a sample's)
     assert abs(ind[..., 3].mean() - pix[..., 3].mean()) < 0.005
@@ -325,76 +326,76 @@ def test_a_refinement_pass_keeps_the_pixel_sampler(renderer, alpha):
 def _padded(build, hair, cam, max_buffer_texels=None):
     """A renderer of `hair` whose own grid is padded (minimum pixel width asked for it)."""
     from tracer.settings import GRID_WIDEN_CAP
-    r = Renderer(build=build, max_buffer_texels=max_buffer_texels)
+    r = Renderer(build=build, max_buffer_texels=max_buffer_texels, accel="grid")
     r.set_strands(hair)
     r.render(cam, RenderSettings(min_pixel_width=True))
     assert r.scene.grid_pad == GRID_WIDEN_CAP and r.scene.wide_grid is None
     return r
 
 
-def test_the_pixel_sampler_walks_a_wide_grid_beside_the_scenes_own(renderer):
+def test_the_pixel_sampler_walks_a_wide_grid_beside_the_scenes_own(grid_renderer):
     """The pixel sampler walks a grid of its own, padded for its samples' reach, built on its
     first render of new strands; the scene's grid stays unpadded, so later default renders
     (and every shadow ray) are a fresh renderer's. The image is the one it gives on a scene
     grid padded by minimum pixel width, bit for bit; new strands drop the wide grid."""
     cam = Camera.look_at((0.0, -2.5, 0.3), (0.0, 0.0, 0.3), size=(40, 40))
     hair = curls(n_strands=30)
-    renderer.set_strands(hair)
-    refs = renderer.stats.grid_refs
-    rebuilds = renderer.stats.grid_rebuilds
-    img = renderer.render(cam, RenderSettings(sampler="pixel", spp=4))
-    assert renderer.scene.grid_pad == 1.0 and renderer.scene.wide_grid is not None
-    assert renderer.stats.wide_grid_refs > refs == renderer.stats.grid_refs
-    assert renderer.stats.grid_rebuilds == rebuilds + 1
-    np.testing.assert_array_equal(img, _padded(renderer.build, hair, cam).render(cam, RenderSettings(sampler="pixel",
+    grid_renderer.set_strands(hair)
+    refs = grid_renderer.stats.grid_refs
+    rebuilds = grid_renderer.stats.grid_rebuilds
+    img = grid_renderer.render(cam, RenderSettings(sampler="pixel", spp=4))
+    assert grid_renderer.scene.grid_pad == 1.0 and grid_renderer.scene.wide_grid is not None
+    assert grid_renderer.stats.wide_grid_refs > refs == grid_renderer.stats.grid_refs
+    assert grid_renderer.stats.grid_rebuilds == rebuilds + 1
+    np.testing.assert_array_equal(img, _padded(grid_renderer.build, hair, cam).render(cam, RenderSettings(sampler="pixel",
                                                                                                      spp=4)))
     assert img[..., 3].max() > 0.5
-    renderer.render(cam, RenderSettings(sampler="pixel", spp=9))      # the same wide grid
-    assert renderer.stats.grid_rebuilds == rebuilds + 1
-    fresh = Renderer(build=renderer.build)
+    grid_renderer.render(cam, RenderSettings(sampler="pixel", spp=9))      # the same wide grid
+    assert grid_renderer.stats.grid_rebuilds == rebuilds + 1
+    fresh = Renderer(build=grid_renderer.build, accel="grid")
     fresh.set_strands(hair)
-    np.testing.assert_array_equal(renderer.render(cam, RenderSettings()), fresh.render(cam, RenderSettings()))
-    renderer.set_strands(hair)
-    assert renderer.scene.wide_grid is None and renderer.scene.grid_pad == 1.0
+    np.testing.assert_array_equal(grid_renderer.render(cam, RenderSettings()), fresh.render(cam, RenderSettings()))
+    grid_renderer.set_strands(hair)
+    assert grid_renderer.scene.wide_grid is None and grid_renderer.scene.grid_pad == 1.0
 
 
-def test_after_minimum_pixel_width_the_pixel_sampler_walks_the_scenes_padded_grid(renderer):
+def test_after_minimum_pixel_width_the_pixel_sampler_walks_the_scenes_padded_grid(grid_renderer):
     """Minimum pixel width pads the scene's grid, and new strands keep the padding: the
     pixel sampler then walks that grid and builds no wide one."""
     from tracer.settings import GRID_WIDEN_CAP
     cam = Camera.look_at((0.0, -2.5, 0.3), (0.0, 0.0, 0.3), size=(40, 40))
     hair = curls(n_strands=30)
-    renderer.set_strands(hair)
-    renderer.render(cam, RenderSettings(min_pixel_width=True))
-    renderer.set_strands(hair)
-    assert renderer.scene.grid_pad == GRID_WIDEN_CAP
-    img = renderer.render(cam, RenderSettings(sampler="pixel", spp=4))
-    assert renderer.scene.wide_grid is None and img[..., 3].max() > 0.5
+    grid_renderer.set_strands(hair)
+    grid_renderer.render(cam, RenderSettings(min_pixel_width=True))
+    grid_renderer.set_strands(hair)
+    assert grid_renderer.scene.grid_pad == GRID_WIDEN_CAP
+    img = grid_renderer.render(cam, RenderSettings(sampler="pixel", spp=4))
+    assert grid_renderer.scene.wide_grid is None and img[..., 3].max() > 0.5
 
 
-def test_a_wide_grid_past_one_buffer_pads_the_scenes_grid_instead(renderer):
+def test_a_wide_grid_past_one_buffer_pads_the_scenes_grid_instead(grid_renderer):
     """The wide grid's lists live in one buffer texture; past it the scene's own grid is
     padded (its lists may be split over several), and the image is the same."""
     from tracer.settings import GRID_WIDEN_CAP
     cam = Camera.look_at((0.0, -2.5, 0.3), (0.0, 0.0, 0.3), size=(40, 40))
     hair = curls(n_strands=30)
-    probe = Renderer(build=renderer.build)
+    probe = Renderer(build=grid_renderer.build, accel="grid")
     probe.set_strands(hair)
     probe.render(cam, RenderSettings(sampler="pixel", spp=4))
     wide, own = probe.stats.wide_grid_refs, probe.stats.grid_refs
     limit = (own + wide) // 2           # the scene's lists fit, the wide ones do not
     assert own < limit < wide
-    small = Renderer(build=renderer.build, max_buffer_texels=limit)
+    small = Renderer(build=grid_renderer.build, max_buffer_texels=limit, accel="grid")
     small.set_strands(hair)
     img = small.render(cam, RenderSettings(sampler="pixel", spp=4))
     assert small.scene.wide_grid is None and small.scene.grid_pad == GRID_WIDEN_CAP
     assert small.buffers.parts("tex_idx") > 1
     np.testing.assert_array_equal(img, probe.render(cam, RenderSettings(sampler="pixel", spp=4)))
-    renderer.set_strands(hair)
-    assert renderer.scene.grid_pad == 1.0
-    fresh = Renderer(build=renderer.build)
+    grid_renderer.set_strands(hair)
+    assert grid_renderer.scene.grid_pad == 1.0
+    fresh = Renderer(build=grid_renderer.build, accel="grid")
     fresh.set_strands(hair)
-    np.testing.assert_array_equal(renderer.render(cam, RenderSettings()), fresh.render(cam, RenderSettings()))
-    renderer.render(cam, RenderSettings(min_pixel_width=True))
-    renderer.set_strands(hair)
-    assert renderer.scene.grid_pad == GRID_WIDEN_CAP
+    np.testing.assert_array_equal(grid_renderer.render(cam, RenderSettings()), fresh.render(cam, RenderSettings()))
+    grid_renderer.render(cam, RenderSettings(min_pixel_width=True))
+    grid_renderer.set_strands(hair)
+    assert grid_renderer.scene.grid_pad == GRID_WIDEN_CAP

@@ -97,18 +97,18 @@ def test_curls_perspective_with_two_lights(renderer):
     assert_matches_reference(renderer, s, cam, settings)
 
 
-def test_empty_blocks_between_tufts_are_skipped_without_losing_hits(renderer):
+def test_empty_blocks_between_tufts_are_skipped_without_losing_hits(grid_renderer):
     # Two tufts far apart: the grid between them is empty blocks the DDA jumps over.
     a, b = curls(12, 8, seed=1, radius=0.01), curls(12, 8, seed=2, radius=0.01)
     from hairio import Strands
     pts = np.concatenate([a.points, b.points + [2.0, 1.5, 0.7]])
     s = Strands.from_arrays(pts, np.concatenate([a.counts, b.counts]), radius=np.full(len(pts), 0.01))
-    renderer.set_strands(s)
+    grid_renderer.set_strands(s)
     from tracer.scene_grid import block_occupancy
-    assert block_occupancy(renderer.grid).mean() < 0.5
+    assert block_occupancy(grid_renderer.grid).mean() < 0.5
     cam = Camera.look_at((-1.5, -2.0, -0.2), (1.0, 0.75, 0.85), fov_deg=60, size=(48, 48))
     settings = RenderSettings(shadows=True, lights=(Light("directional", (1.0, 0.8, 0.2)),))
-    assert_matches_reference(renderer, s, cam, settings)
+    assert_matches_reference(grid_renderer, s, cam, settings)
 
 
 @pytest.mark.parametrize("shadows", [False, True])

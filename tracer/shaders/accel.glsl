@@ -23,6 +23,10 @@
 // cylinders it tests. Its buffers and uniforms are its own (the host binds them:
 // tracer/draw.py TRACE_BUFFERS).
 
+// The pixel (whole-image coordinates) whose samples this invocation's camera rays go
+// through, set by main: the camera beams (accel_beams.glsl) look their bin up by it.
+ivec2 camera_pixel;
+
 // Axis zero components get a tiny same-sign stand-in so 1/d stays finite (no inf - inf).
 vec3 safe_inverse(vec3 d) {
     vec3 s = mix(vec3(1.0), sign(d), notEqual(d, vec3(0.0)));
@@ -60,4 +64,19 @@ bool hits_settled() {
     if (Tl < t_eps) return true;
 #endif
     return false;
+}
+
+// Past this distance no hit can change the image: the farthest of a full list, or the hit
+// after which the layers let less than t_eps through (compositing stops there); BIG while
+// neither holds. (The BVH's near-first walk and the beams' walks stop there.)
+float hits_horizon() {
+    float h = ht[LAYERS - 1];
+#if LAYERS > 1
+    float Tl = 1.0;
+    for (int i = 0; i < LAYERS; ++i) {
+        Tl *= 1.0 - ha[i];
+        h = Tl < t_eps ? min(h, ht[i]) : h;
+    }
+#endif
+    return h;
 }

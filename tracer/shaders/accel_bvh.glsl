@@ -80,20 +80,6 @@ bool piece_holds(int part, vec3 o, vec3 d, float t, vec4 A4, vec4 B4) {
     return K == 1 || (u >= lo && u < hi);
 }
 
-// The distance past which no hit can change the image: the last slot's when the list is
-// full, or the first hit at which the layers before let less than t_eps through.
-float hits_horizon() {
-    float cut = ht[LAYERS - 1];
-#if LAYERS > 1
-    float Tl = 1.0;
-    for (int i = 0; i < LAYERS; ++i) {
-        Tl *= 1.0 - ha[i];
-        if (Tl < t_eps) cut = min(cut, ht[i]);
-    }
-#endif
-    return cut;
-}
-
 // Offers the pieces of leaf `code` hit at 0 < t < tmax to the hit list (a hit counts in the
 // piece that holds it).
 void offer_leaf(int code, vec3 o, vec3 d, float tmax, float widen_per_t, float widen_const) {

@@ -37,6 +37,24 @@ vec3 nearest_on_ray(vec3 w, vec3 D, vec3 ax, float L2) {
     return w + ((b * e - L2 * dd) / max(den, 1e-30 * a * L2)) * D;
 }
 
+// How near a camera ray from o (along d for the orthographic camera) can meet the capsule of
+// the cylinder (A, axis ax, plane-2 normal n2, radius r): perspective, the distance from o
+// to its axis from A to its far end (past the tip on the outer side of a bend:
+// tracer/cylinders.py, extension) less r; orthographic, its nearest depth less r
+// (tracer/beams.py, the camera's keys).
+float capsule_near(vec3 A, vec3 ax, vec3 n2, float r, vec3 o, vec3 d) {
+    float len = length(ax);
+    float c = clamp(dot(ax, n2) / max(len, 1e-30), COS_SHARP, 1.0);
+    vec3 far = A + ax * (1.0 + r * sqrt(max(0.0, 1.0 - c * c)) / c / max(len, 1e-30));
+#if ORTHO
+    return min(dot(A - o, d), dot(far - o, d)) - r;
+#else
+    vec3 af = far - A;
+    float s = clamp(dot(o - A, af) / max(dot(af, af), 1e-30), 0.0, 1.0);
+    return length(A + s * af - o) - r;
+#endif
+}
+
 // Which of the pixel's samples hit the cut cylinder (A4, B4, plane-2 normal n2) of the
 // central ray o + t·d: bit i for sample i. A sample hits where its ray passes within r of
 // the axis and its chord through the infinite cylinder (the point of the ray nearest the
@@ -102,6 +120,13 @@ uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
         n0 = dot(q0, q0) <= r * r ? 0.0 : BIG; nu = 0.0; nv = 0.0;
         f10 = 0.0; f1u = 0.0; f1v = 0.0; f20 = 0.0; f2u = 0.0; f2v = 0.0; hk1 = 0.0; hk2 = 0.0;
     }
+    bool front = trep > 0.0;
+    // No sample ray meets the cut cylinder nearer than its capsule lies (its axis from A to its
+    // far end past a bend, less r), so it is ordered no nearer than that: the infinite
+    // cylinder's entry can lie far in front of the cut one when the strand points at the
+    // camera. The camera beams' keys are the same bound (beams_build.glsl), which lets their
+    // walk stop the pixel's list at them.
+    trep = max(trep, capsule_near(A, ax, n2, r, o, d));
     // The sample's own |D × ax|² (near the axis's direction it changes across a pixel) is
     // quadratic in its offset; the plane tests are taken times it, so a sample needs no
     // division.
@@ -124,7 +149,7 @@ uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
 #endif
         m |= hit ? (1u << uint(i)) : 0u;
     }
-    return trep > 0.0 ? m : 0u;
+    return front ? m : 0u;
 }
 
 #if LAYERS > 1

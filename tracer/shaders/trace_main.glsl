@@ -59,9 +59,27 @@ vec2 light_sample(int k, int l) {
 }
 
 #if SHADOWS
-// Transmittance toward a light from p (1 = lit): 0 behind a mesh, else the accelerator's,
-// after one guess.
-float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint) {
+#if SUN_BEAMS > 0
+uniform int light_sun[NUM_LIGHTS];    // the sun beams (accel_beams.glsl) serving light l; -1: none
+#endif
+
+// Transmittance toward light l through the hair alone: its sun beams' when it has them, else
+// the accelerator's walk.
+float light_transmittance(int l, vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint) {
+#if SUN_BEAMS > 0
+    int set = light_sun[l];
+    if (set >= 0) return sun_transmittance(set, p, d, tmax, own, tmin, hint);
+#endif
+#if WALK
+    return accel_transmittance(p, d, tmax, own, tmin, hint);
+#else
+    return 1.0;     // not reached: with no walk every shadowed light has sun beams
+#endif
+}
+
+// Transmittance toward light l from p (1 = lit): 0 behind a mesh, else the hair's, after one
+// guess.
+float shadow_ray(int l, vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint) {
 #if COUNT
     counter.x += 1.0;
 #endif
@@ -82,7 +100,7 @@ float shadow_ray(vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint
         if (hint >= 0 && h != own && th > tmin && th < tmax) return 0.0;
     }
 #endif
-    return accel_transmittance(p, d, tmax, own, tmin, hint);
+    return light_transmittance(l, p, d, tmax, own, tmin, hint);
 }
 
 int occluder[NUM_LIGHTS];   // per light, the last cylinder that blocked a shadow ray
@@ -175,7 +193,7 @@ vec3 shade(int id, int surf, vec3 o, vec3 d, float t, int k) {
         float lit = 1.0;
 #if SHADOWS
         if (light_shadow[l] > 0.5) {
-            lit = shadow_ray(s.p, L, dist, id, 1e-3 * cyl(id, CYL_TOP).w, occluder[l]);
+            lit = shadow_ray(l, s.p, L, dist, id, 1e-3 * cyl(id, CYL_TOP).w, occluder[l]);
             if (lit <= 0.0) continue;
         }
 #endif
@@ -206,7 +224,7 @@ vec3 shade_mesh(int tri, vec3 o, vec3 d, float t, vec3 N) {
 #endif
             if (mesh_blocked(q, L, dist, tri)) continue;
             int hint = -1;
-            lit = accel_transmittance(q, L, dist, -1, 0.0, hint);
+            lit = light_transmittance(l, q, L, dist, -1, 0.0, hint);
             if (lit <= 0.0) continue;
         }
 #endif
@@ -229,7 +247,11 @@ vec4 trace(vec3 o, vec3 d, float widen_per_t, float widen_const) {
     tmesh = mesh_nearest(o, d, BIG, mtri, mn);
 #endif
     hits_clear();
+#if CAMERA_BEAMS
+    beam_nearest(o, d, tmesh, widen_per_t, widen_const);
+#elif WALK
     accel_nearest(o, d, tmesh, widen_per_t, widen_const);
+#endif
     int n = 0;
     for (int i = 0; i < LAYERS; ++i) n += ht[i] < BIG ? 1 : 0;
     vec3 C = vec3(0.0);
@@ -390,6 +412,7 @@ vec3 shade_entry(int eid, vec2 mi, float et, vec3 o, vec3 d, int k) {
 void main() {
     int px = int(gl_FragCoord.x) + pixel_origin.x;
     int py = int(image_size.y) - 1 - int(gl_FragCoord.y) + pixel_origin.y;   // row 0 = top
+    camera_pixel = ivec2(px, py);
     for (int s = 0; s < PN; ++s) px_off[s] = sample_jitter(sample_index * PN + s, px, py) - 0.5;
     light_seed = pixel_hash(px, py, 0x27d4eb2du);
     vec3 o, d; float len;
@@ -420,7 +443,11 @@ void main() {
     tmax = tfar;
 #endif
     list_clear();
+#if CAMERA_BEAMS
+    beam_pixel_nearest(o, d, tmax);
+#elif WALK
     accel_pixel_nearest(o, d, tmax);
+#endif
 
     // Each sample's compositing, entry by entry in depth order: the entry's weight and the
     // samples it counts in (one of them is where it is shaded, below).
@@ -548,7 +575,7 @@ void main() {
         if (lstrand[l] >= 0 && light_shadow[l] > 0.5) {
             float dist;
             vec3 L = light_dir(l, lp[l], lu[l], dist);
-            v = shadow_ray(lp[l], L, dist, lstrand[l], 1e-3 * cyl(lstrand[l], CYL_TOP).w, occluder[l]);
+            v = shadow_ray(l, lp[l], L, dist, lstrand[l], 1e-3 * cyl(lstrand[l], CYL_TOP).w, occluder[l]);
         }
 #endif
         C += v * lit[l];
@@ -590,6 +617,7 @@ void main() {
 void main() {
     int px = int(gl_FragCoord.x) + pixel_origin.x;
     int py = int(image_size.y) - 1 - int(gl_FragCoord.y) + pixel_origin.y;   // row 0 = top
+    camera_pixel = ivec2(px, py);
     vec2 jit = sample_jitter(sample_index, px, py);
     light_seed = pixel_hash(px, py, 0x27d4eb2du);
     vec3 o, d; float len;

@@ -1,0 +1,307 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Beams (Renderer(accel="beams"), tracer/beams.py): the camera's and the suns' binned lists
+give the grid's image, every cylinder a ray of a bin can meet is in the bin's list no later
+than its depth allows, the compute passes list what numpy lists, and where beams cannot serve
+a family of rays (a camera among the hair, lists past their budget, a point light) those
+rays walk the grid and the image does not change. A camera move uploads nothing."""
+import numpy as np
+import pytest
+
+from tracer import Camera, Light, Renderer, RenderSettings, strands_to_cylinders
+from tracer import layout
+from tracer.beams import BeamsUnfit, build_beams, camera_frame, project, sun_frame
+from tracer.gpu_build import compute_available
+from tracer.gl_state import shared_context
+from tracer.scene_beams import CAMERA_BUFFERS, SUN_BUFFERS, beam_scene_box, read_beams
+
+from test_tracer_grid import _surface_samples
+from test_tracer_vs_reference import assert_matches_reference
+from tracer_scenes import curls, make_strands, uv_sphere
+
+pytestmark = pytest.mark.skipif(not compute_available(shared_context()),
+                                reason="beams are built by compute shaders (OpenGL 4.3); the grid serves without")
+
+CAM = Camera.look_at((1.8, -1.6, 0.9), (0, 0, 0.5), fov_deg=40, size=(64, 64))
+CASES = {
+    "opaque, hard shadows": (curls(30, 10), RenderSettings(shadows=True)),
+    "alpha layers, transmittance": (curls(30, 10, alpha=0.5), RenderSettings(layers=4, shadow_mode="transmittance")),
+    "alpha, hard, 4 spp, a sun and a point light": (curls(30, 10, alpha=0.6), RenderSettings(
+        spp=4, layers=3, lights=(Light(), Light("point", (1.0, -1.0, 2.0), intensity=0.5)))),
+    "min pixel width, phong": (curls(30, 10, radius=0.002), RenderSettings(min_pixel_width=True, shading="phong")),
+    "two suns, one with an angle, chiang": (curls(30, 10, alpha=0.8), RenderSettings(
+        spp=4, layers=2, lights=(Light(vector=(0.3, 0.2, -1.0)), Light(vector=(-0.5, 0.4, -0.6), angle=0.2,
+                                                                          intensity=0.7)))),
+}
+
+
+@pytest.fixture(scope="module")
+def pair():
+    """(grid renderer, beams renderer), both built by the compute passes."""
+    return Renderer(build="gpu", accel="grid"), Renderer(build="gpu", accel="beams")
+
+
+def _both(pair, strands, camera, settings):
+    imgs = []
+    for r in pair:
+        r.set_strands(strands)
+        imgs.append(r.render(camera, settings))
+    return imgs
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_beams_give_the_grids_image(pair, case):
+    strands, settings = CASES[case]
+    grid, beams = _both(pair, strands, CAM, settings)
+    assert (grid[..., 3] > 0).mean() > 0.05, "scene not in view: the test would prove nothing"
+    assert pair[1].stats.camera_beams.endswith("px bins")
+    assert np.abs(grid - beams).max() <= 1e-6
+
+
+def test_a_point_light_walks_the_grid_and_a_sun_its_beams(pair):
+    _both(pair, *CASES["opaque, hard shadows"][:1], CAM, CASES["opaque, hard shadows"][1])
+    assert pair[1].scene.grid is None            # a sun alone: no ray walks the grid
+    strands, settings = CASES["alpha, hard, 4 spp, a sun and a point light"]
+    _both(pair, strands, CAM, settings)
+    assert pair[1].scene.grid is not None        # built for the point light's shadow rays
+
+
+def test_orthographic_camera_from_below(pair):
+    cam = Camera.look_at((0.1, 0.05, -2.0), (0, 0, 0.5), fov_deg=30, size=(48, 48), type="ORTHO", ortho_scale=1.4)
+    grid, beams = _both(pair, curls(20, 8, alpha=0.7), cam, RenderSettings(layers=2))
+    assert (grid[..., 3] > 0).mean() > 0.05 and pair[1].stats.camera_beams.endswith("px bins")
+    assert np.abs(grid - beams).max() <= 1e-6
+
+
+def test_beams_match_the_float64_reference():
+    r = Renderer(build="gpu", accel="beams")
+    assert_matches_reference(r, curls(25, 10, alpha=0.6), CAM, RenderSettings(layers=4, shadow_mode="transmittance"))
+
+
+def test_a_window_of_the_image_is_the_whole_images_pixels(pair):
+    r = pair[1]
+    r.set_strands(curls(30, 10, alpha=0.6))
+    settings = RenderSettings(layers=3, spp=4)
+    whole = r.render(CAM, settings)
+    part = r.render(CAM.window(10, 20, 40, 30), settings)
+    np.testing.assert_array_equal(part, whole[20:50, 10:50])
+
+
+def test_meshes_hide_hair_and_take_its_shadows(pair):
+    strands = curls(30, 10, alpha=0.7)
+    sphere = uv_sphere((0.3, -0.4, 0.5), 0.25)
+    for r in pair:
+        r.set_meshes([(*sphere, (0.6, 0.5, 0.4))])
+    try:
+        grid, beams = _both(pair, strands, CAM, RenderSettings(layers=3, spp=4))
+        pix_grid, pix_beams = _both(pair, strands, CAM, RenderSettings(layers=3, spp=4, sampler="pixel"))
+    finally:
+        for r in pair:
+            r.set_meshes(None)
+    assert (grid[..., 3] == 1).mean() > 0.05
+    assert np.abs(grid - beams).max() <= 1e-6
+    assert abs(pix_grid[..., :3].mean() - pix_beams[..., :3].mean()) < 0.01 * pix_grid[..., :3].mean()
+
+
+def test_a_camera_among_the_hair_walks_the_grid(pair):
+    strands = curls(40, 10)
+    inside = Camera.look_at((0.0, 0.0, 0.5), (0.5, -0.5, 0.5), fov_deg=70, size=(48, 48))
+    grid, beams = _both(pair, strands, inside, RenderSettings())
+    assert "camera's plane" in pair[1].stats.camera_beams
+    assert (grid[..., 3] > 0).mean() > 0.05
+    assert np.abs(grid - beams).max() <= 1e-6
+
+
+def test_lists_past_their_budget_take_coarser_bins_then_the_grid(pair, monkeypatch):
+    strands, settings = CASES["alpha layers, transmittance"]
+    want = _both(pair, strands, CAM, settings)[0]
+    one_px = pair[1].beam_state.camera.refs
+    monkeypatch.setattr(layout, "BEAM_MAX_REFS", int(one_px * 0.8))
+    r = Renderer(build="gpu", accel="beams")
+    r.set_strands(strands)
+    np.testing.assert_allclose(r.render(CAM, settings), want, atol=1e-6)
+    assert r.stats.camera_beams in ("2 px bins", "4 px bins")
+    monkeypatch.setattr(layout, "BEAM_MAX_REFS", 10)
+    r = Renderer(build="gpu", accel="beams")
+    r.set_strands(strands)
+    np.testing.assert_allclose(r.render(CAM, settings), want, atol=1e-6)
+    assert r.stats.camera_beams.startswith("none") and r.scene.grid is not None
+
+
+def test_camera_moves_upload_nothing_and_a_kept_camera_builds_nothing(pair):
+    r = pair[1]
+    strands = curls(200, 10, seed=4)
+    r.set_strands(strands)
+    sent = r.stats.bytes_uploaded
+    first = r.render(CAM)
+    assert r.stats.beams_s > 0
+    moved = Camera.look_at((-1.5, -1.9, 0.4), (0, 0, 0.4), fov_deg=50, size=(64, 64))
+    r.render(moved, RenderSettings(shading="phong", spp=4))
+    again = r.render(CAM)
+    assert r.stats.bytes_uploaded == sent
+    np.testing.assert_array_equal(again, first)
+    r.render(CAM)
+    assert r.stats.beams_s == 0.0          # the same camera and sun: the lists are kept
+
+
+def test_an_edit_rebuilds_the_beams(pair):
+    r = pair[1]
+    strands = curls(60, 10, seed=5)
+    r.set_strands(strands)
+    r.render(CAM)
+    pts = strands.points.copy()
+    first = strands.offsets[7]
+    pts[first:first + strands.counts[7]] += np.array([0.05, 0.0, 0.02], np.float32)
+    edited = type(strands).from_arrays(pts, strands.counts, radius=strands.radius, color=strands.color,
+                                       alpha=strands.alpha)
+    r.update_strands([7], edited)
+    fresh = Renderer(build="gpu", accel="beams")
+    fresh.set_strands(edited)
+    np.testing.assert_array_equal(r.render(CAM), fresh.render(CAM))
+
+
+def test_split_cylinder_buffers_render_as_one(pair):
+    """Past the driver's limit the cylinders continue in further buffers (tracer/scene_buffers.py):
+    the beams' passes and walks find them there. (A beam list itself lives in one buffer.)"""
+    strands, settings = curls(300, 10), RenderSettings(shadows=False)
+    cam = Camera.look_at((1.8, -1.6, 0.9), (0, 0, 0.5), fov_deg=40, size=(16, 16))
+    want = _both(pair, strands, cam, settings)[0]
+    limit = 10_000
+    assert pair[1].beam_state.camera.refs < limit < pair[1].num_cylinders * layout.TEXELS_PER_CYL
+    small = Renderer(build="gpu", accel="beams", max_buffer_texels=limit)
+    small.set_strands(strands)
+    img = small.render(cam, settings)
+    assert small.buffers.parts("tex_cyl") == 2 and small.stats.camera_beams.endswith("px bins")
+    assert (img[..., 3] > 0).mean() > 0.05
+    np.testing.assert_array_equal(img, want)
+
+
+def test_the_counters_see_one_bin_a_ray(pair):
+    r = pair[1]
+    r.set_strands(curls(30, 10))
+    r.render(CAM, RenderSettings(count=True))
+    st = r.stats
+    box = st.screen_box
+    # One bin a camera ray and one a shadow ray toward the sun.
+    assert st.cells_visited == (box[2] - box[0]) * (box[3] - box[1]) + st.shadow_rays
+    grid = pair[0]
+    grid.set_strands(curls(30, 10))
+    grid.render(CAM, RenderSettings(count=True))
+    assert st.cylinder_tests < 0.5 * grid.stats.cylinder_tests
+
+
+def test_the_numpy_build_walks_the_grid():
+    r = Renderer(build="numpy", accel="beams")
+    assert r.accel == "grid"
+
+
+def test_the_pixel_sampler_on_dense_see_through_hair_keeps_every_hit():
+    """The dense tuft of test_tracer_pixel_sampler.py's loop-cap test: the pixel sampler walking
+    the camera's beams has the independent sampler's coverage."""
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 1.0, 24)[:, None]
+    lines = []
+    for _ in range(8000):
+        a, b = rng.uniform(-0.25, 0.25, 3), rng.uniform(-0.25, 0.25, 3)
+        lines.append(a + t * (b - a) + 0.02 * np.sin(9 * t + rng.uniform(0, 6)))
+    r = Renderer(build="gpu", accel="beams")
+    r.set_strands(make_strands(lines, radius=0.0008, alpha=0.05))
+    cam = Camera.look_at((0.0, -1.6, 0.0), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
+    ind = r.render(cam, RenderSettings(spp=4))
+    pix = r.render(cam, RenderSettings(sampler="pixel", spp=4))
+    assert r.stats.camera_beams.endswith("px bins") and ind[..., 3].mean() > 0.1
+    assert abs(ind[..., 3].mean() - pix[..., 3].mean()) < 0.005
+    assert np.abs(ind[..., 3] - pix[..., 3]).mean() < 0.02
+
+
+# --- The lists themselves ----------------------------------------------------------------------
+def _scene(strands):
+    """(cylinders, scene box lo, hi, largest radius) as the renderer frames them."""
+    from tracer.cylinders import plan_cylinders
+    from tracer.settings import GRID_WIDEN_CAP
+    plan = plan_cylinders(strands)
+    lo, hi = beam_scene_box(plan, None, GRID_WIDEN_CAP)
+    return strands_to_cylinders(strands), lo, hi, float(plan.radius.max())
+
+
+SUN_SPREAD = np.tan(0.1)
+
+
+def _frames(lo, hi, rmax):
+    persp = camera_frame(CAM, (0, 0, 64, 64), lo, hi, rmax, 1.0)
+    ortho_cam = Camera.look_at((0.1, 0.05, -2.0), (0, 0, 0.5), size=(48, 40), type="ORTHO", ortho_scale=1.4)
+    ortho = camera_frame(ortho_cam, (3, 2, 45, 38), lo, hi, rmax, 1.0, bin_px=2)
+    towards = np.array([-0.3, 0.5, 0.8]) / np.linalg.norm([-0.3, 0.5, 0.8])
+    sun = sun_frame(towards, SUN_SPREAD, lo, hi, rmax, 1.0, 0.02)
+    return {"perspective": (persp, CAM), "orthographic": (ortho, ortho_cam), "sun": (sun, None)}
+
+
+@pytest.mark.parametrize("family", ["perspective", "orthographic", "sun"])
+def test_every_surface_point_is_listed_where_its_rays_look_it_up(family):
+    """A ray that meets a point of a cylinder's surface looks up a bin that lists the cylinder
+    in a slice starting no farther than the walk goes: a camera ray the bin of the pixel it
+    goes through, up to the point's distance; a shadow ray the bin of where it leaves (below
+    the point, within the sun's angle of its direction), up to minus that origin's height."""
+    rng = np.random.default_rng(5)
+    c, lo, hi, rmax = _scene(curls(30, 12, radius=0.01))
+    frame, camera = _frames(lo, hi, rmax)[family]
+    beams = build_beams(frame, c)
+    assert beams.refs > len(c)
+    nx, ny = frame.dims
+    checked = 0
+    for k in rng.choice(len(c), 80, replace=False):
+        q = _surface_samples(c, k, rng)
+        if frame.kind == "sun":
+            # Origins below q, each along a direction within the sun's angle of its own.
+            w = frame.axes[2]
+            tilt = rng.normal(0, 1, (len(q), 3))
+            tilt -= (tilt @ w)[:, None] * w
+            tilt *= (SUN_SPREAD * rng.uniform(0, 1, len(q)) / np.linalg.norm(tilt, axis=1))[:, None]
+            d = w + tilt
+            p = q - rng.uniform(0, 0.8, len(q))[:, None] * d / np.linalg.norm(d, axis=1)[:, None]
+            reach = -(p @ w)
+        else:
+            p = q
+            reach = np.linalg.norm(q - camera.position, axis=1) if frame.kind == "persp" else project(frame, q)[2]
+        gx, gy, _ = project(frame, p)
+        inside = (gx >= 0) & (gx < nx) & (gy >= 0) & (gy < ny)
+        bins = np.floor(gx).astype(int) + nx * np.floor(gy).astype(int)
+        for b, limit in zip(bins[inside], reach[inside]):
+            run = beams.entries[beams.start[b]:beams.start[b] + beams.count[b]]
+            ids = run & ((1 << layout.BEAM_ID_BITS) - 1)
+            assert k in ids, f"cylinder {k} missing from bin {b}"
+            slice_ = int(run[ids == k][0] >> layout.BEAM_ID_BITS)
+            assert frame.key0 + slice_ * frame.key_step <= limit
+            checked += 1
+    assert checked > 500
+
+
+@pytest.mark.parametrize("family", ["perspective", "orthographic", "sun"])
+def test_the_compute_passes_list_what_numpy_lists(family):
+    r = Renderer(build="gpu", accel="beams")
+    strands = curls(40, 12, radius=0.01, seed=2)
+    r.set_strands(strands)
+    c, lo, hi, rmax = _scene(strands)
+    frame, _ = _frames(lo, hi, rmax)[family]
+    want = build_beams(frame, c)
+    from tracer.gl_state import beam_builder
+    names = CAMERA_BUFFERS if family != "sun" else SUN_BUFFERS[1]
+    built = beam_builder().build(frame, r.num_cylinders, r.buffers["tex_cyl"], 1.0, r.buffers, *names,
+                                 layout.BEAM_MAX_REFS)
+    assert built.refs == want.refs
+    start, count, entries = read_beams(built, r.buffers, names)
+    np.testing.assert_array_equal(count, want.count)
+    np.testing.assert_array_equal(start, want.start)
+    slices = entries >> layout.BEAM_ID_BITS
+    for b in np.flatnonzero(count):       # slice by slice, the same entries
+        run = slice(start[b], start[b] + count[b])
+        assert np.all(np.diff(slices[run].astype(np.int64)) >= 0)
+        np.testing.assert_array_equal(np.sort(entries[run]), want.entries[run])
+    beam_builder().order(built, r.buffers, *names)       # the pixel sampler's order: numpy's
+    np.testing.assert_array_equal(read_beams(built, r.buffers, names)[2], want.entries)
+
+
+def test_a_capsule_at_the_cameras_plane_is_refused():
+    c, lo, hi, rmax = _scene(curls(20, 8))
+    cam = Camera.look_at((0.0, 0.0, 0.5), (1.0, 0.0, 0.5), size=(32, 32))
+    with pytest.raises(BeamsUnfit, match="camera's plane"):
+        camera_frame(cam, (0, 0, 32, 32), lo, hi, rmax, 1.0)

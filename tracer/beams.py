@@ -1,0 +1,312 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Beams: an acceleration structure for a family of rays that share an origin (the camera's)
+or a direction (a sun's), built in whole-array numpy (the compute passes,
+shaders/beams_build.glsl, follow the same rules).
+
+Every camera ray of a pixel stays inside the pyramid of that pixel, and every shadow ray
+toward a sun stays inside a thin prism along the sun's direction. So the rays of such a
+family are binned across their direction: a 2-D grid of bins (the camera's: whole pixels,
+`bin_px` a side; a sun's: squares of the plane square to it), each listing every cylinder a
+ray of the bin can meet, nearest first. A ray then looks up its bin once (no 3-D walk) and
+tests the list in order until nothing farther can change its result: a camera ray once its
+layers are settled nearer than the next entry, a shadow ray once the entries left lie
+behind its origin. Thin diagonal hair is what a uniform grid lists worst (each cylinder in
+every cell its box touches, most of which a ray crosses without meeting it); a bin lists a
+cylinder only where its projected capsule reaches, and a ray tests the few nearest of them.
+
+Lists are kept in order of depth by buckets: the scene's depth range is cut into
+`layout.BEAM_SLICES` slices, and a bin's list holds its entries slice by slice (within a
+slice in any order). Each entry is one 32-bit word, the cylinder id and its slice
+(`id | slice << BEAM_ID_BITS`), so a walk knows without a second fetch that every later
+entry lies at least that slice's depth away. The depth of an entry, its `key`:
+
+    camera   the capsule's nearest distance from the camera (perspective: from its position,
+             the distance to its axis less its radius; orthographic: from the camera's plane,
+             its nearest depth less its radius): a camera ray meets it no nearer than that;
+    sun      minus the capsule's greatest height toward the sun (max over its axis of p·w,
+             plus its radius): a shadow ray leaving p reaches only heights above p·w, so
+             entries whose key exceeds -p·w (lying wholly below p) cannot stop it.
+
+Listing (conservative): a ray of a bin passes within r of some point q of a cylinder's axis
+(its capsule holds the cut cylinder, bent joints included: tracer/cylinders.py, `extension`),
+and then its projection lies within rho of q's: for a perspective camera rho = r·sqrt(1 +
+|x|²) / (depth(q)·pixel_size) pixels, where x is the ray's point on the image plane at unit
+depth (|x| is largest at a corner of the bins) — the distance from q to the ray is at least
+depth(q)·|x_q - x| / sqrt(1 + |x|²) —, for an orthographic camera r / pixel_size, for a sun r
+plus the sideways drift of a sun with an angle over the scene's height. The projection of the
+axis is a segment (perspective maps segments to segments when they lie in front of the
+camera), so the listing is the 2-D version of the grid's slab listing: the segment cut into
+the bins' columns along its longer side, each column listing the rows its part reaches within
+rho. A capsule that reaches the camera's plane cannot be projected: the camera then gets no
+beams (`BeamsUnfit`) and its rays walk the grid.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import layout
+
+CHUNK = 1 << 16         # cylinders per listing job (their temporaries stay in cache)
+
+
+class BeamsUnfit(Exception):
+    """Beams cannot serve this family of rays (a capsule reaching the camera's plane, one
+    listed in too many bins, or more references than one buffer holds): its rays walk the
+    grid instead. Not an input error: the scene renders either way."""
+
+
+class TooManyRefs(BeamsUnfit):
+    """More references than the budget: coarser bins may fit."""
+
+
+@dataclass(frozen=True, eq=False)
+class BeamFrame:
+    """How a family's points map to bins. `kind`: "persp" or "ortho" (camera rays) or "sun"
+    (shadow rays toward a directional light). A point q maps to X, Y, Z = axes·(q - origin),
+    then to bin coordinates gx = X/Z + offset[0], gy = Y/Z + offset[1] ("persp") or
+    gx = X + offset[0], gy = Y + offset[1]; Z is its depth (camera) or height toward the sun.
+    `radius_scale`: bins per unit of radius (per unit of radius and depth for "persp"),
+    `drift`: bins added to every radius (a sun's spread); the keys' slices start at `key0`,
+    `key_step` apart; `dims`: bins along x and y; `bin_px` (cameras): pixels a bin side,
+    `box`: the whole-image pixels (x0, y0, x1, y1) the bins cover."""
+    kind: str
+    origin: np.ndarray
+    axes: np.ndarray
+    offset: np.ndarray
+    radius_scale: float
+    drift: float
+    key0: float
+    key_step: float
+    dims: tuple
+    bin_px: int = 1
+    box: tuple = (0, 0, 0, 0)
+    near_limit: float = 0.0     # perspective: a capsule whose key is not above this reaches the camera's plane
+
+    @property
+    def num_bins(self):
+        return int(self.dims[0]) * int(self.dims[1])
+
+
+@dataclass(frozen=True, eq=False)
+class Beams:
+    """A family's bins: the frame, how many entries they hold, and (numpy build) per bin its
+    first entry and entry count (int32, bin id x + nx·y) and the entries (uint32 id | slice <<
+    BEAM_ID_BITS, slice by slice within a bin). The compute passes leave the last three None:
+    their lists exist only on the GPU (tracer.scene_beams.read_beams brings them back)."""
+    frame: BeamFrame
+    refs: int
+    start: np.ndarray = None
+    count: np.ndarray = None
+    entries: np.ndarray = None
+
+
+# --- frames ------------------------------------------------------------------------------
+def _slices(lo, hi, pad):
+    """(key0, key_step) of BEAM_SLICES slices over keys lo..hi widened by `pad`."""
+    lo, hi = lo - pad, hi + pad
+    return float(lo), float(max(hi - lo, 1e-30) / layout.BEAM_SLICES)
+
+
+def box_corners(lo, hi):
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])],
+                    np.float64)
+
+
+def camera_frame(camera, box, scene_lo, scene_hi, rmax, pad, bin_px=1):
+    """The frame of `camera`'s rays over the whole-image pixel box `box` (x0, y0, x1, y1: the
+    pixels a render traces), for a scene within scene_lo..scene_hi whose largest radius is
+    `rmax`, capsules widened `pad` times, bins of `bin_px` pixels a side. BeamsUnfit when the
+    scene reaches the camera's plane (perspective)."""
+    x0, y0, x1, y1 = (int(v) for v in box)
+    b = int(bin_px)
+    dims = (-(-(x1 - x0) // b), -(-(y1 - y0) // b))
+    R = np.asarray(camera.rotation, np.float64)
+    ps = float(camera.pixel_size)
+    cx, cy = (float(v) for v in camera.centre_px)
+    # Rows: image x (pixels right), image y (pixels down), depth along the view axis.
+    axes = np.stack([R[:, 0] / (ps * b), -R[:, 1] / (ps * b), -R[:, 2]])
+    offset = np.array([(cx - x0) / b, (cy - y0) / b])
+    corners = box_corners(scene_lo, scene_hi)
+    depth = corners @ -R[:, 2] - float(np.asarray(camera.position) @ -R[:, 2])
+    dpad = rmax * pad
+    near_limit = 0.0
+    if camera.type == "PERSP":
+        near_limit = layout.BEAM_NEAR_FRACTION * max(float(depth.max() - depth.min()), rmax)
+        if float(depth.min()) - dpad <= near_limit:
+            raise BeamsUnfit("the hair reaches the camera's plane")
+        # The largest |x| (unit-depth image plane) over the bins' corners.
+        us = (np.array([x0, x0 + dims[0] * b]) - cx) * ps
+        vs = (cy - np.array([y0, y0 + dims[1] * b])) * ps
+        reach = float(np.sqrt(1.0 + np.max(us ** 2) + np.max(vs ** 2)))
+        scale = reach / (ps * b)
+        kind = "persp"
+    else:
+        scale = 1.0 / (ps * b)
+        kind = "ortho"
+    if kind == "persp":     # keys are distances from the camera, which lies outside the box
+        far = float(np.max(np.linalg.norm(corners - np.asarray(camera.position, np.float64), axis=1)))
+        key0, step = _slices(float(depth.min()), far, dpad)
+    else:
+        key0, step = _slices(float(depth.min()), float(depth.max()), dpad)
+    return BeamFrame(kind, np.asarray(camera.position, np.float64), axes, offset, scale, 0.0, key0, step,
+                     dims, b, (x0, y0, x1, y1), near_limit)
+
+
+def sun_basis(towards):
+    """Unit (u, v, w): w toward the sun, u and v across it (tracer.settings._basis's rule)."""
+    w = np.asarray(towards, np.float64)
+    w = w / np.linalg.norm(w)
+    u = np.cross(w, [0.0, 0.0, 1.0]) if abs(w[2]) < 0.999 else np.cross(w, [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    return u, np.cross(w, u), w
+
+
+def sun_frame(towards, spread, scene_lo, scene_hi, rmax, pad, bin_size):
+    """The frame of shadow rays toward a sun: unit `towards` (the shadow rays' direction),
+    `spread` the tangent of the largest angle a ray makes with it (0: one direction), bins of
+    `bin_size` scene units over the scene box's shadow."""
+    u, v, w = sun_basis(towards)
+    corners = box_corners(scene_lo, scene_hi)
+    reach = rmax * pad
+    height = corners @ w
+    # Over the scene's height a ray drifts sideways by at most this.
+    drift_units = float(spread) * float(height.max() - height.min() + 2 * reach)
+    cu, cv = corners @ u, corners @ v
+    margin = reach + drift_units
+    lo_u, lo_v = float(cu.min()) - margin, float(cv.min()) - margin
+    h = float(bin_size)
+    dims = (max(1, int(np.ceil((float(cu.max()) + margin - lo_u) / h))),
+            max(1, int(np.ceil((float(cv.max()) + margin - lo_v) / h))))
+    key0, step = _slices(-float(height.max()), -float(height.min()), reach)
+    return BeamFrame("sun", np.zeros(3), np.stack([u / h, v / h, w]), np.array([-lo_u / h, -lo_v / h]),
+                     1.0 / h, drift_units / h, key0, step, dims)
+
+
+# --- listing -----------------------------------------------------------------------------
+def project(frame, points):
+    """(gx, gy, z) float64 of (N,3) points in `frame`."""
+    q = np.asarray(points, np.float64) - frame.origin
+    X, Y, Z = (q @ frame.axes[i] for i in range(3))
+    if frame.kind == "persp":
+        return X / Z + frame.offset[0], Y / Z + frame.offset[1], Z
+    return X + frame.offset[0], Y + frame.offset[1], Z
+
+
+def segment_distance(c, a, b):
+    """Distance from point c (3,) to the segments a..b (N,3 each)."""
+    ab = b - a
+    ac = c - a
+    s = np.clip(np.einsum("ij,ij->i", ac, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300), 0.0, 1.0)
+    q = a + s[:, None] * ab - c
+    return np.sqrt(np.einsum("ij,ij->i", q, q))
+
+
+def _keys_and_radii(frame, top, far, z0, z1, r):
+    """(key, rho in bins, ok) per capsule top..far of radius r (z0, z1: its ends' depths): its
+    key (module text), how far its projection reaches, and False where it reaches the
+    camera's plane (perspective)."""
+    if frame.kind == "sun":
+        return -(np.maximum(z0, z1) + r), r * frame.radius_scale + frame.drift + layout.BEAM_BIN_EPS, np.ones(len(r), bool)
+    near = np.minimum(z0, z1)
+    if frame.kind == "ortho":
+        return near - r, r * frame.radius_scale + layout.BEAM_BIN_EPS, np.ones(len(r), bool)
+    ok = near - r > frame.near_limit
+    key = segment_distance(frame.origin, np.asarray(top, np.float64), np.asarray(far, np.float64)) - r
+    return key, r * frame.radius_scale / np.where(ok, near, 1.0) + layout.BEAM_BIN_EPS, ok
+
+
+def slice_of(frame, key):
+    """Each key's slice: the last whose start lies at or below it."""
+    k = np.floor((key - frame.key0) / frame.key_step - layout.BEAM_SLICE_EPS)
+    return np.clip(k, 0, layout.BEAM_SLICES - 1).astype(np.int64)
+
+
+def bins_touched(frame, top, far, radius):
+    """(cylinder, bin id) for every bin the capsules top..far of `radius` may project into,
+    and each cylinder's slice. BeamsUnfit when one reaches the camera's plane (perspective) or
+    spans more than layout.BEAM_MAX_BINS_PER_CYLINDER bins."""
+    n = len(top)
+    nx, ny = (int(d) for d in frame.dims)
+    gx0, gy0, z0 = project(frame, top)
+    gx1, gy1, z1 = project(frame, far)
+    r = np.asarray(radius, np.float64)
+    key, rho, ok = _keys_and_radii(frame, top, far, z0, z1, r)
+    behind = ~ok & (np.maximum(z0, z1) + r < 0)     # wholly behind the camera: never seen
+    if np.any(~ok & ~behind):
+        raise BeamsUnfit("the hair reaches the camera's plane")
+    live = np.flatnonzero(ok)
+    # The dominant axis of each projected segment, then (dominant, other) coordinates.
+    dx, dy = gx1 - gx0, gy1 - gy0
+    xdom = np.abs(dx) >= np.abs(dy)
+    A0 = np.where(xdom, gx0, gy0)[live]
+    dA = np.where(xdom, dx, dy)[live]
+    B0 = np.where(xdom, gy0, gx0)[live]
+    dB = np.where(xdom, dy, dx)[live]
+    NA = np.where(xdom, nx, ny)[live]
+    NB = np.where(xdom, ny, nx)[live]
+    SA = np.where(xdom, 1, nx)[live]
+    SB = np.where(xdom, nx, 1)[live]
+    P = rho[live]
+    a_lo = np.floor(np.minimum(A0, A0 + dA) - P)
+    a_hi = np.floor(np.maximum(A0, A0 + dA) + P)
+    i0 = np.clip(a_lo, 0, NA - 1).astype(np.int64)
+    i1 = np.clip(a_hi, 0, NA - 1).astype(np.int64)
+    seen = (a_hi >= 0) & (a_lo <= NA - 1)
+    ncol = np.where(seen, i1 - i0 + 1, 0)
+    # The bound the compute passes check before they loop (the same rule in both builds).
+    bound = ncol * np.minimum(np.abs(dB) + 2 * P + 2, NB)
+    if len(bound) and bound.max() > layout.BEAM_MAX_BINS_PER_CYLINDER:
+        raise BeamsUnfit(f"a cylinder's projection spans up to {int(bound.max())} bins")
+    total = int(ncol.sum())
+    owner = np.repeat(np.arange(len(live)), ncol)
+    col = np.arange(total) - np.repeat(np.cumsum(ncol) - ncol, ncol) + i0[owner]
+    # The part of the segment (s in [0, 1]) within rho of the column; a segment too short to
+    # have a direction is taken whole.
+    flat = np.abs(dA[owner]) < 1e-12
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / np.where(flat, 1.0, dA[owner])
+        sa = (col - P[owner] - A0[owner]) * inv
+        sb = (col + 1 + P[owner] - A0[owner]) * inv
+    s0 = np.where(flat, 0.0, np.clip(np.minimum(sa, sb), 0.0, 1.0))
+    s1 = np.where(flat, 1.0, np.clip(np.maximum(sa, sb), 0.0, 1.0))
+    e0 = B0[owner] + s0 * dB[owner]
+    e1 = B0[owner] + s1 * dB[owner]
+    b_lo = np.floor(np.minimum(e0, e1) - P[owner])
+    b_hi = np.floor(np.maximum(e0, e1) + P[owner])
+    nb = NB[owner]
+    j0 = np.clip(b_lo, 0, nb - 1).astype(np.int64)
+    j1 = np.clip(b_hi, 0, nb - 1).astype(np.int64)
+    rows = np.where((b_hi >= 0) & (b_lo <= nb - 1), j1 - j0 + 1, 0)
+    owner2 = np.repeat(np.arange(total), rows)
+    row = np.arange(len(owner2)) - np.repeat(np.cumsum(rows) - rows, rows) + j0[owner2]
+    c = owner[owner2]
+    bins = col[owner2] * SA[c] + row * SB[c]
+    cyl = live[c]
+    return cyl, bins, slice_of(frame, key)
+
+
+def build_beams(frame, cylinders, pad_factor=1.0, max_refs=None):
+    """Beams of `frame` over tracer.cylinders.Cylinders (capsules widened `pad_factor` times).
+    BeamsUnfit past `max_refs` references (default: one buffer texture's worth,
+    layout.BEAM_MAX_REFS) or where bins_touched says so."""
+    n = len(cylinders)
+    if n >= 1 << layout.BEAM_ID_BITS:
+        raise BeamsUnfit(f"{n} cylinders: more than a beam entry's id holds")
+    max_refs = layout.BEAM_MAX_REFS if max_refs is None else max_refs
+    keys = []
+    refs = 0
+    for a in range(0, n, CHUNK):
+        c = cylinders.select(slice(a, min(n, a + CHUNK)))
+        axis = c.tip.astype(np.float64) - c.top
+        length = np.sqrt(np.einsum("ij,ij->i", axis, axis))
+        far = c.tip + axis * (c.extension / np.maximum(length, 1e-30))[:, None]
+        cyl, bins, slc = bins_touched(frame, c.top, far, c.radius.astype(np.float64) * pad_factor)
+        refs += len(cyl)
+        if refs > max_refs:
+            raise TooManyRefs(f"more than {max_refs:,} references")
+        entry = (cyl + a) | (slc[cyl] << layout.BEAM_ID_BITS)
+        keys.append((bins << 32) | entry)
+    key = np.sort(np.concatenate(keys)) if keys else np.zeros(0, np.int64)
+    count = np.bincount(key >> 32, minlength=frame.num_bins).astype(np.int32)
+    start = (np.cumsum(count, dtype=np.int64) - count).astype(np.int32)
+    return Beams(frame, len(key), start, count, (key & 0xFFFFFFFF).astype(np.uint32))

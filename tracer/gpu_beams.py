@@ -1,0 +1,151 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Beams built by compute passes (GL 4.3; shaders/beams_build.glsl), by tracer/beams.py's
+rules, straight into the buffer textures the trace shader reads: count the references of
+every bin, scan the counts into starts on the GPU, bucket the cylinders by the slice of their
+key, then fill the lists slice after slice. Nothing goes up from the host but uniforms (the
+scratch buffers are zeroed by a pass), so a camera move uploads nothing; what comes back is
+the total, the slices' sizes and two flags.
+"""
+import numpy as np
+
+from . import layout
+from .beams import Beams, BeamsUnfit, TooManyRefs
+from .gpu_build import _groups, set_uniforms
+from .shader_source import shader_source
+
+KIND_CODE = {"persp": 0, "ortho": 1, "sun": 2}
+
+
+class BeamBuilder:
+    """The passes of one context and their scratch buffers (kept and grown, not made again
+    for every camera move: allocating is costly on a CPU driver)."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self._passes = {}
+        self._scratch = {}
+
+    def _program(self, pass_, cyl_parts):
+        key = (layout.glsl_header(), pass_, cyl_parts)
+        prog = self._passes.get(key)
+        if prog is None:
+            prog = self._passes[key] = self.ctx.compute_shader(
+                shader_source(430, ["beams_build.glsl"], {"PASS": pass_, "CYL_PARTS": cyl_parts}))
+        return prog
+
+    def _buffer(self, name, words):
+        """Scratch storage buffer `name` of at least `words` int32."""
+        buf = self._scratch.get(name)
+        if buf is None or buf.size < 4 * words:
+            if buf is not None:
+                buf.release()
+            buf = self._scratch[name] = self.ctx.buffer(reserve=4 * max(words + words // 8, 64))
+        return buf
+
+    def release(self):
+        for buf in self._scratch.values():
+            buf.release()
+        self._scratch.clear()
+
+    def _zero(self, buf, words):
+        prog = self._program(0, 1)
+        set_uniforms(prog, n_items=int(words))
+        buf.bind_to_storage_buffer(0)
+        prog.run(*_groups(words))
+
+    def _frame_uniforms(self, prog, frame, pad_factor, tex_cyl, n):
+        set_uniforms(prog, n_items=int(n), pad_factor=float(pad_factor), frame_kind=KIND_CODE[frame.kind],
+                     frame_origin=tuple(float(x) for x in frame.origin),
+                     axis_x=tuple(float(x) for x in frame.axes[0]), axis_y=tuple(float(x) for x in frame.axes[1]),
+                     axis_z=tuple(float(x) for x in frame.axes[2]),
+                     frame_offset=tuple(float(x) for x in frame.offset), radius_scale=float(frame.radius_scale),
+                     drift=float(frame.drift), key0=float(frame.key0), key_step=float(frame.key_step),
+                     near_limit=float(frame.near_limit), dims=tuple(int(d) for d in frame.dims),
+                     max_bins=int(layout.BEAM_MAX_BINS_PER_CYLINDER),
+                     cyl_split=tex_cyl.part_texels // layout.TEXELS_PER_CYL)
+        for unit, part in enumerate(tex_cyl.parts):
+            part.use(unit)
+
+    def build(self, frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs):
+        """Beams of `frame` over the `n` cylinders of `tex_cyl` (a SplitBuffer), their lists
+        into buffer `list_name` and bin table into `table_name` of `store` (SceneBuffers).
+        Returns Beams without host arrays; BeamsUnfit where the numpy build would raise it."""
+        ctx = self.ctx
+        nbins = frame.num_bins
+        chunks = -(-nbins // layout.BEAM_SCAN_CHUNK)
+        parts = len(tex_cyl.parts)
+        counts = self._buffer("counts", chunks * layout.BEAM_SCAN_CHUNK)
+        slices = self._buffer("slices", layout.BEAM_SLICES)
+        flags = self._buffer("flags", 2)
+        sums = self._buffer("sums", chunks + 1)
+        perm = self._buffer("perm", max(n, 1))
+        self._zero(counts, chunks * layout.BEAM_SCAN_CHUNK)
+        self._zero(slices, layout.BEAM_SLICES)
+        self._zero(flags, 2)
+        ctx.memory_barrier()
+        prog = self._program(1, parts)
+        self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n)
+        for binding, buf in enumerate((counts, slices, perm, sums, flags)):
+            buf.bind_to_storage_buffer(binding)
+        prog.run(*_groups(n))
+        ctx.memory_barrier()
+        near, wide = np.frombuffer(flags.read(size=8), np.int32)
+        if near:
+            raise BeamsUnfit("the hair reaches the camera's plane")
+        if wide:
+            raise BeamsUnfit(f"{int(wide)} cylinders' projections span more than "
+                             f"{layout.BEAM_MAX_BINS_PER_CYLINDER} bins")
+        # The scan: chunk sums, their prefix sums (one invocation), each bin's start.
+        prog = self._program(2, 1)
+        set_uniforms(prog, n_items=chunks)
+        counts.bind_to_storage_buffer(0)
+        sums.bind_to_storage_buffer(3)
+        prog.run(*_groups(chunks))
+        ctx.memory_barrier()
+        prog = self._program(3, 1)
+        set_uniforms(prog, n_items=chunks)
+        prog.run(1)
+        ctx.memory_barrier()
+        total = int(np.frombuffer(sums.read(size=4, offset=4 * chunks), np.int32)[0])
+        if total > max_refs:
+            raise TooManyRefs(f"{total:,} references, more than {max_refs:,}")
+        table = store.store(table_name, nbins, 2, "i4")
+        lists = store.store(list_name, max(total, 1), 1, "u4")
+        prog = self._program(4, 1)
+        set_uniforms(prog, n_items=chunks, dims=tuple(int(d) for d in frame.dims))
+        counts.bind_to_storage_buffer(0)
+        sums.bind_to_storage_buffer(3)
+        table.bind_to_image(0, write=True)
+        prog.run(*_groups(chunks))
+        # The cylinders bucketed by slice: every slice's first place from its count.
+        sizes = np.frombuffer(slices.read(size=4 * layout.BEAM_SLICES), np.int32).astype(np.int64)
+        first = np.cumsum(sizes) - sizes
+        self._zero(slices, layout.BEAM_SLICES)
+        ctx.memory_barrier()
+        prog = self._program(5, parts)
+        self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n)
+        prog["slice_first"].write(first.astype(np.int32).tobytes())
+        for binding, buf in enumerate((counts, slices, perm, sums, flags)):
+            buf.bind_to_storage_buffer(binding)
+        prog.run(*_groups(n))
+        ctx.memory_barrier()
+        # The lists, a slice a dispatch in order, so each bin's entries come slice by slice.
+        prog = self._program(6, parts)
+        self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n)
+        lists.bind_to_image(1, write=True)
+        for k in np.flatnonzero(sizes):
+            set_uniforms(prog, n_items=int(sizes[k]), first_item=int(first[k]), fill_slice=int(k))
+            prog.run(*_groups(int(sizes[k])))
+            ctx.memory_barrier()
+        return Beams(frame, total)
+
+    def order(self, beams, store, list_name, table_name):
+        """Sorts each bin's entries by their words (slice, then id), the numpy build's order:
+        the pixel sampler's walk depends on it (beams_build.glsl, PASS 7)."""
+        prog = self._program(7, 1)
+        n = beams.frame.num_bins
+        set_uniforms(prog, n_items=int(n))
+        store[table_name].bind_to_image(0, read=True, write=False)
+        store[list_name].bind_to_image(1, read=True, write=True)
+        prog.run(*_groups(n))
+        self.ctx.memory_barrier()

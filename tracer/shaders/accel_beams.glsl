@@ -1,0 +1,148 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+// Beams (tracer/beams.py): for the camera's rays (CAMERA_BEAMS) a bin of whole pixels, and for
+// the shadow rays toward up to SUN_BEAMS suns a bin of the plane square to each, list every
+// cylinder a ray of the bin can meet, slice by slice in depth. A ray looks its bin up once
+// and tests the list in order until no later entry can change what it finds; the rays of
+// other lights walk the scene's grid (accel_grid.glsl), as do the camera's when it has no
+// beams. An entry is id | slice << BEAM_ID_BITS; every entry after it lies at least its
+// slice's start deep (camera: key0 + slice·step along the view axis; sun: minus its height).
+
+const uint BEAM_ID_MASK = (1u << uint(BEAM_ID_BITS)) - 1u;
+
+#if CAMERA_BEAMS
+uniform usamplerBuffer tex_beam;        // the camera's lists
+uniform isamplerBuffer tex_beam_cell;   // per bin: first entry, count
+uniform ivec4 beam_box;                 // whole-image pixel of bin (0, 0)'s corner, pixels a bin side, bins across
+uniform int beam_rows;                  // bins down
+uniform vec2 beam_keys;                 // slice 0's start, the slices' step (depths)
+
+// The camera pixel's bin: its first entry and count (none outside the bins).
+ivec2 camera_bin() {
+    ivec2 b = (camera_pixel - beam_box.xy) / beam_box.z;
+    bool inside = all(greaterThanEqual(camera_pixel, beam_box.xy)) && b.x < beam_box.w && b.y < beam_rows;
+    return inside ? texelFetch(tex_beam_cell, b.x + beam_box.w * b.y).xy : ivec2(0);
+}
+
+// How far entries may start and still hold a hit nearer than t along a camera ray (an entry's
+// key bounds the distance at which any camera ray meets it): a little more than t, for
+// float32's sake.
+float beam_reach(float t) {
+    return t + abs(t) * 1e-5 + 1e-30;
+}
+
+// accel_nearest for the camera ray o + t·d of camera_pixel (accel.glsl's contract): entries in
+// key order until the next starts farther than the hit list's horizon (hits_horizon) or the
+// nearest mesh.
+void beam_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_const) {
+    ivec2 sc = camera_bin();
+    float reach = beam_reach(tmax);
+    for (int k = 0; k < sc.y; ++k) {
+        uint e = texelFetch(tex_beam, sc.x + k).x;
+        if (beam_keys.x + float(e >> uint(BEAM_ID_BITS)) * beam_keys.y > reach) break;
+        int id = int(e & BEAM_ID_MASK);
+#if COUNT
+        counter.w += 1.0;
+#endif
+        int surf; float asc, alpha;
+        float t = hit_cylinder_ab(id, cyl(id, CYL_TOP), cyl(id, CYL_TIP), o, d, widen_per_t, widen_const,
+                                  surf, asc, alpha);
+        bool ok = t > 0.0 && t < tmax;
+        hits_offer(ok ? t : BIG, ok ? id : NO_ID, surf, alpha * asc);
+        if (ok) reach = beam_reach(min(tmax, hits_horizon()));
+    }
+#if COUNT
+    counter.z += 1.0;
+#endif
+}
+
+#if PIXEL
+// accel_pixel_nearest for the pixel sampler: every sample of camera_pixel lies in its bin, so
+// every candidate is the bin's; entries in key order until the pixel is settled and the next
+// starts farther than its list's farthest entry (footprint_mask puts an entry no nearer than
+// its key).
+void beam_pixel_nearest(vec3 o, vec3 d, float tmax) {
+    ivec2 sc = camera_bin();
+    float reach = beam_reach(tmax);
+    for (int k = 0; k < sc.y; ++k) {
+        uint e = texelFetch(tex_beam, sc.x + k).x;
+        if (beam_keys.x + float(e >> uint(BEAM_ID_BITS)) * beam_keys.y > reach) break;
+        int id = int(e & BEAM_ID_MASK);
+#if COUNT
+        counter.w += 1.0;
+#endif
+        pixel_offer(id, cyl(id, CYL_TOP), cyl(id, CYL_TIP), o, d);
+        if (pixel_settled()) reach = min(reach, beam_reach(list_far()));
+    }
+#if COUNT
+    counter.z += 1.0;
+#endif
+}
+#endif
+#endif
+
+#if SUN_BEAMS > 0
+// Per sun set: its lists and bin table, its axes (u and v across the sun scaled to bins, w
+// toward it), (offset x, offset y, slice 0's start, step), bins across and down.
+uniform usamplerBuffer tex_sun0;
+uniform isamplerBuffer tex_sun_cell0;
+#if SUN_BEAMS > 1
+uniform usamplerBuffer tex_sun1;
+uniform isamplerBuffer tex_sun_cell1;
+#endif
+uniform vec3 sun_u[SUN_BEAMS];
+uniform vec3 sun_v[SUN_BEAMS];
+uniform vec3 sun_w[SUN_BEAMS];
+uniform vec4 sun_frame[SUN_BEAMS];
+uniform ivec2 sun_dims[SUN_BEAMS];
+
+uint sun_entry(int set, int i) {
+#if SUN_BEAMS > 1
+    if (set == 1) return texelFetch(tex_sun1, i).x;
+#endif
+    return texelFetch(tex_sun0, i).x;
+}
+
+// accel_transmittance for a shadow ray from p toward sun set `set` (its direction, or within
+// the spread its lists were padded for): the entries of p's bin nearest the sun first, until
+// the rest lie wholly below p.
+float sun_transmittance(int set, vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint) {
+    vec4 fr = sun_frame[set];
+    ivec2 n = sun_dims[set];
+    vec2 g = vec2(dot(p, sun_u[set]), dot(p, sun_v[set])) + fr.xy;
+    ivec2 b = ivec2(floor(g));
+    if (any(lessThan(b, ivec2(0))) || any(greaterThanEqual(b, n))) return 1.0;
+    int cell = b.x + n.x * b.y;
+    ivec2 sc;
+#if SUN_BEAMS > 1
+    if (set == 1) sc = texelFetch(tex_sun_cell1, cell).xy; else
+#endif
+    sc = texelFetch(tex_sun_cell0, cell).xy;
+    // An entry whose slice starts past -height(p) lies wholly below p, as do all after it.
+    float hp = -dot(p, sun_w[set]);
+    float below = hp + abs(hp) * 1e-5 + 1e-30;
+    float trans = 1.0;
+#if COUNT
+    counter.z += 1.0;
+#endif
+    for (int k = 0; k < sc.y; ++k) {
+        uint e = sun_entry(set, sc.x + k);
+        if (fr.z + float(e >> uint(BEAM_ID_BITS)) * fr.w > below) break;
+        int id = int(e & BEAM_ID_MASK);
+#if COUNT
+        counter.w += 1.0;
+#endif
+        if (id == own) continue;
+        int surf; float asc, alpha;
+        float t = hit_cylinder_ab(id, cyl(id, CYL_TOP), cyl(id, CYL_TIP), p, d, 0.0, 0.0, surf, asc, alpha);
+#if SHADOWS == 1
+        if (t > tmin && t < tmax) { hint = id; return 0.0; }
+#else
+        if (t > tmin && t < tmax) {
+            trans *= 1.0 - alpha;
+            if (trans < t_eps) return 0.0;
+        }
+#endif
+    }
+    return trans;
+}
+#endif

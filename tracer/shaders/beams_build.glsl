@@ -1,0 +1,260 @@
+// SPDX-License-Identifier: GPL-3.0-or-later
+// Beams built on the GPU (GL 4.3 compute), the same listing as tracer/beams.py's numpy build:
+// every cylinder in every bin its projected capsule may reach, each entry its id and the
+// depth slice of its key, a bin's entries slice by slice. The host prepends
+// "#version 430 core", PASS and the generated header of tracer/layout.py:
+//   PASS 0  zero:   counts[i] = 0 for i < n_items (the bins' counters, then the slices')
+//   PASS 1  count:  counts[bin] += 1 for every (cylinder, bin), slices[slice] += 1 per cylinder
+//   PASS 2  sums:   sums[c] = the counts of bins c·CHUNK .. (c+1)·CHUNK (counts is padded
+//                   with zeros to whole chunks)
+//   PASS 3  scan:   one invocation: sums become exclusive prefix sums, sums[n_items] the total
+//   PASS 4  starts: per chunk of bins, each bin's first entry into the bin table (start,
+//                   count), and into counts, which become the cursors
+//   PASS 5  bucket: perm[slice_first[slice] + slices[slice]++] = cylinder (slices zeroed)
+//   PASS 6  fill:   for the cylinders perm[first_item ..] of slice `fill_slice`, one dispatch
+//                   a slice in order: slot = cursors[bin]++, lists[slot] = id | slice << BITS
+//   PASS 7  order:  one bin an invocation: its entries sorted by their words (slice, then id),
+//                   the numpy build's order
+// The slices are dispatched one after another, so a bin's entries come slice by slice; within
+// a slice their order depends on the atomics. The walks of the independent sampler find the
+// same hits in any order; the pixel sampler's list of distinct cylinders does not (which
+// cylinders it keeps depends on what it has seen when one comes), so before its first walk
+// PASS 7 puts each bin in the numpy build's order: insertion sort, whose steps are the list's
+// length plus its disorder, which lies within slices.
+// A cylinder that reaches the camera's plane, or whose listing could take more than
+// MAX_BINS_PER_CYLINDER loop steps, is counted in flags[0] and flags[1]: the host then gives
+// the family no beams (its rays walk the grid), as the numpy build raises BeamsUnfit.
+layout(local_size_x = GROUP) in;
+
+uniform int n_items;          // cylinders, bins (zero: words) or chunks of this pass
+uniform int first_item;       // fill: the slice's first place in perm
+uniform float pad_factor;     // capsules widened this many times
+// The frame (tracer/beams.py, BeamFrame): kind 0 perspective, 1 orthographic, 2 sun.
+uniform int frame_kind;
+uniform vec3 frame_origin;
+uniform vec3 axis_x;
+uniform vec3 axis_y;
+uniform vec3 axis_z;
+uniform vec2 frame_offset;
+uniform float radius_scale;
+uniform float drift;
+uniform float key0;
+uniform float key_step;
+uniform float near_limit;     // perspective: a capsule's key at or below this reaches the camera's plane
+uniform ivec2 dims;
+uniform int max_bins;         // MAX_BINS_PER_CYLINDER
+uniform int fill_slice;
+uniform int slice_first[BEAM_SLICES];
+
+layout(binding = 0) uniform samplerBuffer tex_cyl;   // TEXELS_PER_CYL texels per cylinder
+#if CYL_PARTS > 1
+layout(binding = 1) uniform samplerBuffer tex_cyl1;
+#endif
+#if CYL_PARTS > 2
+layout(binding = 2) uniform samplerBuffer tex_cyl2;
+#endif
+#if CYL_PARTS > 3
+layout(binding = 3) uniform samplerBuffer tex_cyl3;
+#endif
+uniform int cyl_split;
+
+layout(std430, binding = 0) buffer Counts { int counts[]; };     // per bin: count, then cursor
+layout(std430, binding = 1) buffer Slices { int slices[]; };     // per slice: count, then cursor
+layout(std430, binding = 2) buffer Perm { int perm[]; };         // cylinders, slice by slice
+layout(std430, binding = 3) buffer Sums { int sums[]; };         // per chunk of bins
+layout(std430, binding = 4) buffer Flags { int flags[]; };       // [0] near the camera, [1] too wide
+#if PASS == 4
+layout(rg32i, binding = 0) uniform writeonly iimageBuffer table_img;
+#endif
+#if PASS == 6
+layout(r32ui, binding = 1) uniform writeonly uimageBuffer list_img;
+#endif
+#if PASS == 7
+layout(rg32i, binding = 0) uniform readonly iimageBuffer table_img;
+layout(r32ui, binding = 1) uniform coherent uimageBuffer list_img;
+#endif
+
+vec4 cyl(int id, int j) {
+#if CYL_PARTS > 3
+    if (id >= 3 * cyl_split) return texelFetch(tex_cyl3, TEXELS_PER_CYL * (id - 3 * cyl_split) + j);
+#endif
+#if CYL_PARTS > 2
+    if (id >= 2 * cyl_split) return texelFetch(tex_cyl2, TEXELS_PER_CYL * (id - 2 * cyl_split) + j);
+#endif
+#if CYL_PARTS > 1
+    if (id >= cyl_split) return texelFetch(tex_cyl1, TEXELS_PER_CYL * (id - cyl_split) + j);
+#endif
+    return texelFetch(tex_cyl, TEXELS_PER_CYL * id + j);
+}
+
+int item_index() {
+    return int(gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * GROUP + int(gl_LocalInvocationID.x);
+}
+
+// A point in the frame: (X, Y, Z) = axes·(p - origin).
+vec3 to_frame(vec3 p) {
+    vec3 q = p - frame_origin;
+    return vec3(dot(q, axis_x), dot(q, axis_y), dot(q, axis_z));
+}
+
+vec2 to_bins(vec3 f) {
+    return (frame_kind == 0 ? f.xy / f.z : f.xy) + frame_offset;
+}
+
+// Distance from c to the segment a..b (tracer/beams.py, segment_distance; the pixel sampler
+// bounds its cylinders' distances by the same rule: sampler_pixel.glsl, footprint_mask).
+float segment_distance(vec3 c, vec3 a, vec3 b) {
+    vec3 ab = b - a;
+    float s = clamp(dot(c - a, ab) / max(dot(ab, ab), 1e-30), 0.0, 1.0);
+    return length(a + s * ab - c);
+}
+
+// Cylinder `id`'s projected axis g0..g1 (bins), how far its capsule reaches past it (rho,
+// bins) and its key's slice. Returns 0: to be listed, 1: never seen (wholly behind the
+// camera), 2: it reaches the camera's plane.
+int project_cylinder(int id, out vec2 g0, out vec2 g1, out float rho, out int slice) {
+    vec4 top = cyl(id, CYL_TOP), tip = cyl(id, CYL_TIP), n2 = cyl(id, CYL_N2);
+    vec3 axis = tip.xyz - top.xyz;
+    float len = length(axis);
+    // Past the tip, on the outer side of a bend, the cut cylinder reaches r·tan(angle) further
+    // along its axis (tracer/cylinders.py: extension); the same bound as grid_build.glsl's.
+    float c = clamp(dot(axis, n2.xyz) / max(len, 1e-30), COS_SHARP, 1.0);
+    float ext = top.w * sqrt(max(0.0, 1.0 - c * c)) / c;
+    vec3 far = tip.xyz + axis * (ext / max(len, 1e-30));
+    float r = top.w * pad_factor;
+    vec3 f0 = to_frame(top.xyz), f1 = to_frame(far);
+    float key;
+    rho = r * radius_scale + drift + BEAM_BIN_EPS;
+    if (frame_kind == 2) {
+        key = -(max(f0.z, f1.z) + r);
+    } else {
+        float near = min(f0.z, f1.z);
+        key = near - r;
+        if (frame_kind == 0) {
+            if (key <= near_limit) return max(f0.z, f1.z) + r < 0.0 ? 1 : 2;
+            rho = r * radius_scale / near + BEAM_BIN_EPS;
+            key = segment_distance(frame_origin, top.xyz, far) - r;
+        }
+    }
+    g0 = to_bins(f0);
+    g1 = to_bins(f1);
+    slice = clamp(int(floor((key - key0) / key_step - BEAM_SLICE_EPS)), 0, BEAM_SLICES - 1);
+    return 0;
+}
+
+#if PASS == 1 || PASS == 6
+void visit(int bin, int id, int slice) {
+#if PASS == 1
+    atomicAdd(counts[bin], 1);
+#else
+    int slot = atomicAdd(counts[bin], 1);
+    imageStore(list_img, slot, uvec4(uint(id) | (uint(slice) << uint(BEAM_ID_BITS))));
+#endif
+}
+
+// Every bin the projected capsule may reach (tracer/beams.py, bins_touched): the segment cut
+// into the bins' columns along its longer side, each column's rows within rho of its part.
+// One loop over (column, row), not nested loops (docs/DECISIONS.md, "One loop over the grid
+// build's cells"). False when the bound on its steps passes max_bins.
+bool list_cylinder(int id, vec2 g0, vec2 g1, float rho, int slice) {
+    vec2 dg = g1 - g0;
+    bool xdom = abs(dg.x) >= abs(dg.y);
+    float A0 = xdom ? g0.x : g0.y, dA = xdom ? dg.x : dg.y;
+    float B0 = xdom ? g0.y : g0.x, dB = xdom ? dg.y : dg.x;
+    int NA = xdom ? dims.x : dims.y, NB = xdom ? dims.y : dims.x;
+    int SA = xdom ? 1 : dims.x, SB = xdom ? dims.x : 1;
+    float a_lo = floor(min(A0, A0 + dA) - rho), a_hi = floor(max(A0, A0 + dA) + rho);
+    if (a_hi < 0.0 || a_lo > float(NA - 1)) return true;
+    int i0 = int(clamp(a_lo, 0.0, float(NA - 1))), i1 = int(clamp(a_hi, 0.0, float(NA - 1)));
+    if (float(i1 - i0 + 1) * min(abs(dB) + 2.0 * rho + 2.0, float(NB)) > float(max_bins)) return false;
+    bool no_dir = abs(dA) < 1e-12;
+    float inv = no_dir ? 1.0 : 1.0 / dA;
+    int col = i0, row = 0, row_end = -1;
+    for (;;) {
+        if (row > row_end) {
+            if (col > i1) break;
+            // The part of the segment (s in [0, 1]) within rho of this column, its rows.
+            float s0 = 0.0, s1 = 1.0;
+            if (!no_dir) {
+                float sa = (float(col) - rho - A0) * inv, sb = (float(col + 1) + rho - A0) * inv;
+                s0 = clamp(min(sa, sb), 0.0, 1.0);
+                s1 = clamp(max(sa, sb), 0.0, 1.0);
+            }
+            float e0 = B0 + s0 * dB, e1 = B0 + s1 * dB;
+            float b_lo = floor(min(e0, e1) - rho), b_hi = floor(max(e0, e1) + rho);
+            bool some = b_hi >= 0.0 && b_lo <= float(NB - 1);
+            row = int(clamp(b_lo, 0.0, float(NB - 1)));
+            row_end = some ? int(clamp(b_hi, 0.0, float(NB - 1))) : row - 1;
+            col++;
+            continue;
+        }
+        visit((col - 1) * SA + row * SB, id, slice);
+        row++;
+    }
+    return true;
+}
+#endif
+
+void main() {
+    int i = item_index();
+#if PASS == 0
+    if (i < n_items) counts[i] = 0;
+#elif PASS == 1
+    if (i >= n_items) return;
+    vec2 g0, g1; float rho; int slice;
+    int state = project_cylinder(i, g0, g1, rho, slice);
+    if (state == 2) { atomicAdd(flags[0], 1); return; }
+    if (state == 1) return;
+    atomicAdd(slices[slice], 1);
+    if (!list_cylinder(i, g0, g1, rho, slice)) atomicAdd(flags[1], 1);
+#elif PASS == 2
+    if (i >= n_items) return;
+    int s = 0;
+    for (int k = 0; k < BEAM_SCAN_CHUNK; ++k) s += counts[i * BEAM_SCAN_CHUNK + k];
+    sums[i] = s;
+#elif PASS == 3
+    if (i != 0) return;
+    int total = 0;
+    for (int c = 0; c < n_items; ++c) { int s = sums[c]; sums[c] = total; total += s; }
+    sums[n_items] = total;
+#elif PASS == 4
+    // One chunk of bins an invocation (n_items: chunks; bins: dims.x·dims.y), in order: each
+    // bin's (start, count) into the table, and its start into counts, the cursors of PASS 6.
+    if (i >= n_items) return;
+    int nb = dims.x * dims.y;
+    int start = sums[i];
+    for (int k = 0; k < BEAM_SCAN_CHUNK; ++k) {
+        int b = i * BEAM_SCAN_CHUNK + k;
+        if (b >= nb) break;
+        int c = counts[b];
+        imageStore(table_img, b, ivec4(start, c, 0, 0));
+        counts[b] = start;
+        start += c;
+    }
+#elif PASS == 5
+    if (i >= n_items) return;
+    vec2 g0, g1; float rho; int slice;
+    if (project_cylinder(i, g0, g1, rho, slice) != 0) return;
+    perm[slice_first[slice] + atomicAdd(slices[slice], 1)] = i;
+#elif PASS == 7
+    if (i >= n_items) return;
+    ivec2 sc = imageLoad(table_img, i).xy;
+    for (int k = 1; k < sc.y; ++k) {
+        uint e = imageLoad(list_img, sc.x + k).x;
+        int j = k - 1;
+        uint f = imageLoad(list_img, sc.x + j).x;
+        while (f > e) {
+            imageStore(list_img, sc.x + j + 1, uvec4(f));
+            if (--j < 0) break;
+            f = imageLoad(list_img, sc.x + j).x;
+        }
+        imageStore(list_img, sc.x + j + 1, uvec4(e));
+    }
+#elif PASS == 6
+    if (i >= n_items) return;
+    int id = perm[first_item + i];
+    vec2 g0, g1; float rho; int slice;
+    project_cylinder(id, g0, g1, rho, slice);
+    list_cylinder(id, g0, g1, rho, fill_slice);
+#endif
+}
