@@ -79,13 +79,14 @@ class BeamBuilder:
         flags = self._buffer("flags", 2)
         sums = self._buffer("sums", chunks + 1)
         perm = self._buffer("perm", max(n, 1))
+        filed = self._buffer("filed", max(n, 1))
         self._zero(counts, chunks * layout.BEAM_SCAN_CHUNK)
         self._zero(slices, layout.BEAM_SLICES)
         self._zero(flags, 2)
         ctx.memory_barrier()
         prog = self._program(1, parts)
         self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n)
-        for binding, buf in enumerate((counts, slices, perm, sums, flags)):
+        for binding, buf in enumerate((counts, slices, perm, sums, flags, filed)):
             buf.bind_to_storage_buffer(binding)
         prog.run(*_groups(n))
         ctx.memory_barrier()
@@ -122,10 +123,10 @@ class BeamBuilder:
         first = np.cumsum(sizes) - sizes
         self._zero(slices, layout.BEAM_SLICES)
         ctx.memory_barrier()
-        prog = self._program(5, parts)
-        self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n)
+        prog = self._program(5, 1)
+        set_uniforms(prog, n_items=int(n))
         prog["slice_first"].write(first.astype(np.int32).tobytes())
-        for binding, buf in enumerate((counts, slices, perm, sums, flags)):
+        for binding, buf in enumerate((counts, slices, perm, sums, flags, filed)):
             buf.bind_to_storage_buffer(binding)
         prog.run(*_groups(n))
         ctx.memory_barrier()
@@ -139,13 +140,3 @@ class BeamBuilder:
             ctx.memory_barrier()
         return Beams(frame, total)
 
-    def order(self, beams, store, list_name, table_name):
-        """Sorts each bin's entries by their words (slice, then id), the numpy build's order:
-        the pixel sampler's walk depends on it (beams_build.glsl, PASS 7)."""
-        prog = self._program(7, 1)
-        n = beams.frame.num_bins
-        set_uniforms(prog, n_items=int(n))
-        store[table_name].bind_to_image(0, read=True, write=False)
-        store[list_name].bind_to_image(1, read=True, write=True)
-        prog.run(*_groups(n))
-        self.ctx.memory_barrier()

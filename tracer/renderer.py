@@ -26,7 +26,7 @@ from .meshes import mesh_set
 from .mesh_upload import upload_meshes
 from .scene_buffers import SceneBuffers
 from .scene_bvh import build_scene_bvh, bvh_bounds
-from .scene_beams import BeamPlan, BeamState, beam_scene_box, camera_beams, order_camera_beams, sun_beams, sun_slots
+from .scene_beams import BeamPlan, BeamState, beam_scene_box, camera_beams, sun_beams, sun_slots
 from .scene_grid import build_scene_grid, build_wide_grid, grid_indices, grid_refs
 from .settings import ACCELS, DEFAULT_ACCEL, GRID_WIDEN_CAP, RenderSettings, pixel_group
 from .stats import RenderStats
@@ -267,8 +267,6 @@ class Renderer:
         whole = (box[0] + ox, box[1] + oy, box[2] + ox, box[3] + oy)
         pad = GRID_WIDEN_CAP if settings.min_pixel_width else 1.0
         cam, cam_s = camera_beams(state, self.scene, self.buffers, camera, whole, pad, gpu)
-        if settings.sampler == "pixel":
-            cam_s += order_camera_beams(state, self.buffers)
         suns, light_sun, sun_s = [None] * len(state.suns), [], 0.0
         for light, slot in zip(settings.lights, sun_slots(settings)):
             if slot < 0:

@@ -37,13 +37,11 @@ class BeamState:
     camera_key: object = None
     camera: Optional[Beams] = None
     camera_why: str = ""
-    camera_ordered: bool = False    # the GPU-built camera lists are in the numpy build's order
     suns: list = field(default_factory=lambda: [None] * MAX_SUN_BEAMS)    # (key, Beams or None)
 
     def forget(self):
         self.camera_key = self.camera = None
         self.camera_why = ""
-        self.camera_ordered = False
         self.suns = [None] * MAX_SUN_BEAMS
 
 
@@ -98,7 +96,7 @@ def camera_beams(state, scene, buffers, camera, box, pad, use_gpu):
     if key == state.camera_key:
         return state.camera, 0.0
     t0 = time.perf_counter()
-    state.camera_key, state.camera, state.camera_why, state.camera_ordered = key, None, "", False
+    state.camera_key, state.camera, state.camera_why = key, None, ""
     lo, hi = scene.box
     rmax = float(scene.plan.radius.max())
     sample = _segments_sample(scene.plan)
@@ -222,16 +220,3 @@ def beam_scene_box(plan, bounds, pad):
     return np.asarray(lo, np.float64) - reach, np.asarray(hi, np.float64) + reach
 
 
-
-def order_camera_beams(state, buffers):
-    """Puts the camera's GPU-built lists in the numpy build's order (within a slice the compute
-    passes leave them in the atomics' order), which the pixel sampler's walk depends on; once
-    per build. Returns the seconds it took."""
-    import time
-    beams = state.camera
-    if beams is None or beams.entries is not None or state.camera_ordered:
-        return 0.0
-    t0 = time.perf_counter()
-    beam_builder().order(beams, buffers, *CAMERA_BUFFERS)
-    state.camera_ordered = True
-    return time.perf_counter() - t0

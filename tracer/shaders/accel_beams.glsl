@@ -57,20 +57,21 @@ void beam_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_con
 
 #if PIXEL
 // accel_pixel_nearest for the pixel sampler: every sample of camera_pixel lies in its bin, so
-// every candidate is the bin's; entries in key order until the pixel is settled and the next
-// starts farther than its list's farthest entry (footprint_mask puts an entry no nearer than
-// its key).
+// every candidate is the bin's; entries in key order, a slice an epoch of pixel_offer, until
+// the pixel is settled and the next starts farther than its list's farthest entry
+// (footprint_mask puts an entry no nearer than its key).
 void beam_pixel_nearest(vec3 o, vec3 d, float tmax) {
     ivec2 sc = camera_bin();
     float reach = beam_reach(tmax);
     for (int k = 0; k < sc.y; ++k) {
         uint e = texelFetch(tex_beam, sc.x + k).x;
-        if (beam_keys.x + float(e >> uint(BEAM_ID_BITS)) * beam_keys.y > reach) break;
+        int slice = int(e >> uint(BEAM_ID_BITS));
+        if (beam_keys.x + float(slice) * beam_keys.y > reach) break;
         int id = int(e & BEAM_ID_MASK);
 #if COUNT
         counter.w += 1.0;
 #endif
-        pixel_offer(id, cyl(id, CYL_TOP), cyl(id, CYL_TIP), o, d);
+        pixel_offer(id, cyl(id, CYL_TOP), cyl(id, CYL_TIP), o, d, slice);
         if (pixel_settled()) reach = min(reach, beam_reach(list_far()));
     }
 #if COUNT

@@ -4,23 +4,19 @@
 // depth slice of its key, a bin's entries slice by slice. The host prepends
 // "#version 430 core", PASS and the generated header of tracer/layout.py:
 //   PASS 0  zero:   counts[i] = 0 for i < n_items (the bins' counters, then the slices')
-//   PASS 1  count:  counts[bin] += 1 for every (cylinder, bin), slices[slice] += 1 per cylinder
+//   PASS 1  count:  counts[bin] += 1 for every (cylinder, bin), slices[slice] += 1 per cylinder,
+//                   filed[cylinder] = its slice (-1: never seen)
 //   PASS 2  sums:   sums[c] = the counts of bins c·CHUNK .. (c+1)·CHUNK (counts is padded
 //                   with zeros to whole chunks)
 //   PASS 3  scan:   one invocation: sums become exclusive prefix sums, sums[n_items] the total
 //   PASS 4  starts: per chunk of bins, each bin's first entry into the bin table (start,
 //                   count), and into counts, which become the cursors
-//   PASS 5  bucket: perm[slice_first[slice] + slices[slice]++] = cylinder (slices zeroed)
+//   PASS 5  bucket: perm[slice_first[slice] + slices[slice]++] = cylinder, by filed (slices zeroed)
 //   PASS 6  fill:   for the cylinders perm[first_item ..] of slice `fill_slice`, one dispatch
 //                   a slice in order: slot = cursors[bin]++, lists[slot] = id | slice << BITS
-//   PASS 7  order:  one bin an invocation: its entries sorted by their words (slice, then id),
-//                   the numpy build's order
 // The slices are dispatched one after another, so a bin's entries come slice by slice; within
-// a slice their order depends on the atomics. The walks of the independent sampler find the
-// same hits in any order; the pixel sampler's list of distinct cylinders does not (which
-// cylinders it keeps depends on what it has seen when one comes), so before its first walk
-// PASS 7 puts each bin in the numpy build's order: insertion sort, whose steps are the list's
-// length plus its disorder, which lies within slices.
+// a slice their order depends on the atomics, which no walk depends on (tracer/beams.py; the
+// pixel sampler takes a slice as one epoch: sampler_pixel.glsl, pixel_offer).
 // A cylinder that reaches the camera's plane, or whose listing could take more than
 // MAX_BINS_PER_CYLINDER loop steps, is counted in flags[0] and flags[1]: the host then gives
 // the family no beams (its rays walk the grid), as the numpy build raises BeamsUnfit.
@@ -63,17 +59,13 @@ layout(std430, binding = 1) buffer Slices { int slices[]; };     // per slice: c
 layout(std430, binding = 2) buffer Perm { int perm[]; };         // cylinders, slice by slice
 layout(std430, binding = 3) buffer Sums { int sums[]; };         // per chunk of bins
 layout(std430, binding = 4) buffer Flags { int flags[]; };       // [0] near the camera, [1] too wide
+layout(std430, binding = 5) buffer Filed { int filed[]; };       // per cylinder: its slice, -1 unseen
 #if PASS == 4
 layout(rg32i, binding = 0) uniform writeonly iimageBuffer table_img;
 #endif
 #if PASS == 6
 layout(r32ui, binding = 1) uniform writeonly uimageBuffer list_img;
 #endif
-#if PASS == 7
-layout(rg32i, binding = 0) uniform readonly iimageBuffer table_img;
-layout(r32ui, binding = 1) uniform coherent uimageBuffer list_img;
-#endif
-
 vec4 cyl(int id, int j) {
 #if CYL_PARTS > 3
     if (id >= 3 * cyl_split) return texelFetch(tex_cyl3, TEXELS_PER_CYL * (id - 3 * cyl_split) + j);
@@ -203,6 +195,7 @@ void main() {
     if (i >= n_items) return;
     vec2 g0, g1; float rho; int slice;
     int state = project_cylinder(i, g0, g1, rho, slice);
+    filed[i] = state == 0 ? slice : -1;
     if (state == 2) { atomicAdd(flags[0], 1); return; }
     if (state == 1) return;
     atomicAdd(slices[slice], 1);
@@ -233,23 +226,9 @@ void main() {
     }
 #elif PASS == 5
     if (i >= n_items) return;
-    vec2 g0, g1; float rho; int slice;
-    if (project_cylinder(i, g0, g1, rho, slice) != 0) return;
+    int slice = filed[i];
+    if (slice < 0) return;
     perm[slice_first[slice] + atomicAdd(slices[slice], 1)] = i;
-#elif PASS == 7
-    if (i >= n_items) return;
-    ivec2 sc = imageLoad(table_img, i).xy;
-    for (int k = 1; k < sc.y; ++k) {
-        uint e = imageLoad(list_img, sc.x + k).x;
-        int j = k - 1;
-        uint f = imageLoad(list_img, sc.x + j).x;
-        while (f > e) {
-            imageStore(list_img, sc.x + j + 1, uvec4(f));
-            if (--j < 0) break;
-            f = imageLoad(list_img, sc.x + j).x;
-        }
-        imageStore(list_img, sc.x + j + 1, uvec4(e));
-    }
 #elif PASS == 6
     if (i >= n_items) return;
     int id = perm[first_item + i];

@@ -154,26 +154,26 @@ uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
 
 #if LAYERS > 1
 // The PIX_M nearest distinct cylinders hit by any sample, sorted by (distance along the
-// central ray, id); empty slots (BIG, NO_ID, mask 0). Constant indices only (accel.glsl says
-// why).
-float lt[PIX_M]; float la[PIX_M]; int lid[PIX_M]; uint lm[PIX_M];
+// central ray, id), each with the epoch it came in (below); empty slots (BIG, NO_ID, mask
+// 0). Constant indices only (accel.glsl says why).
+float lt[PIX_M]; float la[PIX_M]; int lid[PIX_M]; uint lm[PIX_M]; int le[PIX_M];
 
 void list_clear() {
-    for (int j = 0; j < PIX_M; ++j) { lt[j] = BIG; la[j] = 0.0; lid[j] = NO_ID; lm[j] = 0u; }
+    for (int j = 0; j < PIX_M; ++j) { lt[j] = BIG; la[j] = 0.0; lid[j] = NO_ID; lm[j] = 0u; le[j] = 0; }
 }
 
 // The samples that see nothing past t: those with LAYERS hits among the list's cylinders
-// nearer than t (counted with one mask per count: have[k] holds the samples with more than k
-// hits), and those behind a nearer cylinder that lets less than t_eps through (compositing
-// stops there, as the independent sampler's walk does: hits_settled). Opaque hair (alpha 1)
-// thus needs one hit a sample, not LAYERS. A product of translucent layers below t_eps is
-// not looked for (that sample only walks on).
-uint samples_full(float t) {
+// nearer than t that came in before `epoch` (counted with one mask per count: have[k] holds
+// the samples with more than k hits), and those behind such a cylinder that lets less than
+// t_eps through (compositing stops there, as the independent sampler's walk does:
+// hits_settled). Opaque hair (alpha 1) thus needs one hit a sample, not LAYERS. A product of
+// translucent layers below t_eps is not looked for (that sample only walks on).
+uint samples_full(float t, int epoch) {
     uint have[LAYERS];
     uint shut = 0u;
     for (int k = 0; k < LAYERS; ++k) have[k] = 0u;
     for (int j = 0; j < PIX_M; ++j) {
-        uint mj = lt[j] < t ? lm[j] : 0u;
+        uint mj = lt[j] < t && le[j] < epoch ? lm[j] : 0u;
         for (int k = LAYERS - 1; k > 0; --k) have[k] |= have[k - 1] & mj;
         have[0] |= mj;
         shut |= 1.0 - la[j] < t_eps ? mj : 0u;
@@ -181,33 +181,38 @@ uint samples_full(float t) {
     return have[LAYERS - 1] | shut;
 }
 
-// Cylinder `id` (its TOP and TIP texels A4, B4) as a candidate of the central ray o + t·d:
-// into the list when any sample hits it, once (a cylinder comes from every cell or leaf
-// that lists it; the list keeps the first).
-void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d) {
+// Cylinder `id` (its TOP and TIP texels A4, B4) as a candidate of the central ray o + t·d,
+// offered in `epoch` (the walk's cell, slice or leaf: epochs come in increasing order, and
+// within one the candidates come in whatever order the structure's lists hold them): into the
+// list when any sample hits it, once (a cylinder comes from every cell or leaf that lists it;
+// the list keeps the first).
+void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d, int epoch) {
     float t;
     uint m = footprint_mask(A4, B4, cyl(id, CYL_N2).xyz, o, d, t);
     // Most candidates hit no sample: they cost the footprint test only.
     if (m == 0u) return;
     // Samples that already have LAYERS nearer hits in the list will never see this one:
     // their bits go, so the list spends no slot on what is hidden (thin strands end-on
-    // filled it with hidden ones and lost the hits of samples they did not cover).
-    m &= ~samples_full(t);
+    // filled it with hidden ones and lost the hits of samples they did not cover). Only hits
+    // of earlier epochs count, so that the list does not depend on the order within one
+    // (the GPU builds fill their lists with atomics): the list then holds the PIX_M
+    // nearest of what the epochs so far admitted, whatever order they came in.
+    m &= ~samples_full(t, epoch);
     bool dup = false;
     for (int j = 0; j < PIX_M; ++j) dup = dup || lid[j] == id;
     if (m == 0u || dup) return;
-    float ct = t, ca = B4.w; int cid = id; uint cm = m;
+    float ct = t, ca = B4.w; int cid = id; uint cm = m; int ce = epoch;
     for (int j = 0; j < PIX_M; ++j) {
         bool sw = ct < lt[j] || (ct == lt[j] && cid < lid[j]);
-        float ft = lt[j], fa = la[j]; int fi = lid[j]; uint fm = lm[j];
-        lt[j] = sw ? ct : ft; la[j] = sw ? ca : fa; lid[j] = sw ? cid : fi; lm[j] = sw ? cm : fm;
-        ct = sw ? ft : ct; ca = sw ? fa : ca; cid = sw ? fi : cid; cm = sw ? fm : cm;
+        float ft = lt[j], fa = la[j]; int fi = lid[j]; uint fm = lm[j]; int fe = le[j];
+        lt[j] = sw ? ct : ft; la[j] = sw ? ca : fa; lid[j] = sw ? cid : fi; lm[j] = sw ? cm : fm; le[j] = sw ? ce : fe;
+        ct = sw ? ft : ct; ca = sw ? fa : ca; cid = sw ? fi : cid; cm = sw ? fm : cm; ce = sw ? fe : ce;
     }
 }
 
 // No farther cylinder can change the pixel: every sample has LAYERS hits in the list.
 bool pixel_settled() {
-    return samples_full(BIG) == FULL;
+    return samples_full(BIG, 0x7fffffff) == FULL;
 }
 
 // The farthest distance of a cylinder in the list.
@@ -230,7 +235,7 @@ void list_clear() {
     have = 0u;
 }
 
-void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d) {
+void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d, int epoch) {
     float t;
     uint m = footprint_mask(A4, B4, cyl(id, CYL_N2).xyz, o, d, t);
     if (m == 0u) return;
