@@ -16,6 +16,11 @@ from .shader_source import shader_source
 KIND_CODE = {"persp": 0, "ortho": 1, "sun": 2}
 
 
+# Scratch buffers up to this many words are kept between builds; bigger ones (a scene of
+# tens of millions of cylinders) are given back after the build that needed them.
+KEEP_WORDS = 1 << 24
+
+
 class BeamBuilder:
     """The passes of one context and their scratch buffers (kept and grown, not made again
     for every camera move: allocating is costly on a CPU driver)."""
@@ -70,6 +75,13 @@ class BeamBuilder:
         """Beams of `frame` over the `n` cylinders of `tex_cyl` (a SplitBuffer), their lists
         into buffer `list_name` and bin table into `table_name` of `store` (SceneBuffers).
         Returns Beams without host arrays; BeamsUnfit where the numpy build would raise it."""
+        try:
+            return self._build(frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs)
+        finally:
+            for name in [k for k, buf in self._scratch.items() if buf.size > 4 * KEEP_WORDS]:
+                self._scratch.pop(name).release()
+
+    def _build(self, frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs):
         ctx = self.ctx
         nbins = frame.num_bins
         chunks = -(-nbins // layout.BEAM_SCAN_CHUNK)

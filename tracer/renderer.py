@@ -266,7 +266,7 @@ class Renderer:
         ox, oy = camera.pixel_origin
         whole = (box[0] + ox, box[1] + oy, box[2] + ox, box[3] + oy)
         pad = GRID_WIDEN_CAP if settings.min_pixel_width else 1.0
-        cam, cam_s = camera_beams(state, self.scene, self.buffers, camera, whole, pad, gpu)
+        cam, cam_s = camera_beams(state, self.scene, self.buffers, camera, whole, pad, gpu, settings.spp)
         suns, light_sun, sun_s = [None] * len(state.suns), [], 0.0
         for light, slot in zip(settings.lights, sun_slots(settings)):
             if slot < 0:
@@ -277,9 +277,11 @@ class Renderer:
             suns[slot] = beams
             light_sun.append(slot if beams is not None else -1)
         plan = BeamPlan(cam, suns, light_sun)
-        st.beams_s = cam_s + sun_s
+        st.beams_s, st.camera_beams_s, st.sun_beams_s = cam_s + sun_s, cam_s, sun_s
         st.camera_beams = (f"{cam.frame.bin_px} px bins" if cam is not None else f"none: {state.camera_why}")
-        st.beam_refs = (cam.refs if cam is not None else 0) + sum(b.refs for b in suns if b is not None)
+        st.camera_beam_refs = cam.refs if cam is not None else 0
+        st.sun_beam_refs = sum(b.refs for b in suns if b is not None)
+        st.beam_refs = st.camera_beam_refs + st.sun_beam_refs
         shadowed = [settings.shadows and light.shadows for light in settings.lights]
         return plan, cam is None or any(s and k < 0 for s, k in zip(shadowed, light_sun))
 

@@ -24,7 +24,13 @@ CAMERA_BUFFERS = ("tex_beam", "tex_beam_cell")
 SUN_BUFFERS = (("tex_sun0", "tex_sun_cell0"), ("tex_sun1", "tex_sun_cell1"))
 MAX_SUN_BEAMS = len(SUN_BUFFERS)
 CAMERA_BIN_PX = (1, 2, 4)
-SUN_REFS_PER_CYLINDER = 16.0
+# A camera's beams are rebuilt at every camera move, the grid is built once: beams are built
+# for a render whose camera rays are at least 1 / CAMERA_REFS_PER_RAY of the references they
+# would list (1-pixel bins, estimated from a sample). Measured on llvmpipe (docs/DECISIONS.md,
+# "Beams"): a reference costs about two cylinder tests to build, and the beams save a camera
+# ray 0.7-1.8 tests per list entry of its pixel against the grid.
+CAMERA_REFS_PER_RAY = 100.0
+SUN_REFS_PER_CYLINDER = 8.0
 SUN_MAX_SIDE = 2048          # bins along either side of a sun's plane
 SAMPLE = 20_000              # cylinders whose projections decide a resolution
 
@@ -85,11 +91,12 @@ def _estimated_refs(frame, sample, pad, count):
     return float(np.mean(cols * rows)) * count
 
 
-def camera_beams(state, scene, buffers, camera, box, pad, use_gpu):
+def camera_beams(state, scene, buffers, camera, box, pad, use_gpu, samples=1):
     """The camera's Beams over whole-image pixel box `box` (the render's traced box) with
     capsules widened `pad` times, built (or kept from the last render with the same camera,
-    box and pad) into CAMERA_BUFFERS; None where beams cannot serve it (state.camera_why says
-    why). Returns (beams, seconds building or 0.0 when kept)."""
+    box and pad) into CAMERA_BUFFERS; None where beams cannot serve it or would not pay for a
+    render of `samples` samples a pixel (state.camera_why says why). Returns (beams, seconds
+    building or 0.0 when kept)."""
     import time
     key = (camera.type, camera.position.tobytes(), camera.rotation.tobytes(), float(camera.pixel_size),
            tuple(float(c) for c in camera.centre_px), tuple(box), float(pad), id(scene.plan))
@@ -101,12 +108,20 @@ def camera_beams(state, scene, buffers, camera, box, pad, use_gpu):
     rmax = float(scene.plan.radius.max())
     sample = _segments_sample(scene.plan)
     budget = min(layout.BEAM_MAX_REFS, buffers.max_texels)
+    rays = samples * (box[2] - box[0]) * (box[3] - box[1])
     try:
         for b in CAMERA_BIN_PX:
             frame = camera_frame(camera, box, lo, hi, rmax, pad, b)
             if frame.num_bins > layout.BEAM_MAX_BINS:
                 continue
-            if _estimated_refs(frame, sample, pad, scene.num_cylinders) > 0.5 * budget and b != CAMERA_BIN_PX[-1]:
+            estimate = _estimated_refs(frame, sample, pad, scene.num_cylinders)
+            if b == CAMERA_BIN_PX[0] and estimate > CAMERA_REFS_PER_RAY * rays:
+                # Not cached: a render with more samples asks again.
+                state.camera_key = None
+                state.camera_why = (f"about {estimate / rays:.0f} list entries per camera ray of this render; "
+                                    "the grid, kept between camera moves, costs less")
+                break
+            if estimate > 0.5 * budget and b != CAMERA_BIN_PX[-1]:
                 continue
             try:
                 state.camera = _build(scene, buffers, frame, pad, use_gpu, CAMERA_BUFFERS, budget)

@@ -15,9 +15,10 @@ class RenderStats:
     buffers; for the grid its lists and cell table). Of the last set_meshes: num_triangles,
     mesh_s. Of the pixel sampler's wide grid (built on its first render of new strands,
     beside the scene's grid): wide_grid_s, wide_grid_refs. Of the last render with beams
-    (accel "beams"): beams_s (seconds building beams; 0 when the last ones were kept),
-    camera_beams (the camera's bin size, or why it has none and walks the grid), beam_refs
-    (entries of the camera's and the suns' lists). Of the last render: render_s, layers_max (layers the shader was
+    (accel "beams"): beams_s (seconds building beams; 0 when the last ones were kept), of
+    which camera_beams_s and sun_beams_s, camera_beams (the camera's bin size, or why it has
+    none and walks the grid), beam_refs (entries of the camera's and the suns' lists), of
+    which camera_beam_refs and sun_beam_refs. Of the last render: render_s, layers_max (layers the shader was
     compiled for), screen_box and traversed_pixels (the projected bounds that were traced),
     and with RenderSettings(count=True) the counters shadow_rays, layers_traced,
     cells_visited, cylinder_tests (summed over samples). gl_backend: the shared context's
@@ -50,6 +51,10 @@ class RenderStats:
     beams_s: Optional[float] = None
     camera_beams: Optional[str] = None
     beam_refs: Optional[int] = None
+    camera_beams_s: Optional[float] = None
+    sun_beams_s: Optional[float] = None
+    camera_beam_refs: Optional[int] = None
+    sun_beam_refs: Optional[int] = None
     layers_max: Optional[int] = None
     screen_box: Optional[tuple] = None
     traversed_pixels: Optional[int] = None

@@ -1,25 +1,34 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Acceleration structures: the BVH over cylinder pieces (tracer/bvh.py) against the uniform
-grid (tracer/grid.py), same scenes, camera, sun and settings, one renderer each, numpy builds.
+"""Acceleration structures: beams (tracer/beams.py, the default: camera rays and shadow rays
+toward the sun look up a bin of lists made for their family), the uniform grid (tracer/grid.py,
+the thesis's) and the BVH over cylinder pieces (tracer/bvh.py); same scenes, camera, sun and
+settings, one renderer each.
 
 Per scene: the structure's build time and size, the render time at 1 and 16 samples per
 pixel (16 spp against 16 times 1 spp says how much of a pixel's work its samples share), and
-the work per ray from the tracer's own counters: boxes (BVH) or cells (grid) visited and
-cylinders tested per primary ray (a render without shadows) and per shadow ray (the rest of
-a render with the sun, over the shadow rays it cast). Both images are compared pixel by
-pixel: the structures must find the same hits.
+the work per ray from the tracer's own counters: boxes (BVH), cells (grid) or bins (beams)
+visited and cylinders tested per primary ray (a render without shadows) and per shadow ray
+(the rest of a render with the sun, over the shadow rays it cast). The images are compared
+pixel by pixel: the structures must find the same hits.
 
-The two structures render in turn (grid, BVH, grid, ...) so that both see the same load on
+Builds: the grid and the beams by the compute passes (the renderer's default build), the BVH
+in numpy (its only build). The grid and the BVH are built by set_strands; the beams by the
+first render that needs them (the camera's again at every camera move, the sun's once), and
+the grid beside them only when some ray needs it: their build time is that render's. With
+beams, 1-spp renders of dense hair leave the camera's rays to the grid, which a camera move
+does not make again (tracer/scene_beams.py, CAMERA_REFS_PER_RAY): the column "camera rays"
+says what they walked.
+
+The structures render in turn (grid, beams, BVH, grid, ...) so that all see the same load on
 a shared machine; each time is the median of its runs, as wall-clock time and as the
 process's CPU time (the driver's threads included), which another process's load disturbs
-less. The ratio BVH ÷ grid is the figure to read.
+less. The ratios to the grid are the figures to read.
 
 1,000,000 `wavy` strands (~61 M cylinders, more than one buffer texture of the driver holds:
-the cylinders and the cell lists are split over two each) are measured with the grid alone,
-built by the compute passes (the default build; the numpy build's host copy of the cylinders
-and its lists need several times the memory), once at 1 spp. The BVH is not built there: its
-numpy build took 30 s and 280 MB at 100,000 strands and grows with the cylinders, past the
-section's time and this machine's memory at ten times as many.
+the cylinders and the cell lists are split over two each) are measured with the grid and the
+beams, once at 1 spp. The BVH is not built there: its numpy build took 30 s and 280 MB at
+100,000 strands and grows with the cylinders, past the section's time and this machine's
+memory at ten times as many.
 
 Run alone: `python -m benchmarks --quick --only accel` (or `--full`).
 """
@@ -36,7 +45,7 @@ from benchmarks.sections import left, over_budget
 
 QUICK_SCENES = (("straight.hair", None), ("wavy", 1000), ("wavy", 10000))
 FULL_SCENES = QUICK_SCENES + (("wavy", 100000), ("wavy", 1000000))
-ACCELS = ("grid", "bvh")
+ACCELS = ("grid", "beams", "bvh")
 # Scenes of more strands than this: the grid alone, GPU build, one run (see the module text).
 HUGE_STRANDS = 500_000
 
@@ -97,7 +106,7 @@ def run(sec, cfg):
             continue
         renderers, builds = {}, {}
         for accel in ACCELS:
-            r = tracer.Renderer(build="numpy", accel=accel)
+            r = tracer.Renderer(accel=accel)
             try:
                 once(lambda: r.set_strands(strands))
             except InputError as e:
@@ -107,76 +116,117 @@ def run(sec, cfg):
         if len(renderers) < 2:
             continue
         rs1, rs16 = settings(spp=1, **kw), settings(spp=16, **kw)
-        for r in renderers.values():
-            r.render(cam, rs1)          # compiles the programs
+        for accel, r in renderers.items():
+            r.render(cam, rs1)          # compiles the programs (and builds the beams)
+            if accel == "beams":
+                builds[accel] = _beams_build(r)
         wall1, cpu1, images = _alternate(renderers, cam, rs1, runs)
+        camera1 = renderers["beams"].stats.camera_beams if "beams" in renderers else ""
         wall16 = cpu16 = None
+        camera16 = ""
         if 16 * sum(wall1.values()) < left(sec, 0.8) / 2:
             wall16, cpu16, _ = _alternate(renderers, cam, rs16, 1)
-        diff = float(np.abs(images["grid"] - images["bvh"]).max())
+            camera16 = renderers["beams"].stats.camera_beams if "beams" in renderers else ""
+        diffs = {a: float(np.abs(images["grid"] - img).max()) for a, img in images.items() if a != "grid"}
         for accel, r in renderers.items():
             st = builds[accel]
             pw, pt, sw, stt = _work(r, cam, kw)
             ratio16 = "" if cpu16 is None else f"{cpu16[accel] / (16 * cpu1[accel]):.2f}"
-            rows.append([label, accel, f"{strands.num_segments:,}", fmt_time(st["accel_s"]),
+            walked = {"grid": "grid", "bvh": "BVH"}.get(accel) or f"1 spp: {_said(camera1)}" + (
+                f"; 16 spp: {_said(camera16)}" if camera16 else "")
+            rows.append([label, accel, f"{strands.num_segments:,}", _build_cell(accel, st),
                          f"{st['accel_bytes'] / 2**20:.1f}", fmt_time(wall1[accel]), fmt_time(cpu1[accel]),
                          "not measured: time budget" if cpu16 is None else fmt_time(cpu16[accel]), ratio16,
-                         f"{diff:.1e}" if accel == "bvh" else ""])
+                         f"{diffs[accel]:.1e}" if accel in diffs else "", walked])
             work_rows.append([label, accel, fmt_num(pw), fmt_num(pt), fmt_num(sw), fmt_num(stt)])
             sec.data.setdefault(label, {})[accel] = {
                 "build_s": st["accel_s"], "bytes": st["accel_bytes"], "wall_1spp_s": wall1[accel],
                 "cpu_1spp_s": cpu1[accel], "cpu_16spp_s": None if cpu16 is None else cpu16[accel],
+                "wall_16spp_s": None if wall16 is None else wall16[accel],
                 "primary_steps": pw, "primary_tests": pt, "shadow_steps": sw, "shadow_tests": stt}
         for r in renderers.values():     # GL buffers are not freed with their renderer
             r.buffers.release()
-        ratio = cpu1["bvh"] / cpu1["grid"]
-        sec.summary.append(f"{label}: BVH ÷ grid CPU time {ratio:.2f} at 1 spp (wall {fmt_time(wall1['bvh'])} vs "
-                           f"{fmt_time(wall1['grid'])}); build {fmt_time(builds['bvh']['accel_s'])} vs "
-                           f"{fmt_time(builds['grid']['accel_s'])}; images differ by at most {diff:.1e}")
+        parts = [f"{a} ÷ grid CPU time {cpu1[a] / cpu1['grid']:.2f} at 1 spp" for a in renderers if a != "grid"]
+        if cpu16 is not None:
+            parts += [f"{a} ÷ grid {cpu16[a] / cpu16['grid']:.2f} at 16 spp" for a in renderers if a != "grid"]
+        sec.summary.append(f"{label}: " + ", ".join(parts) + "; builds " + ", ".join(
+            f"{a} {fmt_time(builds[a]['accel_s'])}" for a in renderers) + "; images differ from the grid's by at "
+            "most " + ", ".join(f"{d:.1e} ({a})" for a, d in diffs.items()))
     sec.table(["scene", "structure", "cylinders", "build", "MB", "1 spp wall", "1 spp CPU", "16 spp CPU",
-               "16 spp ÷ 16×(1 spp)", "max abs diff BVH vs grid"], [r + [""] * (10 - len(r)) for r in rows],
-              caption="Build (numpy; the 1,000,000-strand grid: compute passes), size and render time (medians; "
-                      "grid and BVH rendered in turn). MB: the structure's buffers (grid: lists and cell table; "
+               "16 spp ÷ 16×(1 spp)", "max abs diff vs grid", "camera rays walked"],
+              [r + [""] * (11 - len(r)) for r in rows],
+              caption="Build (grid, beams: compute passes; BVH: numpy), size and render time (medians; the "
+                      "structures rendered in turn). MB: the structure's buffers (grid: lists and cell table; "
+                      "beams: the camera's and the sun's lists and bin tables, with the grid's where it was built; "
                       "BVH: nodes, leaves and pieces).")
     sec.table(["scene", "structure", "steps / primary ray", "tests / primary ray", "steps / shadow ray",
                "tests / shadow ray"], work_rows,
-              caption="Work per ray (tracer counters, 1 spp). Steps are BVH boxes tested or grid cells visited; "
+              caption="Work per ray (tracer counters, 1 spp). Steps are BVH boxes tested, grid cells visited or "
+                      "beam bins looked up (one a ray; with beams a 1-spp camera ray of dense hair walks the grid); "
                       "tests are cylinder (BVH: piece) intersection tests.")
 
 
-def _huge_scene(sec, tracer, label, strands, cam, kw, rows, work_rows):
-    """The grid alone, built by the compute passes, one render at 1 spp (see the module text)."""
-    bvh_row = [label, "bvh", f"{strands.num_segments:,}", "not measured: the numpy BVH build at this size needs "
-               "more time than the section has and more memory than this machine has (see the text)"]
-    r = tracer.Renderer(build="auto", accel="grid")
-    try:
-        once(lambda: r.set_strands(strands))
-    except InputError as e:
-        rows.extend([[label, "grid", f"refused: {e}"], bvh_row])
-        return
+def _said(camera_beams):
+    """What the beams renderer's camera rays walked, from RenderStats.camera_beams."""
+    return "grid" if camera_beams.startswith("none") else f"beams, {camera_beams}"
+
+
+def _beams_build(r):
+    """The stats of a beams renderer's first render, with its build as accel_s (the beams, and the
+    grid where some ray needed it) and accel_bytes (their buffers)."""
     st = r.stats.as_dict()
-    parts = (r.buffers.parts("tex_cyl"), r.buffers.parts("tex_idx"))
+    grid_s = st["grid_s"] or 0.0
+    bins = sum(b.frame.num_bins for b in [r.beam_state.camera] + [s[1] for s in r.beam_state.suns if s]
+               if b is not None)
+    grid_bytes = 4 * st["grid_refs"] + 8 * int(np.prod(st["grid_dims"])) if st["grid_refs"] else 0
+    st["accel_s"] = st["beams_s"] + grid_s
+    st["accel_bytes"] = 4 * st["beam_refs"] + 8 * bins + grid_bytes
+    st["grid_built"] = bool(st["grid_refs"])
+    return st
+
+
+def _build_cell(accel, st):
+    if accel == "beams":
+        return (f"{fmt_time(st['accel_s'])} (camera {fmt_time(st['camera_beams_s'])}, sun "
+                f"{fmt_time(st['sun_beams_s'])}" + (", with the grid" if st["grid_built"] else "") + ")")
+    return fmt_time(st["accel_s"]) + (f" ({st['grid_build']} build)" if accel == "grid" else " (numpy)")
+
+
+def _huge_scene(sec, tracer, label, strands, cam, kw, rows, work_rows):
+    """The grid and the beams, built by the compute passes, one render at 1 spp each (see the
+    module text)."""
     rs1 = settings(spp=1, **kw)
-    try:
-        r.render(cam, rs1)          # compiles the programs of the split buffers
-        t0, c0 = time.perf_counter(), time.process_time()
-        r.render(cam, rs1)
-        wall1, cpu1 = time.perf_counter() - t0, time.process_time() - c0
-        pw, pt, sw, stt = _work(r, cam, kw) if left(sec) > 3 * wall1 else (None,) * 4
-    finally:
-        r.buffers.release()
-    build = f"{fmt_time(st['accel_s'])} ({st['grid_build']} build)"
-    rows.append([label, "grid", f"{strands.num_segments:,}", build, f"{st['accel_bytes'] / 2**20:.1f}",
-                 fmt_time(wall1), fmt_time(cpu1), "not measured: 16 one-spp renders of this size exceed the budget",
-                 "", f"cylinders in {parts[0]} buffer textures, cell lists in {parts[1]}"])
-    rows.append(bvh_row)
-    if pw is None:
-        work_rows.append([label, "grid", "not measured: time budget", "", "", ""])
-    else:
-        work_rows.append([label, "grid", fmt_num(pw), fmt_num(pt), fmt_num(sw), fmt_num(stt)])
-    sec.data.setdefault(label, {})["grid"] = {
-        "build_s": st["accel_s"], "build": st["grid_build"], "bytes": st["accel_bytes"], "wall_1spp_s": wall1,
-        "cpu_1spp_s": cpu1, "cpu_16spp_s": None, "primary_steps": pw, "primary_tests": pt, "shadow_steps": sw,
-        "shadow_tests": stt, "buffer_parts": parts, "grid_refs": st["grid_refs"], "grid_dims": st["grid_dims"]}
-    sec.summary.append(f"{label}: grid only ({st['grid_build']} build {fmt_time(st['accel_s'])}, "
-                       f"{st['accel_bytes'] / 2**20:.0f} MB, {st['grid_refs']:,} references), 1 spp {fmt_time(wall1)}")
+    for accel in ("grid", "beams"):
+        r = tracer.Renderer(build="auto", accel=accel)
+        try:
+            once(lambda: r.set_strands(strands))
+        except InputError as e:
+            rows.append([label, accel, f"refused: {e}"])
+            continue
+        try:
+            r.render(cam, rs1)          # compiles the programs of the split buffers (and builds the beams)
+            st = _beams_build(r) if accel == "beams" else r.stats.as_dict()
+            parts = (r.buffers.parts("tex_cyl"), r.buffers.parts("tex_idx"))
+            t0, c0 = time.perf_counter(), time.process_time()
+            r.render(cam, rs1)
+            wall1, cpu1 = time.perf_counter() - t0, time.process_time() - c0
+            walked = "grid" if accel == "grid" else f"1 spp: {_said(r.stats.camera_beams)}"
+            pw, pt, sw, stt = _work(r, cam, kw) if left(sec) > 3 * wall1 else (None,) * 4
+        finally:
+            r.buffers.release()
+        rows.append([label, accel, f"{strands.num_segments:,}", _build_cell(accel, st),
+                     f"{st['accel_bytes'] / 2**20:.1f}", fmt_time(wall1), fmt_time(cpu1),
+                     "not measured: 16 one-spp renders of this size exceed the budget", "",
+                     f"cylinders in {parts[0]} buffer textures, cell lists in {parts[1]}", walked])
+        if pw is None:
+            work_rows.append([label, accel, "not measured: time budget", "", "", ""])
+        else:
+            work_rows.append([label, accel, fmt_num(pw), fmt_num(pt), fmt_num(sw), fmt_num(stt)])
+        sec.data.setdefault(label, {})[accel] = {
+            "build_s": st["accel_s"], "build": st["grid_build"], "bytes": st["accel_bytes"], "wall_1spp_s": wall1,
+            "cpu_1spp_s": cpu1, "cpu_16spp_s": None, "primary_steps": pw, "primary_tests": pt, "shadow_steps": sw,
+            "shadow_tests": stt, "buffer_parts": parts, "grid_refs": st["grid_refs"], "grid_dims": st["grid_dims"]}
+        sec.summary.append(f"{label}: {accel} (build {_build_cell(accel, st)}, {st['accel_bytes'] / 2**20:.0f} MB), "
+                           f"1 spp {fmt_time(wall1)}")
+    rows.append([label, "bvh", f"{strands.num_segments:,}", "not measured: the numpy BVH build at this size needs "
+                 "more time than the section has and more memory than this machine has (see the text)"])

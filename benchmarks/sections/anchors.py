@@ -5,10 +5,14 @@ The Blender camera (matrix_world, 50 mm lens, 36 mm sensor, AUTO fit) is given t
 to Cycles as a camera object, to the tracer through `tracer.Camera.from_blender`. Cycles'
 time is the wall time of `bpy.ops.render.render` (scene sync + BVH build + sampling; persistent
 data off, so every render pays all three). The tracer's "first render" is `set_strands`
-(cylinders, upload, grid) + `render` on a warm GL context; "re-render" is a render after a
-camera move, which uploads nothing. The same Renderer serves every run of a scene, as in an
+(cylinders, upload) + `render` on a warm GL context, with its default accelerator, beams
+(tracer/beams.py): the render builds the camera's beams and the sun's, and the grid where
+some ray is left to it (a 1-spp render of dense hair leaves the camera's rays to the grid);
+"re-render" is a render after a camera move, which uploads nothing and builds the camera's
+beams again (the sun's are kept). The same Renderer serves every run of a scene, as in an
 interactive session, so runs after the first reuse its GPU allocations; the cold first
-render (new context allocations and shader compiles) is reported beside each scene.
+render (new context allocations and shader compiles) is reported beside each scene, and the
+stages of each first render (what its camera rays walked, what it built) below the table.
 
 The groom scenes fade alpha from 1 at 70 % of each strand's length to 0.4 at the tip, so both
 renderers composite alpha layers, as the figure asks; the real file has alpha 0.64 throughout.
@@ -100,7 +104,7 @@ class _Scene:
         self.moved = tracer_camera(orbit(self.matrix, np.radians(12), 0.5 * (lo + hi)), size)
         self.renderer = tracer.Renderer()
         self.cold = None
-        self.parts = None       # the stages of the last first render (renderer stats)
+        self.parts = {}         # per job key: the stages of its last first render (_stages)
         self.parts_split = None  # buffer textures of the cylinders and of the cell lists (huge scenes)
         self.error_note = None
         self.ours, self.cycles, self.images, self.error = {}, {}, {}, None
@@ -196,9 +200,7 @@ def _tracer_job(sec, cfg, tracer, sc, spp, sampler="independent"):
                             budget=left(sec))
         if sc.cold is None:
             sc.cold = first.warmups[0]
-        if key == min(cfg.anc_spp):
-            st = r.stats
-            sc.parts = (st.cylinders_s, st.upload_s, st.grid_s, st.render_s, st.grid_build or "numpy")
+        sc.parts[key] = _stages(r.stats)
         flip = {"on": False}
 
         def rerender():
@@ -310,9 +312,7 @@ def _report(sec, cfg, scenes, size):
                      f"{'met' if ratio(f1, c1) <= 0.5 else 'NOT met'}); re-render after a camera move "
                      f"{ratio(a1, c1):.2f}× (target ≤ 0.25: {'met' if ratio(a1, c1) <= 0.25 else 'NOT met'}).** "
                      + (f"Cold first render (shader compile included): {fmt_time(sc.cold)}." if sc.cold else "")
-                     + (" The last first render's stages: cylinders {}, upload {}, grid ({} build) {}, "
-                        "render {}.".format(fmt_time(sc.parts[0]), fmt_time(sc.parts[1]), sc.parts[4],
-                                            fmt_time(sc.parts[2]), fmt_time(sc.parts[3])) if sc.parts else "")
+                     + "".join(f" The last first render at {_shown(key)}: {stages}." for key, stages in sc.parts.items())
                      + (" Cylinders in {} buffer textures, cell lists in {}; one run after one warm-up (no warm-up "
                         "for Cycles).".format(*sc.parts_split) if sc.parts_split else ""))
             sec.summary.append(f"{sc.name}: first {fmt_time(f1)} = {ratio(f1, c1):.2f}× Cycles 1 spp ({fmt_time(c1)}); "
@@ -328,6 +328,24 @@ def _report(sec, cfg, scenes, size):
               rows, caption=f"The tracer against Cycles at {size[0]}×{size[1]} (medians, same run).")
     if pics:
         _side_by_side(sec, pics)
+
+
+def _stages(st):
+    """The stages of a first render (set_strands + render) from the renderer's stats: what its
+    camera rays walked and what it built."""
+    parts = [f"cylinders {fmt_time(st.cylinders_s)}", f"upload {fmt_time(st.upload_s)}"]
+    if st.accel == "beams" and st.beams_s is not None:
+        parts.append(f"beams {fmt_time(st.beams_s)} (camera: {st.camera_beams}, {fmt_time(st.camera_beams_s)}; "
+                     f"sun {fmt_time(st.sun_beams_s)})")
+    if st.grid_refs is not None and st.grid_s:
+        parts.append(f"grid ({st.grid_build or 'numpy'} build) {fmt_time(st.grid_s)}")
+    # render_s holds the render's whole time, the beams' and a grid built for it included.
+    parts.append(f"render {fmt_time(st.render_s)} in all")
+    return ", ".join(parts)
+
+
+def _shown(key):
+    return f"{key[0]} spp, pixel sampler" if isinstance(key, tuple) else f"{key} spp"
 
 
 def _pixel_error(sc, key, spp):

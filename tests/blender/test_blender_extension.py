@@ -85,6 +85,14 @@ obj.keystrand_hair.count = 100
 assert bpy.ops.hair.generate() == {{'FINISHED'}}
 import groom
 print("CURVES", len(obj.keystrand_hair.hair_object.data.curves))
+# Large enough for worker processes: they run the wheel's groom too.
+obj.keystrand_hair.count = 5000
+assert bpy.ops.hair.generate() == {{'FINISHED'}}
+from groom import parallel, processes
+if processes.available() and parallel.cpu_threads() > 1:
+    w = processes.workers(1)[0]
+    w.send(eval, "__import__('groom').__file__")
+    print("WORKER", processes.workers_cpu_seconds() > 0, w.receive())
 print("GROOM", groom.__file__)
 """
     user = tmp_path / "user"
@@ -96,6 +104,9 @@ print("GROOM", groom.__file__)
     assert "CURVES 100" in proc.stdout
     groom_file = proc.stdout.split("GROOM ")[1].strip()
     assert pathlib.Path(groom_file).is_relative_to(user / "extensions" / ".local"), groom_file
+    if "WORKER " in proc.stdout:
+        worked, worker_groom = proc.stdout.split("WORKER ")[1].split("\n")[0].split(" ", 1)
+        assert worked == "True" and pathlib.Path(worker_groom).is_relative_to(user / "extensions" / ".local")
 
 
 def test_disabling_leaves_no_class_handler_property_or_menu_entry(extension, ext_enable):

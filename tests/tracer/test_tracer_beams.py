@@ -194,20 +194,44 @@ def test_the_numpy_build_walks_the_grid():
     assert r.accel == "grid"
 
 
-def test_the_pixel_sampler_on_dense_see_through_hair_keeps_every_hit():
-    """The dense tuft of test_tracer_pixel_sampler.py's loop-cap test: the pixel sampler walking
-    the camera's beams has the independent sampler's coverage."""
+def _dense_tuft():
+    """8,000 faint strands packed in front of DENSE_CAM (test_tracer_pixel_sampler.py's loop-cap
+    scene): over a hundred list entries a pixel."""
     rng = np.random.default_rng(3)
     t = np.linspace(0.0, 1.0, 24)[:, None]
     lines = []
     for _ in range(8000):
         a, b = rng.uniform(-0.25, 0.25, 3), rng.uniform(-0.25, 0.25, 3)
         lines.append(a + t * (b - a) + 0.02 * np.sin(9 * t + rng.uniform(0, 6)))
+    return make_strands(lines, radius=0.0008, alpha=0.05)
+
+
+DENSE_CAM = Camera.look_at((0.0, -1.6, 0.0), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
+
+
+def test_one_sample_of_dense_hair_leaves_the_camera_to_the_grid(pair):
+    """Rebuilt at every camera move, the camera's beams are built for a render only when its
+    camera rays are many enough for the lists they would take (CAMERA_REFS_PER_RAY): one sample
+    of the dense tuft walks the grid, sixteen the beams, and the image is the grid's either way."""
+    grid, beams = _both(pair, _dense_tuft(), DENSE_CAM, RenderSettings())
+    assert pair[1].stats.camera_beams.startswith("none: about") and pair[1].scene.grid is not None
+    assert np.abs(grid - beams).max() <= 1e-6
+    grid, beams = (r.render(DENSE_CAM, RenderSettings(spp=16)) for r in pair)
+    assert pair[1].stats.camera_beams.endswith("px bins")
+    assert np.abs(grid - beams).max() <= 1e-6
+
+
+def test_the_pixel_sampler_on_dense_see_through_hair_keeps_every_hit():
+    """The dense tuft of test_tracer_pixel_sampler.py's loop-cap test: the pixel sampler walking
+    the camera's beams (four walks of four samples a pixel) has the independent sampler's
+    coverage."""
     r = Renderer(build="gpu", accel="beams")
-    r.set_strands(make_strands(lines, radius=0.0008, alpha=0.05))
-    cam = Camera.look_at((0.0, -1.6, 0.0), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
-    ind = r.render(cam, RenderSettings(spp=4))
-    pix = r.render(cam, RenderSettings(sampler="pixel", spp=4))
+    r.set_strands(_dense_tuft())
+    cam = DENSE_CAM
+    # 16 samples: at fewer the camera rays of so dense a tuft are left to the grid (the beams'
+    # lists would hold over a hundred entries a ray: scene_beams.CAMERA_REFS_PER_RAY).
+    ind = r.render(cam, RenderSettings(spp=16))
+    pix = r.render(cam, RenderSettings(sampler="pixel", spp=16))
     assert r.stats.camera_beams.endswith("px bins") and ind[..., 3].mean() > 0.1
     assert abs(ind[..., 3].mean() - pix[..., 3].mean()) < 0.005
     assert np.abs(ind[..., 3] - pix[..., 3]).mean() < 0.02
