@@ -66,7 +66,7 @@ class BeamFrame:
     then to bin coordinates gx = X/Z + offset[0], gy = Y/Z + offset[1] ("persp") or
     gx = X + offset[0], gy = Y + offset[1]; Z is its depth (camera) or height toward the sun.
     `radius_scale`: bins per unit of radius (per unit of radius and depth for "persp"),
-    `drift`: bins added to every radius (a sun's spread); the keys' slices start at `key0`,
+    `drift`: bins added to every radius (a sun's spread; a camera's shift_pad); the keys' slices start at `key0`,
     `key_step` apart; `dims`: bins along x and y; `bin_px` (cameras): pixels a bin side,
     `box`: the whole-image pixels (x0, y0, x1, y1) the bins cover."""
     kind: str
@@ -81,6 +81,7 @@ class BeamFrame:
     bin_px: int = 1
     box: tuple = (0, 0, 0, 0)
     near_limit: float = 0.0     # perspective: a capsule whose key is not above this reaches the camera's plane
+    centre: tuple = (0.0, 0.0)  # cameras: the optical axis in pixels the bins were laid for
 
     @property
     def num_bins(self):
@@ -112,17 +113,20 @@ def box_corners(lo, hi):
                     np.float64)
 
 
-def camera_frame(camera, box, scene_lo, scene_hi, rmax, pad, bin_px=1):
+def camera_frame(camera, box, scene_lo, scene_hi, rmax, pad, bin_px=1, shift_pad=0.0, centre=None):
     """The frame of `camera`'s rays over the whole-image pixel box `box` (x0, y0, x1, y1: the
     pixels a render traces), for a scene within scene_lo..scene_hi whose largest radius is
-    `rmax`, capsules widened `pad` times, bins of `bin_px` pixels a side. BeamsUnfit when the
-    scene reaches the camera's plane (perspective)."""
+    `rmax`, capsules widened `pad` times, bins of `bin_px` pixels a side. `centre`: the optical
+    axis in pixels (default the camera's; a pass of the same view moved by a fraction of a
+    pixel keeps the first's), `shift_pad`: how far (pixels) a pixel's samples may lie outside
+    its bin, for the pixel sampler of such a pass (every cylinder is listed that much wider).
+    BeamsUnfit when the scene reaches the camera's plane (perspective)."""
     x0, y0, x1, y1 = (int(v) for v in box)
     b = int(bin_px)
     dims = (-(-(x1 - x0) // b), -(-(y1 - y0) // b))
     R = np.asarray(camera.rotation, np.float64)
     ps = float(camera.pixel_size)
-    cx, cy = (float(v) for v in camera.centre_px)
+    cx, cy = (float(v) for v in (camera.centre_px if centre is None else centre))
     # Rows: image x (pixels right), image y (pixels down), depth along the view axis.
     axes = np.stack([R[:, 0] / (ps * b), -R[:, 1] / (ps * b), -R[:, 2]])
     offset = np.array([(cx - x0) / b, (cy - y0) / b])
@@ -148,8 +152,8 @@ def camera_frame(camera, box, scene_lo, scene_hi, rmax, pad, bin_px=1):
         key0, step = _slices(float(depth.min()), far, dpad)
     else:
         key0, step = _slices(float(depth.min()), float(depth.max()), dpad)
-    return BeamFrame(kind, np.asarray(camera.position, np.float64), axes, offset, scale, 0.0, key0, step,
-                     dims, b, (x0, y0, x1, y1), near_limit)
+    return BeamFrame(kind, np.asarray(camera.position, np.float64), axes, offset, scale, float(shift_pad) / b, key0,
+                     step, dims, b, (x0, y0, x1, y1), near_limit, (cx, cy))
 
 
 def sun_basis(towards):
@@ -209,10 +213,10 @@ def _keys_and_radii(frame, top, far, z0, z1, r):
         return -(np.maximum(z0, z1) + r), r * frame.radius_scale + frame.drift + layout.BEAM_BIN_EPS, np.ones(len(r), bool)
     near = np.minimum(z0, z1)
     if frame.kind == "ortho":
-        return near - r, r * frame.radius_scale + layout.BEAM_BIN_EPS, np.ones(len(r), bool)
+        return near - r, r * frame.radius_scale + frame.drift + layout.BEAM_BIN_EPS, np.ones(len(r), bool)
     ok = near - r > frame.near_limit
     key = segment_distance(frame.origin, np.asarray(top, np.float64), np.asarray(far, np.float64)) - r
-    return key, r * frame.radius_scale / np.where(ok, near, 1.0) + layout.BEAM_BIN_EPS, ok
+    return key, r * frame.radius_scale / np.where(ok, near, 1.0) + frame.drift + layout.BEAM_BIN_EPS, ok
 
 
 def slice_of(frame, key):

@@ -280,7 +280,8 @@ def _set_beam_uniforms(prog, beams):
     if cam is not None:
         f = cam.frame
         set_uniforms(prog, beam_box=(int(f.box[0]), int(f.box[1]), int(f.bin_px), int(f.dims[0])),
-                     beam_rows=int(f.dims[1]), beam_keys=(float(f.key0), float(f.key_step)))
+                     beam_rows=int(f.dims[1]), beam_keys=(float(f.key0), float(f.key_step)),
+                     beam_shift=tuple(float(x) for x in beams.camera_shift))
     suns = [b for b in beams.suns]
     used = max([k + 1 for k in beams.light_sun if k >= 0], default=0)
     if used:

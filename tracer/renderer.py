@@ -262,21 +262,22 @@ class Renderer:
         """What a render with beams walks (tracer/scene_beams.py, BeamPlan): the camera's
         beams over the traced pixels `box`, sun beams for the shadowed suns, and the grid
         where some ray is left to it; records what it built in the stats."""
-        st, gpu, state = self.stats, self.build == "gpu", self.beam_state
+        st, state = self.stats, self.beam_state
         ox, oy = camera.pixel_origin
         whole = (box[0] + ox, box[1] + oy, box[2] + ox, box[3] + oy)
         pad = GRID_WIDEN_CAP if settings.min_pixel_width else 1.0
-        cam, cam_s = camera_beams(state, self.scene, self.buffers, camera, whole, pad, gpu, settings.spp)
+        pixel_n = settings.spp_n if settings.sampler == "pixel" else 0
+        cam, shift, cam_s = camera_beams(state, self.scene, self.buffers, camera, whole, pad, settings.spp, pixel_n)
         suns, light_sun, sun_s = [None] * len(state.suns), [], 0.0
         for light, slot in zip(settings.lights, sun_slots(settings)):
             if slot < 0:
                 light_sun.append(-1)
                 continue
-            beams, s = sun_beams(state, self.scene, self.buffers, light, slot, gpu)
+            beams, s = sun_beams(state, self.scene, self.buffers, light, slot)
             sun_s += s
             suns[slot] = beams
             light_sun.append(slot if beams is not None else -1)
-        plan = BeamPlan(cam, suns, light_sun)
+        plan = BeamPlan(cam, suns, light_sun, shift)
         st.beams_s, st.camera_beams_s, st.sun_beams_s = cam_s + sun_s, cam_s, sun_s
         st.camera_beams = (f"{cam.frame.bin_px} px bins" if cam is not None else f"none: {state.camera_why}")
         st.camera_beam_refs = cam.refs if cam is not None else 0

@@ -1,8 +1,9 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The scene's beams (tracer/beams.py) on the GPU: the camera's, built for the pixels a render
-traces and kept while the camera and those pixels stay, and up to MAX_SUN_BEAMS suns', kept
-while the sun stays, each built by the compute passes (tracer/gpu_beams.py) or in numpy and
-uploaded; and which rays they cannot serve (those walk the scene's grid).
+traces and kept while the view stays (a progressive render's passes keep them), and up to
+MAX_SUN_BEAMS suns', kept while the sun stays, each built by the compute passes
+(tracer/gpu_beams.py: beams need them, as a camera move must upload nothing); and which rays
+they cannot serve or would not pay for (those walk the scene's grid).
 
 Resolution. A camera bin is `bin_px` pixels a side, the smallest of CAMERA_BIN_PX whose lists
 are estimated (from an even sample of the cylinders) to stay within their share of
@@ -10,25 +11,26 @@ layout.BEAM_MAX_REFS; a sun's bins are squares sized so that a cylinder is liste
 SUN_REFS_PER_CYLINDER bins (fewer for large scenes, within the same budget). Smaller bins list
 each cylinder more often but hand a ray fewer cylinders to test: docs/DECISIONS.md, "Beams".
 """
+import time
 from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
 
 from . import layout
-from .beams import Beams, BeamsUnfit, TooManyRefs, box_corners, build_beams, camera_frame, project, sun_basis, sun_frame
-from .cylinders import segment_radius
+from .beams import Beams, BeamsUnfit, TooManyRefs, box_corners, camera_frame, project, sun_basis, sun_frame
+from .cylinders import column_bounds, segment_radius
 from .gl_state import beam_builder
 
 CAMERA_BUFFERS = ("tex_beam", "tex_beam_cell")
 SUN_BUFFERS = (("tex_sun0", "tex_sun_cell0"), ("tex_sun1", "tex_sun_cell1"))
 MAX_SUN_BEAMS = len(SUN_BUFFERS)
 CAMERA_BIN_PX = (1, 2, 4)
-# A camera's beams are rebuilt at every camera move, the grid is built once: beams are built
-# for a render whose camera rays are at least 1 / CAMERA_REFS_PER_RAY of the references they
-# would list (1-pixel bins, estimated from a sample). Measured on llvmpipe (docs/DECISIONS.md,
-# "Beams"): a reference costs about two cylinder tests to build, and the beams save a camera
-# ray 0.7-1.8 tests per list entry of its pixel against the grid.
+# A camera's beams are built again at every camera move, the grid once: a render gets them
+# when they would list at most CAMERA_REFS_PER_RAY references per camera ray it traces
+# (1-pixel bins, estimated from a sample). Measured on llvmpipe (docs/DECISIONS.md, "Beams"):
+# a reference costs about two cylinder tests to build, and the beams save a camera ray
+# 0.7-1.8 tests per list entry of its pixel against the grid.
 CAMERA_REFS_PER_RAY = 100.0
 SUN_REFS_PER_CYLINDER = 8.0
 SUN_MAX_SIDE = 2048          # bins along either side of a sun's plane
@@ -37,33 +39,30 @@ SAMPLE = 20_000              # cylinders whose projections decide a resolution
 
 @dataclass
 class BeamState:
-    """What a renderer keeps of its beams between renders: per family the key it was built
-    for and the Beams (None: unfit, with `why`), and the seconds and references of the last
-    builds."""
-    camera_key: object = None
+    """What a renderer keeps of its beams between renders: the camera's view they were built
+    for (position, rotation, pixel size, capsule pad, scene) and the Beams (None: none, with
+    `camera_why`), and per sun slot (key, Beams or None)."""
+    camera_view: object = None
     camera: Optional[Beams] = None
     camera_why: str = ""
-    suns: list = field(default_factory=lambda: [None] * MAX_SUN_BEAMS)    # (key, Beams or None)
+    suns: list = field(default_factory=lambda: [None] * MAX_SUN_BEAMS)
 
     def forget(self):
-        self.camera_key = self.camera = None
+        self.camera_view = self.camera = None
         self.camera_why = ""
         self.suns = [None] * MAX_SUN_BEAMS
 
 
 @dataclass
 class BeamPlan:
-    """What one render walks: the camera's beams (None: its rays walk the grid), the sun beams
-    by slot, and per light the slot serving it (-1: the grid)."""
+    """What one render walks: the camera's beams (None: its rays walk the grid) and how far
+    (pixels) this camera's pixel grid lies from the one they were laid for (a pass of a
+    progressive render moves by a fraction of a pixel), the sun beams by slot, and per light
+    the slot serving it (-1: the grid)."""
     camera: Optional[Beams]
     suns: list
     light_sun: list
-
-    @property
-    def needs_walk(self):
-        """Some ray walks the scene's grid: the camera's, or a shadow ray toward a light
-        without beams (the caller knows which lights cast shadows: `shadowed`)."""
-        return self.camera is None
+    camera_shift: tuple = (0.0, 0.0)
 
 
 def _segments_sample(plan, n=SAMPLE):
@@ -91,40 +90,66 @@ def _estimated_refs(frame, sample, pad, count):
     return float(np.mean(cols * rows)) * count
 
 
-def camera_beams(state, scene, buffers, camera, box, pad, use_gpu, samples=1):
-    """The camera's Beams over whole-image pixel box `box` (the render's traced box) with
-    capsules widened `pad` times, built (or kept from the last render with the same camera,
-    box and pad) into CAMERA_BUFFERS; None where beams cannot serve it or would not pay for a
-    render of `samples` samples a pixel (state.camera_why says why). Returns (beams, seconds
-    building or 0.0 when kept)."""
-    import time
-    key = (camera.type, camera.position.tobytes(), camera.rotation.tobytes(), float(camera.pixel_size),
-           tuple(float(c) for c in camera.centre_px), tuple(box), float(pad), id(scene.plan))
-    if key == state.camera_key:
-        return state.camera, 0.0
+def camera_beams(state, scene, buffers, camera, box, pad, samples=1, pixel_n=0):
+    """The camera's Beams for a render of whole-image pixel box `box` (the pixels it traces)
+    with capsules widened `pad` times, built into CAMERA_BUFFERS or kept from an earlier
+    render of the same view, and how far this camera's pixels lie from the ones they were laid
+    for. `samples`: samples a pixel; `pixel_n`: the pixel sampler's samples a side (0: the
+    independent sampler). Returns (beams or None, shift, seconds building or 0.0); None where
+    beams cannot serve the camera or would not pay for this render (state.camera_why says why).
+
+    A progressive render's passes move the camera by a fraction of a pixel
+    (tracer.Camera.for_pass): they keep the first pass's beams, laid one pixel wider than the
+    traced box. An independent sample looks up the bin its ray crosses, wherever the pixel
+    grid lies; the pixel sampler looks up its pixel's bin, which holds all its samples only
+    when the lists were widened by the shift (`shift_pad`): a pass of n² samples moves by at
+    most half of 1/n of a pixel, so the first such pass builds them again that much wider."""
+    view = (camera.type, camera.position.tobytes(), camera.rotation.tobytes(), float(camera.pixel_size),
+            float(pad), id(scene.plan))
+    cx, cy = (float(c) for c in camera.centre_px)
+    kept = state.camera if state.camera_view == view else None
+    need = 0.0
+    if kept is not None:
+        f = kept.frame
+        shift = (f.centre[0] - cx, f.centre[1] - cy)
+        moved = (box[0] + shift[0], box[1] + shift[1], box[2] + shift[0], box[3] + shift[1])
+        inside = (max(abs(shift[0]), abs(shift[1])) < 1.0 and moved[0] >= f.box[0] and moved[1] >= f.box[1]
+                  and moved[2] <= f.box[2] and moved[3] <= f.box[3])
+        need = max(abs(shift[0]), abs(shift[1])) if pixel_n else 0.0
+        if inside and need <= f.drift * f.bin_px + 1e-9:
+            return kept, shift, 0.0
+        if not inside:
+            need = 0.0
     t0 = time.perf_counter()
-    state.camera_key, state.camera, state.camera_why = key, None, ""
+    centre = kept.frame.centre if need > 0.0 else (cx, cy)
+    shift_pad = max(need, 0.5 / pixel_n) if need > 0.0 else 0.0
+    shift = (centre[0] - cx, centre[1] - cy)
+    state.camera_view, state.camera, state.camera_why = view, None, ""
     lo, hi = scene.box
     rmax = float(scene.plan.radius.max())
     sample = _segments_sample(scene.plan)
     budget = min(layout.BEAM_MAX_REFS, buffers.max_texels)
     rays = samples * (box[2] - box[0]) * (box[3] - box[1])
+    # The traced box in the bins' pixel grid, one pixel more on every side for the passes that
+    # move this camera's.
+    domain = (int(np.floor(box[0] + shift[0])) - 1, int(np.floor(box[1] + shift[1])) - 1,
+              int(np.ceil(box[2] + shift[0])) + 1, int(np.ceil(box[3] + shift[1])) + 1)
     try:
         for b in CAMERA_BIN_PX:
-            frame = camera_frame(camera, box, lo, hi, rmax, pad, b)
+            frame = camera_frame(camera, domain, lo, hi, rmax, pad, b, shift_pad, centre)
             if frame.num_bins > layout.BEAM_MAX_BINS:
                 continue
             estimate = _estimated_refs(frame, sample, pad, scene.num_cylinders)
             if b == CAMERA_BIN_PX[0] and estimate > CAMERA_REFS_PER_RAY * rays:
-                # Not cached: a render with more samples asks again.
-                state.camera_key = None
+                # Not kept: a render with more samples asks again.
+                state.camera_view = None
                 state.camera_why = (f"about {estimate / rays:.0f} list entries per camera ray of this render; "
                                     "the grid, kept between camera moves, costs less")
                 break
             if estimate > 0.5 * budget and b != CAMERA_BIN_PX[-1]:
                 continue
             try:
-                state.camera = _build(scene, buffers, frame, pad, use_gpu, CAMERA_BUFFERS, budget)
+                state.camera = _build(scene, buffers, frame, pad, CAMERA_BUFFERS, budget)
                 break
             except TooManyRefs:
                 continue
@@ -132,7 +157,7 @@ def camera_beams(state, scene, buffers, camera, box, pad, use_gpu, samples=1):
             state.camera_why = "its lists would outgrow one buffer at every bin size"
     except BeamsUnfit as e:
         state.camera_why = str(e)
-    return state.camera, time.perf_counter() - t0
+    return state.camera, shift, time.perf_counter() - t0
 
 
 def sun_slots(settings):
@@ -151,11 +176,10 @@ def sun_slots(settings):
     return slots
 
 
-def sun_beams(state, scene, buffers, light, slot, use_gpu):
+def sun_beams(state, scene, buffers, light, slot):
     """The Beams of shadow rays toward directional `light` in sun slot `slot`, built (or
     kept while the light's direction and angle stay) into SUN_BUFFERS[slot]; None where beams
     cannot serve it. Returns (beams, seconds building or 0.0)."""
-    import time
     packed, _ = light.packed()
     towards = -np.asarray(packed[:3], np.float32).astype(np.float64)
     spread = float(light.extent()[1][3])
@@ -166,7 +190,7 @@ def sun_beams(state, scene, buffers, light, slot, use_gpu):
     t0 = time.perf_counter()
     beams = None
     try:
-        beams = _build(scene, buffers, _sun_frame(scene, buffers, towards, spread), 1.0, use_gpu, SUN_BUFFERS[slot],
+        beams = _build(scene, buffers, _sun_frame(scene, buffers, towards, spread), 1.0, SUN_BUFFERS[slot],
                        min(layout.BEAM_MAX_REFS, buffers.max_texels))
     except BeamsUnfit:
         beams = None
@@ -202,23 +226,16 @@ def _sun_frame(scene, buffers, towards, spread):
     return sun_frame(towards, spread, lo, hi, rmax, 1.0, h_hi)
 
 
-def _build(scene, buffers, frame, pad, use_gpu, names, budget):
-    """Beams of `frame` into buffers `names` (lists, bin table)."""
+def _build(scene, buffers, frame, pad, names, budget):
+    """Beams of `frame` built by the compute passes into buffers `names` (lists, bin table)."""
     if frame.num_bins > layout.BEAM_MAX_BINS:
         raise TooManyRefs(f"{frame.num_bins:,} bins")
-    if use_gpu:
-        return beam_builder().build(frame, scene.num_cylinders, buffers["tex_cyl"], pad, buffers, names[0],
-                                    names[1], budget)
-    beams = build_beams(frame, scene.cylinders, pad, budget)
-    buffers.upload(names[0], beams.entries if beams.refs else np.zeros(1, np.uint32), 1, "u4")
-    buffers.upload(names[1], np.stack([beams.start, beams.count], axis=1), 2, "i4")
-    return beams
+    return beam_builder().build(frame, scene.num_cylinders, buffers["tex_cyl"], pad, buffers, names[0], names[1],
+                                budget)
 
 
 def read_beams(beams, buffers, names):
     """(start, count, entries) of Beams built on the GPU, read back (for tests and tools)."""
-    if beams.entries is not None:
-        return beams.start, beams.count, beams.entries
     cells = np.frombuffer(buffers[names[1]].read(beams.frame.num_bins), np.int32).reshape(-1, 2)
     entries = np.frombuffer(buffers[names[0]].read(beams.refs), np.uint32)
     return cells[:, 0].copy(), cells[:, 1].copy(), entries.copy()
@@ -228,7 +245,6 @@ def beam_scene_box(plan, bounds, pad):
     """The box every capsule of the plan lies in (its points' column bounds widened by the
     largest radius times `pad` and the reach of a bent cylinder past its tip), as the grid's
     frame widens them (tracer/grid.py, _segments_frame)."""
-    from .cylinders import column_bounds
     lo, hi = column_bounds(plan.points) if bounds is None else bounds
     rmax = float(plan.radius.max()) if len(plan.radius) else 0.0
     reach = rmax * (pad + layout.tan_sharp()) * (1 + 1e-6)

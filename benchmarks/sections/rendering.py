@@ -243,7 +243,7 @@ def _grid(sec, cfg, tracer, strands, camera, acc, base):
     for scale in sorted(cfg.ren_grid_scale, key=lambda s: s != 1.0):
         try:
             with grid_scale(scale):
-                r = tracer.Renderer()
+                r = tracer.Renderer(accel="grid")   # the grid's own resolution
                 t_build, _ = measure(lambda: r.set_strands(strands), runs=cfg.runs, budget=left(sec, 1.0))
             stats = r.stats.as_dict()
             t, img = measure(lambda: r.render(camera, rs), runs=cfg.runs, budget=left(sec, 1.0))

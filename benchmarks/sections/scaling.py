@@ -34,7 +34,7 @@ def run(sec, cfg):
     sec.text(__doc__.split("\n", 2)[2].strip())
     sec.settings(preset="wavy", image=f"{size[0]}x{size[1]}", spp=1, shadows=True, layers=4, runs=cfg.runs)
     fits = []
-    renderer = tracer.Renderer()
+    renderer = tracer.Renderer(accel="grid")     # the thesis's cost model is the grid's
 
     # (a) strand count: 45 % of the budget, (b) image size: 20 %, (c) length: 35 %.
     # Render time first (the claim under test), upload time only where its runs fit as well:

@@ -23,7 +23,7 @@ def run(sec, cfg):
     lo, hi = strands.bounds()
     matrix = view_matrix(lo, hi, size)
     cam = tracer_camera(matrix, size)
-    r = tracer.Renderer()
+    r = tracer.Renderer(accel="grid")     # the skips of the grid walk (the beams': section 6)
     r.set_strands(strands)
     sec.text(__doc__.split("\n", 2)[2].strip())
     sec.settings(preset="wavy", strands=strands.num_strands, cylinders=strands.num_segments,
@@ -87,7 +87,7 @@ def run(sec, cfg):
     t_on, _ = measure(rerender, runs=cfg.runs)
     sent = r.stats.bytes_uploaded - before
     t_off, _ = measure(lambda: (r.set_strands(strands), r.render(moved, base)), runs=cfg.runs)
-    fresh = tracer.Renderer()
+    fresh = tracer.Renderer(accel="grid")
     fresh.set_strands(strands)
     same = float(np.abs(fresh.render(moved, base) - r.render(moved, base)).max())
     row("camera move: render only (vs upload + grid + render)", t_on, t_off,

@@ -143,6 +143,30 @@ def test_camera_moves_upload_nothing_and_a_kept_camera_builds_nothing(pair):
     assert r.stats.beams_s == 0.0          # the same camera and sun: the lists are kept
 
 
+@pytest.mark.parametrize("sampler, spp", [("independent", 1), ("pixel", 16)])
+def test_the_passes_of_a_progressive_render_keep_the_first_ones_beams(pair, sampler, spp):
+    """A progressive render's passes move the camera by a fraction of a pixel (Camera.for_pass):
+    an independent sample looks up the bin its ray crosses, the pixel sampler its pixel's bin,
+    widened once for the passes' shift; after that no pass builds, and every image is the one
+    a renderer that builds beams for that pass's camera gives (for the independent sampler,
+    the grid's)."""
+    strands = curls(60, 10, alpha=0.7)
+    settings = RenderSettings(layers=3, spp=spp, sampler=sampler)
+    for r in pair:
+        r.set_strands(strands)
+    built = []
+    for k in range(4):
+        cam = CAM.for_pass(k, settings.spp_n)
+        fresh = Renderer(build="gpu", accel="beams") if sampler == "pixel" else pair[0]
+        fresh.set_strands(strands)
+        want, beams = fresh.render(cam, settings), pair[1].render(cam, settings)
+        assert (want[..., 3] > 0).mean() > 0.05
+        np.testing.assert_allclose(beams, want, atol=1e-6)
+        built.append(pair[1].stats.beams_s > 0)
+    assert built[0] and not any(built[2:])
+    assert built[1] == (sampler == "pixel")      # the pixel sampler's lists widened once
+
+
 def test_an_edit_rebuilds_the_beams(pair):
     r = pair[1]
     strands = curls(60, 10, seed=5)

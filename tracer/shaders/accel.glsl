@@ -24,8 +24,10 @@
 // tracer/draw.py TRACE_BUFFERS).
 
 // The pixel (whole-image coordinates) whose samples this invocation's camera rays go
-// through, set by main: the camera beams (accel_beams.glsl) look their bin up by it.
+// through, and the independent sampler's sample point in it (pixels), set by main: the
+// camera beams (accel_beams.glsl) look their bin up by them.
 ivec2 camera_pixel;
+vec2 camera_point;
 
 // Axis zero components get a tiny same-sign stand-in so 1/d stays finite (no inf - inf).
 vec3 safe_inverse(vec3 d) {

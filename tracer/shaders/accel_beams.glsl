@@ -4,8 +4,10 @@
 // cylinder a ray of the bin can meet, slice by slice in depth. A ray looks its bin up once
 // and tests the list in order until no later entry can change what it finds; the rays of
 // other lights walk the scene's grid (accel_grid.glsl), as do the camera's when it has no
-// beams. An entry is id | slice << BEAM_ID_BITS; every entry after it lies at least its
-// slice's start deep (camera: key0 + slice·step along the view axis; sun: minus its height).
+// beams. An entry is id | slice << BEAM_ID_BITS; no entry after it has a key below its
+// slice's start, key0 + slice·step (camera: the distance from the camera, or from its plane
+// when orthographic, at which its rays can meet the cylinder; sun: minus the cylinder's
+// greatest height toward the sun).
 
 const uint BEAM_ID_MASK = (1u << uint(BEAM_ID_BITS)) - 1u;
 
@@ -14,12 +16,16 @@ uniform usamplerBuffer tex_beam;        // the camera's lists
 uniform isamplerBuffer tex_beam_cell;   // per bin: first entry, count
 uniform ivec4 beam_box;                 // whole-image pixel of bin (0, 0)'s corner, pixels a bin side, bins across
 uniform int beam_rows;                  // bins down
-uniform vec2 beam_keys;                 // slice 0's start, the slices' step (depths)
+uniform vec2 beam_keys;                 // slice 0's start, the slices' step (distances)
+uniform vec2 beam_shift;                // the bins' pixel grid less this camera's (a pass moved by a
+                                        // fraction of a pixel keeps its first pass's beams)
 
-// The camera pixel's bin: its first entry and count (none outside the bins).
-ivec2 camera_bin() {
-    ivec2 b = (camera_pixel - beam_box.xy) / beam_box.z;
-    bool inside = all(greaterThanEqual(camera_pixel, beam_box.xy)) && b.x < beam_box.w && b.y < beam_rows;
+// The bin of whole-image pixel p of the bins' grid: its first entry and count (none outside
+// the bins).
+ivec2 bin_at(ivec2 p) {
+    ivec2 q = p - beam_box.xy;
+    bool inside = all(greaterThanEqual(q, ivec2(0))) && q.x < beam_box.w * beam_box.z && q.y < beam_rows * beam_box.z;
+    ivec2 b = q / beam_box.z;
     return inside ? texelFetch(tex_beam_cell, b.x + beam_box.w * b.y).xy : ivec2(0);
 }
 
@@ -34,7 +40,8 @@ float beam_reach(float t) {
 // key order until the next starts farther than the hit list's horizon (hits_horizon) or the
 // nearest mesh.
 void beam_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_const) {
-    ivec2 sc = camera_bin();
+    // The bin the ray crosses: its point of the image in the bins' pixel grid.
+    ivec2 sc = bin_at(ivec2(floor(camera_point + beam_shift)));
     float reach = beam_reach(tmax);
     for (int k = 0; k < sc.y; ++k) {
         uint e = texelFetch(tex_beam, sc.x + k).x;
@@ -61,7 +68,9 @@ void beam_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_con
 // the pixel is settled and the next starts farther than its list's farthest entry
 // (footprint_mask puts an entry no nearer than its key).
 void beam_pixel_nearest(vec3 o, vec3 d, float tmax) {
-    ivec2 sc = camera_bin();
+    // The pixel's own bin: with the grids apart by beam_shift its samples lie up to that far
+    // outside, which the lists were widened for (tracer/scene_beams.py, camera_beams).
+    ivec2 sc = bin_at(camera_pixel);
     float reach = beam_reach(tmax);
     for (int k = 0; k < sc.y; ++k) {
         uint e = texelFetch(tex_beam, sc.x + k).x;

@@ -124,7 +124,7 @@ int project_cylinder(int id, out vec2 g0, out vec2 g1, out float rho, out int sl
         key = near - r;
         if (frame_kind == 0) {
             if (key <= near_limit) return max(f0.z, f1.z) + r < 0.0 ? 1 : 2;
-            rho = r * radius_scale / near + BEAM_BIN_EPS;
+            rho = r * radius_scale / near + drift + BEAM_BIN_EPS;
             key = segment_distance(frame_origin, top.xyz, far) - r;
         }
     }

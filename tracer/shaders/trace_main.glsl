@@ -619,6 +619,7 @@ void main() {
     int py = int(image_size.y) - 1 - int(gl_FragCoord.y) + pixel_origin.y;   // row 0 = top
     camera_pixel = ivec2(px, py);
     vec2 jit = sample_jitter(sample_index, px, py);
+    camera_point = vec2(px, py) + jit;
     light_seed = pixel_hash(px, py, 0x27d4eb2du);
     vec3 o, d; float len;
     camera_ray(float(px) + jit.x, float(py) + jit.y, o, d, len);
