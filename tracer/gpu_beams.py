@@ -128,7 +128,7 @@ class BeamBuilder:
         set_uniforms(prog, n_items=chunks, dims=tuple(int(d) for d in frame.dims))
         counts.bind_to_storage_buffer(0)
         sums.bind_to_storage_buffer(3)
-        table.bind_to_image(0, write=True)
+        table.buffer.bind_to_storage_buffer(6)
         prog.run(*_groups(chunks))
         # The cylinders bucketed by slice: every slice's first place from its count.
         sizes = np.frombuffer(slices.read(size=4 * layout.BEAM_SLICES), np.int32).astype(np.int64)
@@ -145,7 +145,7 @@ class BeamBuilder:
         # The lists, a slice a dispatch in order, so each bin's entries come slice by slice.
         prog = self._program(6, parts)
         self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n)
-        lists.bind_to_image(1, write=True)
+        lists.buffer.bind_to_storage_buffer(6)
         for k in np.flatnonzero(sizes):
             set_uniforms(prog, n_items=int(sizes[k]), first_item=int(first[k]), fill_slice=int(k))
             prog.run(*_groups(int(sizes[k])))

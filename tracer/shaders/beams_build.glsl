@@ -61,10 +61,10 @@ layout(std430, binding = 3) buffer Sums { int sums[]; };         // per chunk of
 layout(std430, binding = 4) buffer Flags { int flags[]; };       // [0] near the camera, [1] too wide
 layout(std430, binding = 5) buffer Filed { int filed[]; };       // per cylinder: its slice, -1 unseen
 #if PASS == 4
-layout(rg32i, binding = 0) uniform writeonly iimageBuffer table_img;
+layout(std430, binding = 6) writeonly buffer Table { ivec2 table[]; };
 #endif
 #if PASS == 6
-layout(r32ui, binding = 1) uniform writeonly uimageBuffer list_img;
+layout(std430, binding = 6) writeonly buffer Lists { uint lists[]; };
 #endif
 vec4 cyl(int id, int j) {
 #if CYL_PARTS > 3
@@ -140,7 +140,7 @@ void visit(int bin, int id, int slice) {
     atomicAdd(counts[bin], 1);
 #else
     int slot = atomicAdd(counts[bin], 1);
-    imageStore(list_img, slot, uvec4(uint(id) | (uint(slice) << uint(BEAM_ID_BITS))));
+    lists[slot] = uint(id) | (uint(slice) << uint(BEAM_ID_BITS));
 #endif
 }
 
@@ -220,7 +220,7 @@ void main() {
         int b = i * BEAM_SCAN_CHUNK + k;
         if (b >= nb) break;
         int c = counts[b];
-        imageStore(table_img, b, ivec4(start, c, 0, 0));
+        table[b] = ivec2(start, c);
         counts[b] = start;
         start += c;
     }
