@@ -12,7 +12,7 @@ SECTIONS = [
     ("rendering", "Rendering: time against image error"),
     ("anchors", "Anchors: the tracer against Blender Cycles"),
     ("scaling", "Scaling: strand count, image size, hair length, cost model"),
-    ("accel", "Acceleration structures: BVH against uniform grid"),
+    ("accel", "Acceleration structures: beams, uniform grid and BVH"),
     ("skips", "Skips: on and off, with proof the output is unchanged"),
     ("stress", "Stress: SPEC §9 cases and randomised scenes"),
     ("gpu", "GPU"),
