@@ -268,22 +268,28 @@ class Renderer:
         pad = GRID_WIDEN_CAP if settings.min_pixel_width else 1.0
         pixel_n = settings.spp_n if settings.sampler == "pixel" else 0
         cam, shift, cam_s = camera_beams(state, self.scene, self.buffers, camera, whole, pad, settings.spp, pixel_n)
+        slots = sun_slots(settings)
+        shadowed = [settings.shadows and light.shadows for light in settings.lights]
+        # Whether the grid is built for this render whatever the suns get: then a sun's beams
+        # must pay for themselves against it (scene_beams.SUN_REFS_PER_RAY).
+        grid_anyway = cam is None or any(s and k < 0 for s, k in zip(shadowed, slots)) or self.scene.grid is not None
+        rays = settings.spp * (box[2] - box[0]) * (box[3] - box[1]) if grid_anyway else None
         suns, light_sun, sun_s = [None] * len(state.suns), [], 0.0
-        for light, slot in zip(settings.lights, sun_slots(settings)):
+        for light, slot in zip(settings.lights, slots):
             if slot < 0:
                 light_sun.append(-1)
                 continue
-            beams, s = sun_beams(state, self.scene, self.buffers, light, slot)
+            beams, s = sun_beams(state, self.scene, self.buffers, light, slot, rays)
             sun_s += s
             suns[slot] = beams
             light_sun.append(slot if beams is not None else -1)
+        state.renders += 1
         plan = BeamPlan(cam, suns, light_sun, shift)
         st.beams_s, st.camera_beams_s, st.sun_beams_s = cam_s + sun_s, cam_s, sun_s
         st.camera_beams = (f"{cam.frame.bin_px} px bins" if cam is not None else f"none: {state.camera_why}")
         st.camera_beam_refs = cam.refs if cam is not None else 0
         st.sun_beam_refs = sum(b.refs for b in suns if b is not None)
         st.beam_refs = st.camera_beam_refs + st.sun_beam_refs
-        shadowed = [settings.shadows and light.shadows for light in settings.lights]
         return plan, cam is None or any(s and k < 0 for s, k in zip(shadowed, light_sun))
 
     # --- rendering ----------------------------------------------------------------------

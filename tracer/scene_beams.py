@@ -32,7 +32,16 @@ CAMERA_BIN_PX = (1, 2, 4)
 # a reference costs about two cylinder tests to build, and the beams save a camera ray
 # 0.7-1.8 tests per list entry of its pixel against the grid.
 CAMERA_REFS_PER_RAY = 100.0
+# A sun's bins: about SUN_REFS_PER_CYLINDER references a cylinder, fewer where the scene's
+# share of the budget is smaller, but never under SUN_MIN_REFS_PER_CYLINDER (coarser bins hand
+# a shadow ray more entries than the grid's cells: 1,000,000 strands at 1.5 references a
+# cylinder rendered 5x slower than on the grid). Kept across camera moves, a sun's beams are
+# built for a render that would otherwise walk the grid anyway only when it casts at least one
+# shadow ray (estimated: a ray a traced pixel and sample) per SUN_REFS_PER_RAY references, or
+# when the strands are rendered again (their build then serves the renders to come).
 SUN_REFS_PER_CYLINDER = 8.0
+SUN_MIN_REFS_PER_CYLINDER = 4.0
+SUN_REFS_PER_RAY = 100.0
 SUN_MAX_SIDE = 2048          # bins along either side of a sun's plane
 SAMPLE = 20_000              # cylinders whose projections decide a resolution
 
@@ -46,11 +55,13 @@ class BeamState:
     camera: Optional[Beams] = None
     camera_why: str = ""
     suns: list = field(default_factory=lambda: [None] * MAX_SUN_BEAMS)
+    renders: int = 0            # renders of these strands so far
 
     def forget(self):
         self.camera_view = self.camera = None
         self.camera_why = ""
         self.suns = [None] * MAX_SUN_BEAMS
+        self.renders = 0
 
 
 @dataclass
@@ -176,10 +187,12 @@ def sun_slots(settings):
     return slots
 
 
-def sun_beams(state, scene, buffers, light, slot):
+def sun_beams(state, scene, buffers, light, slot, rays=None):
     """The Beams of shadow rays toward directional `light` in sun slot `slot`, built (or
     kept while the light's direction and angle stay) into SUN_BUFFERS[slot]; None where beams
-    cannot serve it. Returns (beams, seconds building or 0.0)."""
+    cannot serve it or would not pay. `rays`: the shadow rays this render may cast, when the
+    grid is to be built for it anyway (None: it is not: beams spare it; see SUN_REFS_PER_RAY).
+    Returns (beams, seconds building or 0.0)."""
     packed, _ = light.packed()
     towards = -np.asarray(packed[:3], np.float32).astype(np.float64)
     spread = float(light.extent()[1][3])
@@ -188,25 +201,27 @@ def sun_beams(state, scene, buffers, light, slot):
     if kept is not None and kept[0] == key:
         return kept[1], 0.0
     t0 = time.perf_counter()
+    budget = min(layout.BEAM_MAX_REFS, buffers.max_texels)
+    target = min(0.5 * budget / max(scene.num_cylinders, 1), SUN_REFS_PER_CYLINDER)
+    if target < SUN_MIN_REFS_PER_CYLINDER:
+        state.suns[slot] = (key, None)       # never: as many cylinders next time
+        return None, 0.0
+    if rays is not None and state.renders == 0 and target * scene.num_cylinders > SUN_REFS_PER_RAY * rays:
+        return None, 0.0                     # not kept: the next render of these strands asks again
     beams = None
     try:
-        beams = _build(scene, buffers, _sun_frame(scene, buffers, towards, spread), 1.0, SUN_BUFFERS[slot],
-                       min(layout.BEAM_MAX_REFS, buffers.max_texels))
+        beams = _build(scene, buffers, _sun_frame(scene, towards, spread, target), 1.0, SUN_BUFFERS[slot], budget)
     except BeamsUnfit:
         beams = None
     state.suns[slot] = (key, beams)
     return beams, time.perf_counter() - t0
 
 
-def _sun_frame(scene, buffers, towards, spread):
-    """A sun's frame with bins sized for about SUN_REFS_PER_CYLINDER references a cylinder
-    (fewer when the scene's share of layout.BEAM_MAX_REFS is smaller), within SUN_MAX_SIDE bins
-    a side."""
+def _sun_frame(scene, towards, spread, target):
+    """A sun's frame with bins sized for about `target` references a cylinder, within
+    SUN_MAX_SIDE bins a side."""
     lo, hi = scene.box
     rmax = float(scene.plan.radius.max())
-    n = scene.num_cylinders
-    budget = min(layout.BEAM_MAX_REFS, buffers.max_texels)
-    target = float(np.clip(0.5 * budget / max(n, 1), 1.5, SUN_REFS_PER_CYLINDER))
     u, v, _ = sun_basis(towards)
     corners = box_corners(lo, hi)
     span = max(float(np.ptp(corners @ u)), float(np.ptp(corners @ v)), 1e-30)

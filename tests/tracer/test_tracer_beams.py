@@ -16,7 +16,7 @@ from tracer.scene_beams import CAMERA_BUFFERS, SUN_BUFFERS, beam_scene_box, read
 
 from test_tracer_grid import _surface_samples
 from test_tracer_vs_reference import assert_matches_reference
-from tracer_scenes import curls, make_strands, uv_sphere
+from tracer_scenes import curls, dense_tuft, uv_sphere
 
 pytestmark = pytest.mark.skipif(not compute_available(shared_context()),
                                 reason="beams are built by compute shaders (OpenGL 4.3); the grid serves without")
@@ -218,18 +218,7 @@ def test_the_numpy_build_walks_the_grid():
     assert r.accel == "grid"
 
 
-def _dense_tuft():
-    """8,000 faint strands packed in front of DENSE_CAM (test_tracer_pixel_sampler.py's loop-cap
-    scene): over a hundred list entries a pixel."""
-    rng = np.random.default_rng(3)
-    t = np.linspace(0.0, 1.0, 24)[:, None]
-    lines = []
-    for _ in range(8000):
-        a, b = rng.uniform(-0.25, 0.25, 3), rng.uniform(-0.25, 0.25, 3)
-        lines.append(a + t * (b - a) + 0.02 * np.sin(9 * t + rng.uniform(0, 6)))
-    return make_strands(lines, radius=0.0008, alpha=0.05)
-
-
+# The dense tuft (tracer_scenes.dense_tuft) fills its view: over a hundred list entries a pixel.
 DENSE_CAM = Camera.look_at((0.0, -1.6, 0.0), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
 
 
@@ -237,7 +226,7 @@ def test_one_sample_of_dense_hair_leaves_the_camera_to_the_grid(pair):
     """Rebuilt at every camera move, the camera's beams are built for a render only when its
     camera rays are many enough for the lists they would take (CAMERA_REFS_PER_RAY): one sample
     of the dense tuft walks the grid, sixteen the beams, and the image is the grid's either way."""
-    grid, beams = _both(pair, _dense_tuft(), DENSE_CAM, RenderSettings())
+    grid, beams = _both(pair, dense_tuft(), DENSE_CAM, RenderSettings())
     assert pair[1].stats.camera_beams.startswith("none: about") and pair[1].scene.grid is not None
     assert np.abs(grid - beams).max() <= 1e-6
     grid, beams = (r.render(DENSE_CAM, RenderSettings(spp=16)) for r in pair)
@@ -245,12 +234,41 @@ def test_one_sample_of_dense_hair_leaves_the_camera_to_the_grid(pair):
     assert np.abs(grid - beams).max() <= 1e-6
 
 
+def test_a_suns_beams_wait_for_a_second_render_when_the_grid_is_built_anyway(pair):
+    """One sample of the dense tuft walks the grid with its camera rays, so the grid is built
+    for that render; its few shadow rays would not pay for the sun's beams, which the second
+    render of the same strands builds (kept across camera moves, they serve the renders to
+    come). The images are the grid's."""
+    strands = dense_tuft()
+    grid, first = _both(pair, strands, DENSE_CAM, RenderSettings())
+    assert pair[1].scene.grid is not None and pair[1].beam_state.suns[0] is None
+    moved = Camera.look_at((0.3, -1.6, 0.1), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
+    again = pair[1].render(moved, RenderSettings())
+    assert pair[1].beam_state.suns[0][1] is not None and pair[1].stats.sun_beams_s > 0
+    assert np.abs(grid - first).max() <= 1e-6
+    assert np.abs(pair[0].render(moved, RenderSettings()) - again).max() <= 1e-6
+
+
+def test_a_sun_of_too_many_cylinders_for_fine_bins_walks_the_grid(pair, monkeypatch):
+    """Where the budget leaves a sun under SUN_MIN_REFS_PER_CYLINDER references a cylinder its
+    bins would hand a shadow ray more entries than the grid's cells: its rays walk the grid."""
+    from tracer import scene_beams
+    strands, settings = CASES["opaque, hard shadows"]
+    want = _both(pair, strands, CAM, settings)[0]
+    n = pair[1].num_cylinders
+    monkeypatch.setattr(layout, "BEAM_MAX_REFS", int(2 * n * (scene_beams.SUN_MIN_REFS_PER_CYLINDER - 1)))
+    r = Renderer(build="gpu", accel="beams")
+    r.set_strands(strands)
+    np.testing.assert_allclose(r.render(CAM, settings), want, atol=1e-6)
+    assert r.beam_state.suns[0][1] is None and r.scene.grid is not None
+
+
 def test_the_pixel_sampler_on_dense_see_through_hair_keeps_every_hit():
     """The dense tuft of test_tracer_pixel_sampler.py's loop-cap test: the pixel sampler walking
     the camera's beams (four walks of four samples a pixel) has the independent sampler's
     coverage."""
     r = Renderer(build="gpu", accel="beams")
-    r.set_strands(_dense_tuft())
+    r.set_strands(dense_tuft())
     cam = DENSE_CAM
     # 16 samples: at fewer the camera rays of so dense a tuft are left to the grid (the beams'
     # lists would hold over a hundred entries a ray: scene_beams.CAMERA_REFS_PER_RAY).

@@ -11,7 +11,7 @@ import pytest
 from hairio import InputError
 from tracer import Camera, Light, Renderer, RenderSettings
 
-from tracer_scenes import curls, make_strands, uv_sphere
+from tracer_scenes import curls, dense_tuft, make_strands, uv_sphere
 
 
 def _hair_rmse(a, b):
@@ -173,13 +173,7 @@ def test_dense_scene_keeps_every_hit(grid_renderer):
     alpha below the independent sampler's, whose invocations each walk one sample; and one
     invocation does one walk, not one per sample (the counters say so). On the grid, whose
     walks test the most candidates (the beams' walk of the same scene: test_tracer_beams.py)."""
-    rng = np.random.default_rng(3)
-    t = np.linspace(0.0, 1.0, 24)[:, None]
-    lines = []
-    for _ in range(8000):
-        a, b = rng.uniform(-0.25, 0.25, 3), rng.uniform(-0.25, 0.25, 3)
-        lines.append(a + t * (b - a) + 0.02 * np.sin(9 * t + rng.uniform(0, 6)))
-    grid_renderer.set_strands(make_strands(lines, radius=0.0008, alpha=0.05))
+    grid_renderer.set_strands(dense_tuft())
     cam = Camera.look_at((0.0, -1.6, 0.0), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
     ind = grid_renderer.render(cam, RenderSettings(spp=4, count=True))
     ind_tests = grid_renderer.stats.cylinder_tests

@@ -29,6 +29,19 @@ def curls(n_strands=12, n_points=10, seed=0, radius=0.015, alpha=1.0):
                         color=(0.7, 0.45, 0.25))
 
 
+def dense_tuft(n_strands=8000, seed=3):
+    """Faint straight-ish strands (alpha 0.05) packed into a box of half side 0.25 at the
+    origin: seen from 1.6 away through 32² pixels, hundreds of cylinders a pixel (the
+    pixel sampler's loop-cap scene)."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 1.0, 24)[:, None]
+    lines = []
+    for _ in range(n_strands):
+        a, b = rng.uniform(-0.25, 0.25, 3), rng.uniform(-0.25, 0.25, 3)
+        lines.append(a + t * (b - a) + 0.02 * np.sin(9 * t + rng.uniform(0, 6)))
+    return make_strands(lines, radius=0.0008, alpha=0.05)
+
+
 def uv_sphere(centre, radius, rings=12, segments=24):
     """A closed sphere: (vertices, triangles)."""
     theta = np.linspace(0, np.pi, rings + 1)[1:-1]
