@@ -55,7 +55,7 @@ def trace_files(settings, meshes=False, accel="grid", walk=True):
         structure = (["accel_grid.glsl"] if walk else []) + ["accel_beams.glsl"]
     else:
         structure = [f"accel_{accel}.glsl"]
-    return (["trace_scene.glsl", "shapes_cylinder.glsl", "accel.glsl", "sampler_pixel.glsl"] + structure
+    return (["trace_scene.glsl", "shapes_cylinder.glsl", "capsule.glsl", "accel.glsl", "sampler_pixel.glsl"] + structure
             + mesh_files
             + [shading_model(settings.shading).glsl, "trace_main.glsl"])
 

@@ -14,6 +14,7 @@ from .gpu_build import _groups, set_uniforms
 from .shader_source import shader_source
 
 KIND_CODE = {"persp": 0, "ortho": 1, "sun": 2}
+BUILD_FILES = ["build_cylinders.glsl", "capsule.glsl", "beams_build.glsl"]
 
 
 # Scratch buffers up to this many words are kept between builds; bigger ones (a scene of
@@ -35,7 +36,7 @@ class BeamBuilder:
         prog = self._passes.get(key)
         if prog is None:
             prog = self._passes[key] = self.ctx.compute_shader(
-                shader_source(430, ["beams_build.glsl"], {"PASS": pass_, "CYL_PARTS": cyl_parts}))
+                shader_source(430, BUILD_FILES, {"PASS": pass_, "CYL_PARTS": cyl_parts}))
         return prog
 
     def _buffer(self, name, words):

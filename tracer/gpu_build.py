@@ -47,11 +47,13 @@ class GpuBuilder:
         self._passes = {}
 
     def _program(self, name, **defines):
-        """The pass of file `name` with `defines`, for the current layout."""
+        """The pass of file `name` with `defines`, for the current layout (the grid's after the
+        files it shares with the beams' passes)."""
         key = (layout.glsl_header(), name, tuple(sorted(defines.items())))
         prog = self._passes.get(key)
         if prog is None:
-            prog = self._passes[key] = self.ctx.compute_shader(shader_source(430, [name], defines))
+            files = ["build_cylinders.glsl", "capsule.glsl", name] if name == "grid_build.glsl" else [name]
+            prog = self._passes[key] = self.ctx.compute_shader(shader_source(430, files, defines))
         return prog
 
     @property

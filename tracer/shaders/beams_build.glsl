@@ -2,7 +2,8 @@
 // Beams built on the GPU (GL 4.3 compute), the same listing as tracer/beams.py's numpy build:
 // every cylinder in every bin its projected capsule may reach, each entry its id and the
 // depth slice of its key, a bin's entries slice by slice. The host prepends
-// "#version 430 core", PASS and the generated header of tracer/layout.py:
+// "#version 430 core", PASS and the generated header of tracer/layout.py, then
+// build_cylinders.glsl and capsule.glsl:
 //   PASS 0  zero:   counts[i] = 0 for i < n_items (the bins' counters, then the slices')
 //   PASS 1  count:  counts[bin] += 1 for every (cylinder, bin), slices[slice] += 1 per cylinder,
 //                   filed[cylinder] = its slice (-1: never seen)
@@ -20,8 +21,6 @@
 // A cylinder that reaches the camera's plane, or whose listing could take more than
 // MAX_BINS_PER_CYLINDER loop steps, is counted in flags[0] and flags[1]: the host then gives
 // the family no beams (its rays walk the grid), as the numpy build raises BeamsUnfit.
-layout(local_size_x = GROUP) in;
-
 uniform int n_items;          // cylinders, bins (zero: words) or chunks of this pass
 uniform int first_item;       // fill: the slice's first place in perm
 uniform float pad_factor;     // capsules widened this many times
@@ -42,18 +41,6 @@ uniform int max_bins;         // MAX_BINS_PER_CYLINDER
 uniform int fill_slice;
 uniform int slice_first[BEAM_SLICES];
 
-layout(binding = 0) uniform samplerBuffer tex_cyl;   // TEXELS_PER_CYL texels per cylinder
-#if CYL_PARTS > 1
-layout(binding = 1) uniform samplerBuffer tex_cyl1;
-#endif
-#if CYL_PARTS > 2
-layout(binding = 2) uniform samplerBuffer tex_cyl2;
-#endif
-#if CYL_PARTS > 3
-layout(binding = 3) uniform samplerBuffer tex_cyl3;
-#endif
-uniform int cyl_split;
-
 layout(std430, binding = 0) buffer Counts { int counts[]; };     // per bin: count, then cursor
 layout(std430, binding = 1) buffer Slices { int slices[]; };     // per slice: count, then cursor
 layout(std430, binding = 2) buffer Perm { int perm[]; };         // cylinders, slice by slice
@@ -66,23 +53,6 @@ layout(std430, binding = 6) writeonly buffer Table { ivec2 table[]; };
 #if PASS == 6
 layout(std430, binding = 6) writeonly buffer Lists { uint lists[]; };
 #endif
-vec4 cyl(int id, int j) {
-#if CYL_PARTS > 3
-    if (id >= 3 * cyl_split) return texelFetch(tex_cyl3, TEXELS_PER_CYL * (id - 3 * cyl_split) + j);
-#endif
-#if CYL_PARTS > 2
-    if (id >= 2 * cyl_split) return texelFetch(tex_cyl2, TEXELS_PER_CYL * (id - 2 * cyl_split) + j);
-#endif
-#if CYL_PARTS > 1
-    if (id >= cyl_split) return texelFetch(tex_cyl1, TEXELS_PER_CYL * (id - cyl_split) + j);
-#endif
-    return texelFetch(tex_cyl, TEXELS_PER_CYL * id + j);
-}
-
-int item_index() {
-    return int(gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * GROUP + int(gl_LocalInvocationID.x);
-}
-
 // A point in the frame: (X, Y, Z) = axes·(p - origin).
 vec3 to_frame(vec3 p) {
     vec3 q = p - frame_origin;
@@ -106,13 +76,7 @@ float segment_distance(vec3 c, vec3 a, vec3 b) {
 // camera), 2: it reaches the camera's plane.
 int project_cylinder(int id, out vec2 g0, out vec2 g1, out float rho, out int slice) {
     vec4 top = cyl(id, CYL_TOP), tip = cyl(id, CYL_TIP), n2 = cyl(id, CYL_N2);
-    vec3 axis = tip.xyz - top.xyz;
-    float len = length(axis);
-    // Past the tip, on the outer side of a bend, the cut cylinder reaches r·tan(angle) further
-    // along its axis (tracer/cylinders.py: extension); the same bound as grid_build.glsl's.
-    float c = clamp(dot(axis, n2.xyz) / max(len, 1e-30), COS_SHARP, 1.0);
-    float ext = top.w * sqrt(max(0.0, 1.0 - c * c)) / c;
-    vec3 far = tip.xyz + axis * (ext / max(len, 1e-30));
+    vec3 far = capsule_far(top.xyz, tip.xyz, n2.xyz, top.w);
     float r = top.w * pad_factor;
     vec3 f0 = to_frame(top.xyz), f1 = to_frame(far);
     float key;

@@ -2,7 +2,7 @@
 // Grid build on the GPU (GL 4.3 compute), the same listing as tracer/grid.py's numpy build:
 // every cylinder in every cell its padded capsule may touch, cut slab by slab along its
 // dominant axis. The host prepends "#version 430 core", PASS and the generated header of
-// tracer/layout.py:
+// tracer/layout.py, then build_cylinders.glsl and capsule.glsl:
 //   PASS 0  count: cells[cell] += 1 for every (cylinder, cell)
 //   PASS 1  fill:  slot = cells[cell]++ (cells holds each cell's first slot on entry),
 //                  idx_img[slot] = cylinder id
@@ -14,27 +14,14 @@
 // A cylinder whose listing would take more than MAX_VISITS loop steps is not listed at all
 // but counted in `overflow`: llvmpipe silently cuts any invocation off after 65,535 loop
 // steps, so the host builds such a grid in numpy instead of trusting a truncated one.
-layout(local_size_x = GROUP) in;
-
 uniform int n_items;          // cylinders
 uniform vec3 grid_lo;
 uniform vec3 inv_cell;        // 1 / cell size per axis
 uniform ivec3 dims;
 uniform float pad_factor;
 
-layout(binding = 0) uniform samplerBuffer tex_cyl;   // TEXELS_PER_CYL texels per cylinder
-// Past the driver's limit the cylinders and the lists continue in further buffers,
-// cyl_split cylinders and idx_split entries in each but the last (tracer/scene_buffers.py).
-#if CYL_PARTS > 1
-layout(binding = 1) uniform samplerBuffer tex_cyl1;
-#endif
-#if CYL_PARTS > 2
-layout(binding = 2) uniform samplerBuffer tex_cyl2;
-#endif
-#if CYL_PARTS > 3
-layout(binding = 3) uniform samplerBuffer tex_cyl3;
-#endif
-uniform int cyl_split;
+// Past the driver's limit the lists continue in further buffers, idx_split entries in each
+// but the last (tracer/scene_buffers.py).
 uniform int idx_split;
 layout(std430, binding = 0) buffer Cells { int cells[]; };
 #if PASS == 0
@@ -52,23 +39,6 @@ layout(r32i, binding = 3) uniform writeonly iimageBuffer idx_img2;
 layout(r32i, binding = 4) uniform writeonly iimageBuffer idx_img3;
 #endif
 #endif
-
-vec4 cyl(int id, int j) {
-#if CYL_PARTS > 3
-    if (id >= 3 * cyl_split) return texelFetch(tex_cyl3, TEXELS_PER_CYL * (id - 3 * cyl_split) + j);
-#endif
-#if CYL_PARTS > 2
-    if (id >= 2 * cyl_split) return texelFetch(tex_cyl2, TEXELS_PER_CYL * (id - 2 * cyl_split) + j);
-#endif
-#if CYL_PARTS > 1
-    if (id >= cyl_split) return texelFetch(tex_cyl1, TEXELS_PER_CYL * (id - cyl_split) + j);
-#endif
-    return texelFetch(tex_cyl, TEXELS_PER_CYL * id + j);
-}
-
-int item_index() {
-    return int(gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * GROUP + int(gl_LocalInvocationID.x);
-}
 
 void visit(int cell, int id) {
 #if PASS == 0
@@ -112,13 +82,7 @@ void main() {
     int id = item_index();
     if (id >= n_items) return;
     vec4 top = cyl(id, CYL_TOP), tip = cyl(id, CYL_TIP), n2 = cyl(id, CYL_N2);
-    vec3 axis = tip.xyz - top.xyz;
-    float len = length(axis);
-    // Past the tip, on the outer side of a bend, the cut cylinder reaches r·tan(angle)
-    // further along its axis (tracer/cylinders.py: extension); the same bound as there.
-    float c = clamp(dot(axis, n2.xyz) / max(len, 1e-30), COS_SHARP, 1.0);
-    float ext = top.w * sqrt(max(0.0, 1.0 - c * c)) / c;
-    vec3 far = tip.xyz + axis * (ext / max(len, 1e-30));
+    vec3 far = capsule_far(top.xyz, tip.xyz, n2.xyz, top.w);
     vec3 g0 = (top.xyz - grid_lo) * inv_cell;
     vec3 dg = (far - grid_lo) * inv_cell - g0;
     // A thousandth of a cell more than the radius covers float32 rounding, as in numpy.

@@ -38,14 +38,11 @@ vec3 nearest_on_ray(vec3 w, vec3 D, vec3 ax, float L2) {
 }
 
 // How near a camera ray from o (along d for the orthographic camera) can meet the capsule of
-// the cylinder (A, axis ax, plane-2 normal n2, radius r): perspective, the distance from o
-// to its axis from A to its far end (past the tip on the outer side of a bend:
-// tracer/cylinders.py, extension) less r; orthographic, its nearest depth less r
-// (tracer/beams.py, the camera's keys).
+// the cylinder (A, axis ax, plane-2 normal n2, radius r; capsule.glsl): perspective, the
+// distance from o to its axis less r; orthographic, its nearest depth less r (tracer/beams.py,
+// the camera's keys).
 float capsule_near(vec3 A, vec3 ax, vec3 n2, float r, vec3 o, vec3 d) {
-    float len = length(ax);
-    float c = clamp(dot(ax, n2) / max(len, 1e-30), COS_SHARP, 1.0);
-    vec3 far = A + ax * (1.0 + r * sqrt(max(0.0, 1.0 - c * c)) / c / max(len, 1e-30));
+    vec3 far = capsule_far(A, A + ax, n2, r);
 #if ORTHO
     return min(dot(A - o, d), dot(far - o, d)) - r;
 #else

@@ -5,11 +5,14 @@
 // compile-time switches and the header generated from tracer/layout.py:
 //   trace_scene.glsl      this file
 //   shapes_cylinder.glsl  ray vs one cut cylinder, its normal
+//   capsule.glsl          the capsule a cut cylinder lies in (shared with the builds)
 //   accel.glsl            the accelerator interface and the hit list it fills
 //   sampler_pixel.glsl    the pixel sampler's list of distinct cylinders and coverage masks
 //                         (PIXEL 1; empty otherwise)
 //   accel_grid.glsl       the uniform grid (or accel_bvh.glsl, the BVH), implementing that
 //                         interface, and the pixel sampler's walk
+//   accel_beams.glsl      with beams (after the grid's file where some ray walks it): the
+//                         camera's and the suns' lists
 //   shapes_triangle.glsl, accel_mesh_grid.glsl   opaque meshes and their own grid (MESHES 1)
 //   shading_<model>.glsl  shade_light of the chosen model (tracer/shading: the registry)
 //   trace_main.glsl       camera rays, layers, shadows, samples: main
