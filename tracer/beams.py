@@ -229,7 +229,6 @@ def bins_touched(frame, top, far, radius):
     """(cylinder, bin id) for every bin the capsules top..far of `radius` may project into,
     and each cylinder's slice. BeamsUnfit when one reaches the camera's plane (perspective) or
     spans more than layout.BEAM_MAX_BINS_PER_CYLINDER bins."""
-    n = len(top)
     nx, ny = (int(d) for d in frame.dims)
     gx0, gy0, z0 = project(frame, top)
     gx1, gy1, z1 = project(frame, far)

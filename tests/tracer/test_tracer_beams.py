@@ -297,11 +297,13 @@ def _frames(lo, hi, rmax):
     ortho_cam = Camera.look_at((0.1, 0.05, -2.0), (0, 0, 0.5), size=(48, 40), type="ORTHO", ortho_scale=1.4)
     ortho = camera_frame(ortho_cam, (3, 2, 45, 38), lo, hi, rmax, 1.0, bin_px=2)
     towards = np.array([-0.3, 0.5, 0.8]) / np.linalg.norm([-0.3, 0.5, 0.8])
-    sun = sun_frame(towards, SUN_SPREAD, lo, hi, rmax, 1.0, 0.02)
-    return {"perspective": (persp, CAM), "orthographic": (ortho, ortho_cam), "sun": (sun, None)}
+    sun = sun_frame(towards, 0.0, lo, hi, rmax, 1.0, 0.02)
+    wide_sun = sun_frame(towards, SUN_SPREAD, lo, hi, rmax, 1.0, 0.02)
+    return {"perspective": (persp, CAM), "orthographic": (ortho, ortho_cam), "sun": (sun, None),
+            "sun with an angle": (wide_sun, None)}
 
 
-@pytest.mark.parametrize("family", ["perspective", "orthographic", "sun"])
+@pytest.mark.parametrize("family", ["perspective", "orthographic", "sun", "sun with an angle"])
 def test_every_surface_point_is_listed_where_its_rays_look_it_up(family):
     """A ray that meets a point of a cylinder's surface looks up a bin that lists the cylinder
     in a slice starting no farther than the walk goes: a camera ray the bin of the pixel it
@@ -319,9 +321,10 @@ def test_every_surface_point_is_listed_where_its_rays_look_it_up(family):
         if frame.kind == "sun":
             # Origins below q, each along a direction within the sun's angle of its own.
             w = frame.axes[2]
+            spread = SUN_SPREAD if frame.drift > 0 else 0.0
             tilt = rng.normal(0, 1, (len(q), 3))
             tilt -= (tilt @ w)[:, None] * w
-            tilt *= (SUN_SPREAD * rng.uniform(0, 1, len(q)) / np.linalg.norm(tilt, axis=1))[:, None]
+            tilt *= (spread * rng.uniform(0, 1, len(q)) / np.linalg.norm(tilt, axis=1))[:, None]
             d = w + tilt
             p = q - rng.uniform(0, 0.8, len(q))[:, None] * d / np.linalg.norm(d, axis=1)[:, None]
             reach = -(p @ w)
