@@ -5,8 +5,9 @@ MAX_SUN_BEAMS suns', kept while the sun stays, each built by the compute passes
 (tracer/gpu_beams.py: beams need them, as a camera move must upload nothing); and which rays
 they cannot serve or would not pay for (those walk the scene's grid).
 
-Resolution. A camera bin is `bin_px` pixels a side, the smallest of CAMERA_BIN_PX whose lists
-are estimated (from an even sample of the cylinders) to stay within their share of
+Resolution. A camera bin is `bin_px` pixels a side, the smallest of CAMERA_BIN_PX (from
+ONE_SAMPLE_BIN_PX for a render of one sample a pixel) whose lists are estimated (from an
+even sample of the cylinders) to stay within their share of
 layout.BEAM_MAX_REFS; a sun's bins are squares sized so that a cylinder is listed in about
 SUN_REFS_PER_CYLINDER bins (fewer for large scenes, within the same budget). Smaller bins list
 each cylinder more often but hand a ray fewer cylinders to test: docs/DECISIONS.md, "Beams".
@@ -26,6 +27,12 @@ CAMERA_BUFFERS = ("tex_beam", "tex_beam_cell")
 SUN_BUFFERS = (("tex_sun0", "tex_sun_cell0"), ("tex_sun1", "tex_sun_cell1"))
 MAX_SUN_BEAMS = len(SUN_BUFFERS)
 CAMERA_BIN_PX = (1, 2, 4)
+# A render of one sample a pixel starts at 2-pixel bins, which build in about half the time;
+# its few camera rays pay little for their longer lists (first render and re-render of
+# straight.hair 0.37-0.39 and 0.27-0.30 s against 0.46-0.54 and 0.29-0.44 with 1-pixel bins;
+# 10,000 wavy strands 0.48 and 0.24 against 0.62 and 0.30). From two samples on, 1 pixel
+# (16 samples of the pixel sampler: 1.4-1.7x faster than on 2-pixel bins).
+ONE_SAMPLE_BIN_PX = 2
 # A camera's beams are built again at every camera move, the grid once: a render gets them
 # when they would list at most CAMERA_REFS_PER_RAY references per camera ray it traces
 # (1-pixel bins, estimated from a sample). Measured on llvmpipe (docs/DECISIONS.md, "Beams"):
@@ -118,7 +125,10 @@ def camera_beams(state, scene, buffers, camera, box, pad, samples=1, pixel_n=0):
     view = (camera.type, camera.position.tobytes(), camera.rotation.tobytes(), float(camera.pixel_size),
             float(pad), id(scene.plan))
     cx, cy = (float(c) for c in camera.centre_px)
+    finest = ONE_SAMPLE_BIN_PX if samples == 1 else CAMERA_BIN_PX[0]
     kept = state.camera if state.camera_view == view else None
+    if kept is not None and kept.frame.bin_px > finest:
+        kept = None      # coarser than this render's samples want: built again
     need = 0.0
     if kept is not None:
         f = kept.frame
@@ -146,17 +156,21 @@ def camera_beams(state, scene, buffers, camera, box, pad, samples=1, pixel_n=0):
     domain = (int(np.floor(box[0] + shift[0])) - 1, int(np.floor(box[1] + shift[1])) - 1,
               int(np.ceil(box[2] + shift[0])) + 1, int(np.ceil(box[3] + shift[1])) + 1)
     try:
+        # Whether beams pay, by the references of 1-pixel bins (what CAMERA_REFS_PER_RAY was
+        # measured with).
+        one = _estimated_refs(camera_frame(camera, domain, lo, hi, rmax, pad, 1, shift_pad, centre), sample, pad,
+                              scene.num_cylinders)
         for b in CAMERA_BIN_PX:
             frame = camera_frame(camera, domain, lo, hi, rmax, pad, b, shift_pad, centre)
-            if frame.num_bins > layout.BEAM_MAX_BINS:
+            if frame.num_bins > layout.BEAM_MAX_BINS or b < finest:
                 continue
-            estimate = _estimated_refs(frame, sample, pad, scene.num_cylinders)
-            if b == CAMERA_BIN_PX[0] and estimate > CAMERA_REFS_PER_RAY * rays:
+            if one > CAMERA_REFS_PER_RAY * rays:
                 # Not kept: a render with more samples asks again.
                 state.camera_view = None
-                state.camera_why = (f"about {estimate / rays:.0f} list entries per camera ray of this render; "
+                state.camera_why = (f"about {one / rays:.0f} list entries per camera ray of this render; "
                                     "the grid, kept between camera moves, costs less")
                 break
+            estimate = _estimated_refs(frame, sample, pad, scene.num_cylinders)
             if estimate > 0.5 * budget and b != CAMERA_BIN_PX[-1]:
                 continue
             try:
