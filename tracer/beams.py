@@ -210,7 +210,8 @@ def _keys_and_radii(frame, top, far, z0, z1, r):
     key (module text), how far its projection reaches, and False where it reaches the
     camera's plane (perspective)."""
     if frame.kind == "sun":
-        return -(np.maximum(z0, z1) + r), r * frame.radius_scale + frame.drift + layout.BEAM_BIN_EPS, np.ones(len(r), bool)
+        rho = r * frame.radius_scale + frame.drift + layout.BEAM_BIN_EPS
+        return -(np.maximum(z0, z1) + r), rho, np.ones(len(r), bool)
     near = np.minimum(z0, z1)
     if frame.kind == "ortho":
         return near - r, r * frame.radius_scale + frame.drift + layout.BEAM_BIN_EPS, np.ones(len(r), bool)

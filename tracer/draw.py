@@ -292,7 +292,8 @@ def _set_beam_uniforms(prog, beams):
                 ("sun_u", lambda f: f.axes[0] if f else zero3, np.float32),
                 ("sun_v", lambda f: f.axes[1] if f else zero3, np.float32),
                 ("sun_w", lambda f: f.axes[2] if f else zero3, np.float32),
-                ("sun_frame", lambda f: (f.offset[0], f.offset[1], f.key0, f.key_step) if f else (0.0,) * 4, np.float32),
+                ("sun_frame", lambda f: (f.offset[0], f.offset[1], f.key0, f.key_step) if f else (0.0,) * 4,
+                 np.float32),
                 ("sun_dims", lambda f: tuple(int(d) for d in f.dims) if f else (0, 0), np.int32)):
             if name in prog:
                 prog[name].write(pick(fn, dtype).tobytes())

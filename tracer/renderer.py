@@ -367,9 +367,9 @@ class Renderer:
             self.scene.grid = None
             self._grid_for_beams(settings)
         layers = self.effective_layers(settings)
+        mesh_offset = 0.0 if self.meshes is None else self.meshes.shadow_offset()
         img, counts = self._drawer.draw(self.buffers, self.structure if walk else None, camera, settings, layers,
-                                        box, self.mesh_grid, 0.0 if self.meshes is None else self.meshes.shadow_offset(),
-                                        wide, beams)
+                                        box, self.mesh_grid, mesh_offset, wide, beams)
         st = self.stats
         st.render_s = time.perf_counter() - t0
         st.renders += 1

@@ -312,7 +312,8 @@ def _report(sec, cfg, scenes, size):
                      f"{'met' if ratio(f1, c1) <= 0.5 else 'NOT met'}); re-render after a camera move "
                      f"{ratio(a1, c1):.2f}× (target ≤ 0.25: {'met' if ratio(a1, c1) <= 0.25 else 'NOT met'}).** "
                      + (f"Cold first render (shader compile included): {fmt_time(sc.cold)}." if sc.cold else "")
-                     + "".join(f" The last first render at {_shown(key)}: {stages}." for key, stages in sc.parts.items())
+                     + "".join(f" The last first render at {_shown(key)}: {stages}."
+                               for key, stages in sc.parts.items())
                      + (" Cylinders in {} buffer textures, cell lists in {}; one run after one warm-up (no warm-up "
                         "for Cycles).".format(*sc.parts_split) if sc.parts_split else ""))
             sec.summary.append(f"{sc.name}: first {fmt_time(f1)} = {ratio(f1, c1):.2f}× Cycles 1 spp ({fmt_time(c1)}); "

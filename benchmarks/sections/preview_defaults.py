@@ -160,7 +160,8 @@ def run(sec, cfg):
             rows.append([name, where, f"{TARGET_SPP} spp (the error to reach), grid", fmt_time(t16) + " (1 run)",
                          f"{t16 / base.median:.2f}", "", fmt_num(e16)])
             met, shared = [], None
-            for label, change in (("1 spp (today's default settings, beams)", {}),) + CANDIDATES + ((PROGRESSIVE, None),):
+            today = (("1 spp (today's default settings, beams)", {}),)
+            for label, change in today + CANDIDATES + ((PROGRESSIVE, None),):
                 job = _progressive(tracer, renderer, camera) if change is None else (
                     lambda rs=tracer.RenderSettings(**change): renderer.render(camera, rs))
                 dflt, timing, im, c = paired(lambda: plain.render(camera, tracer.RenderSettings()), job, cfg.runs)

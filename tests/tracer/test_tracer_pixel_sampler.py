@@ -341,8 +341,8 @@ def test_the_pixel_sampler_walks_a_wide_grid_beside_the_scenes_own(grid_renderer
     assert grid_renderer.scene.grid_pad == 1.0 and grid_renderer.scene.wide_grid is not None
     assert grid_renderer.stats.wide_grid_refs > refs == grid_renderer.stats.grid_refs
     assert grid_renderer.stats.grid_rebuilds == rebuilds + 1
-    np.testing.assert_array_equal(img, _padded(grid_renderer.build, hair, cam).render(cam, RenderSettings(sampler="pixel",
-                                                                                                     spp=4)))
+    padded = _padded(grid_renderer.build, hair, cam)
+    np.testing.assert_array_equal(img, padded.render(cam, RenderSettings(sampler="pixel", spp=4)))
     assert img[..., 3].max() > 0.5
     grid_renderer.render(cam, RenderSettings(sampler="pixel", spp=9))      # the same wide grid
     assert grid_renderer.stats.grid_rebuilds == rebuilds + 1
