@@ -14,6 +14,7 @@ from tracer.gpu_build import compute_available
 from tracer.gl_state import shared_context
 from tracer.scene_beams import CAMERA_BUFFERS, SUN_BUFFERS, beam_scene_box, read_beams
 
+from test_tracer_accel import CAM, CASES as ACCEL_CASES, _render_both
 from test_tracer_grid import _surface_samples
 from test_tracer_vs_reference import assert_matches_reference
 from tracer_scenes import curls, dense_tuft, uv_sphere
@@ -21,17 +22,11 @@ from tracer_scenes import curls, dense_tuft, uv_sphere
 pytestmark = pytest.mark.skipif(not compute_available(shared_context()),
                                 reason="beams are built by compute shaders (OpenGL 4.3); the grid serves without")
 
-CAM = Camera.look_at((1.8, -1.6, 0.9), (0, 0, 0.5), fov_deg=40, size=(64, 64))
-CASES = {
-    "opaque, hard shadows": (curls(30, 10), RenderSettings(shadows=True)),
-    "alpha layers, transmittance": (curls(30, 10, alpha=0.5), RenderSettings(layers=4, shadow_mode="transmittance")),
-    "alpha, hard, 4 spp, a sun and a point light": (curls(30, 10, alpha=0.6), RenderSettings(
-        spp=4, layers=3, lights=(Light(), Light("point", (1.0, -1.0, 2.0), intensity=0.5)))),
-    "min pixel width, phong": (curls(30, 10, radius=0.002), RenderSettings(min_pixel_width=True, shading="phong")),
+# The BVH's cases (the same scenes, settings and camera), and a second sun, one with an angle.
+CASES = dict(ACCEL_CASES, **{
     "two suns, one with an angle, chiang": (curls(30, 10, alpha=0.8), RenderSettings(
         spp=4, layers=2, lights=(Light(vector=(0.3, 0.2, -1.0)), Light(vector=(-0.5, 0.4, -0.6), angle=0.2,
-                                                                          intensity=0.7)))),
-}
+                                                                          intensity=0.7))))})
 
 
 @pytest.fixture(scope="module")
@@ -40,34 +35,27 @@ def pair():
     return Renderer(build="gpu", accel="grid"), Renderer(build="gpu", accel="beams")
 
 
-def _both(pair, strands, camera, settings):
-    imgs = []
-    for r in pair:
-        r.set_strands(strands)
-        imgs.append(r.render(camera, settings))
-    return imgs
-
-
 @pytest.mark.parametrize("case", list(CASES))
 def test_beams_give_the_grids_image(pair, case):
     strands, settings = CASES[case]
-    grid, beams = _both(pair, strands, CAM, settings)
+    grid, beams = _render_both(pair, strands, CAM, settings)
     assert (grid[..., 3] > 0).mean() > 0.05, "scene not in view: the test would prove nothing"
     assert pair[1].stats.camera_beams.endswith("px bins")
     assert np.abs(grid - beams).max() <= 1e-6
 
 
 def test_a_point_light_walks_the_grid_and_a_sun_its_beams(pair):
-    _both(pair, *CASES["opaque, hard shadows"][:1], CAM, CASES["opaque, hard shadows"][1])
+    strands, settings = CASES["opaque, hard shadows"]
+    _render_both(pair, strands, CAM, settings)
     assert pair[1].scene.grid is None            # a sun alone: no ray walks the grid
-    strands, settings = CASES["alpha, hard, 4 spp, a sun and a point light"]
-    _both(pair, strands, CAM, settings)
+    strands, settings = CASES["alpha, hard, 4 spp, two lights"]   # a sun and a point light
+    _render_both(pair, strands, CAM, settings)
     assert pair[1].scene.grid is not None        # built for the point light's shadow rays
 
 
 def test_orthographic_camera_from_below(pair):
     cam = Camera.look_at((0.1, 0.05, -2.0), (0, 0, 0.5), fov_deg=30, size=(48, 48), type="ORTHO", ortho_scale=1.4)
-    grid, beams = _both(pair, curls(20, 8, alpha=0.7), cam, RenderSettings(layers=2))
+    grid, beams = _render_both(pair, curls(20, 8, alpha=0.7), cam, RenderSettings(layers=2))
     assert (grid[..., 3] > 0).mean() > 0.05 and pair[1].stats.camera_beams.endswith("px bins")
     assert np.abs(grid - beams).max() <= 1e-6
 
@@ -92,8 +80,8 @@ def test_meshes_hide_hair_and_take_its_shadows(pair):
     for r in pair:
         r.set_meshes([(*sphere, (0.6, 0.5, 0.4))])
     try:
-        grid, beams = _both(pair, strands, CAM, RenderSettings(layers=3, spp=4))
-        pix_grid, pix_beams = _both(pair, strands, CAM, RenderSettings(layers=3, spp=4, sampler="pixel"))
+        grid, beams = _render_both(pair, strands, CAM, RenderSettings(layers=3, spp=4))
+        pix_grid, pix_beams = _render_both(pair, strands, CAM, RenderSettings(layers=3, spp=4, sampler="pixel"))
     finally:
         for r in pair:
             r.set_meshes(None)
@@ -105,7 +93,7 @@ def test_meshes_hide_hair_and_take_its_shadows(pair):
 def test_a_camera_among_the_hair_walks_the_grid(pair):
     strands = curls(40, 10)
     inside = Camera.look_at((0.0, 0.0, 0.5), (0.5, -0.5, 0.5), fov_deg=70, size=(48, 48))
-    grid, beams = _both(pair, strands, inside, RenderSettings())
+    grid, beams = _render_both(pair, strands, inside, RenderSettings())
     assert "camera's plane" in pair[1].stats.camera_beams
     assert (grid[..., 3] > 0).mean() > 0.05
     assert np.abs(grid - beams).max() <= 1e-6
@@ -113,7 +101,7 @@ def test_a_camera_among_the_hair_walks_the_grid(pair):
 
 def test_lists_past_their_budget_take_coarser_bins_then_the_grid(pair, monkeypatch):
     strands, settings = CASES["alpha layers, transmittance"]
-    want = _both(pair, strands, CAM, settings)[0]
+    want = _render_both(pair, strands, CAM, settings)[0]
     one_px = pair[1].beam_state.camera.refs
     monkeypatch.setattr(layout, "BEAM_MAX_REFS", int(one_px * 0.8))
     r = Renderer(build="gpu", accel="beams")
@@ -188,7 +176,7 @@ def test_split_cylinder_buffers_render_as_one(pair):
     the beams' passes and walks find them there. (A beam list itself lives in one buffer.)"""
     strands, settings = curls(300, 10), RenderSettings(shadows=False)
     cam = Camera.look_at((1.8, -1.6, 0.9), (0, 0, 0.5), fov_deg=40, size=(16, 16))
-    want = _both(pair, strands, cam, settings)[0]
+    want = _render_both(pair, strands, cam, settings)[0]
     limit = 10_000
     assert pair[1].beam_state.camera.refs < limit < pair[1].num_cylinders * layout.TEXELS_PER_CYL
     small = Renderer(build="gpu", accel="beams", max_buffer_texels=limit)
@@ -226,7 +214,7 @@ def test_one_sample_of_dense_hair_leaves_the_camera_to_the_grid(pair):
     """Rebuilt at every camera move, the camera's beams are built for a render only when its
     camera rays are many enough for the lists they would take (CAMERA_REFS_PER_RAY): one sample
     of the dense tuft walks the grid, sixteen the beams, and the image is the grid's either way."""
-    grid, beams = _both(pair, dense_tuft(), DENSE_CAM, RenderSettings())
+    grid, beams = _render_both(pair, dense_tuft(), DENSE_CAM, RenderSettings())
     assert pair[1].stats.camera_beams.startswith("none: about") and pair[1].scene.grid is not None
     assert np.abs(grid - beams).max() <= 1e-6
     grid, beams = (r.render(DENSE_CAM, RenderSettings(spp=16)) for r in pair)
@@ -240,7 +228,7 @@ def test_a_suns_beams_wait_for_a_second_render_when_the_grid_is_built_anyway(pai
     render of the same strands builds (kept across camera moves, they serve the renders to
     come). The images are the grid's."""
     strands = dense_tuft()
-    grid, first = _both(pair, strands, DENSE_CAM, RenderSettings())
+    grid, first = _render_both(pair, strands, DENSE_CAM, RenderSettings())
     assert pair[1].scene.grid is not None and pair[1].beam_state.suns[0] is None
     moved = Camera.look_at((0.3, -1.6, 0.1), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
     again = pair[1].render(moved, RenderSettings())
@@ -254,7 +242,7 @@ def test_a_sun_of_too_many_cylinders_for_fine_bins_walks_the_grid(pair, monkeypa
     bins would hand a shadow ray more entries than the grid's cells: its rays walk the grid."""
     from tracer import scene_beams
     strands, settings = CASES["opaque, hard shadows"]
-    want = _both(pair, strands, CAM, settings)[0]
+    want = _render_both(pair, strands, CAM, settings)[0]
     n = pair[1].num_cylinders
     monkeypatch.setattr(layout, "BEAM_MAX_REFS", int(2 * n * (scene_beams.SUN_MIN_REFS_PER_CYLINDER - 1)))
     r = Renderer(build="gpu", accel="beams")
