@@ -45,12 +45,18 @@ def read_collider(scalp, depsgraph=None, scalp_data=None, collision=None):
     return collider_for(vertices, triangles, name)
 
 
-def build_generator(scalp_data, keys, settings, count=None, collider=None, progress=None):
+def build_generator(scalp_data, keys, settings, count=None, collider=None, progress=None, replacing=None):
     """A groom.Generator and its first GroomResult; collider: a groom.Collider (read_collider)
-    or None; progress: groom's progress callback or None."""
-    from groom import Generator
+    or None; progress: groom's progress callback or None; replacing: the scalp whose cached
+    hair this result replaces, or None. That hair's generators go once the new inputs have
+    passed groom's checks, before the strands grow, so the new result takes the memory of
+    the old (groom.processes.recycling) rather than fresh pages beside it."""
+    from groom import Generator, processes
     gen = Generator(scalp_data, keys, groom_params(settings, count), collider=collider, progress=progress)
-    return gen, gen.generate()
+    with processes.recycling():
+        if replacing is not None:
+            generator_cache.forget(replacing)
+        return gen, gen.generate()
 
 
 def groom_strands(generator, result):
@@ -107,7 +113,7 @@ def generate(scalp, depsgraph=None, count=None, progress=None):
         progress(0.0, "preparing the collider")
     collider = read_collider(scalp, depsgraph, scalp_data)
     t_collider = time.perf_counter()
-    gen, result = build_generator(scalp_data, keys, settings, count, collider, progress)
+    gen, result = build_generator(scalp_data, keys, settings, count, collider, progress, replacing=scalp)
     gen.progress = None  # the live updates that reuse it report nothing
     t2 = time.perf_counter()
     with transaction() as tx:

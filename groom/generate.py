@@ -483,14 +483,13 @@ def _worker_grow(i, handles, lo, hi, offsets, first):
     being strand `first` of the run)."""
     g = processes.STATE["grower"]
     inputs, plan = processes.STATE.pop(i)
-    whole = tuple(processes.open_shared(h) for h in handles)
-    rows = tuple(a[lo:hi] for a in whole)
+    rows = tuple(processes.open_shared(h, (lo, hi)) for h in handles)
     grown = g._grow(g.context, *inputs, slice(0, len(inputs[4])), _quiet, plan, into=rows, collide=False)
     del plan
     _keep_rows(rows, grown)
     counts = grown[1]
     del grown
-    found = _first_pass_of(g._collision, (whole[0][lo:hi], whole[1][lo:hi]), offsets - lo, counts, 0, len(counts))
+    found = _first_pass_of(g._collision, rows[:2], offsets - lo, counts, 0, len(counts))
     return None if found is None else (found[0] + first,) + found[1:]
 
 

@@ -16,6 +16,7 @@ are written once, where the result keeps them. Jobs run serially in a worker
 """
 import atexit
 import collections
+import contextlib
 import mmap
 import os
 import pickle
@@ -25,6 +26,7 @@ import sys
 import threading
 import traceback
 import uuid
+import weakref
 
 import numpy as np
 
@@ -244,26 +246,35 @@ def token(obj):
 class Shared:
     """An array in a memory file of its own: `array` here, `handle` for a worker's
     open_shared. close() once the workers have mapped it (the memory stays while the array
-    or a view of it lives)."""
+    or a view of it lives; then it goes, or, inside recycling(), waits for the next
+    shared_empty)."""
 
     def __init__(self, shape, dtype):
         dtype = np.dtype(dtype)
         shape = tuple(int(s) for s in np.atleast_1d(shape))
-        nbytes = int(np.prod(shape)) * dtype.itemsize
-        self.fd = os.memfd_create("keystrand-groom", os.MFD_CLOEXEC)
-        try:
-            os.ftruncate(self.fd, max(nbytes, 1))
-            # The pages made here at once, not by each process's first writes side by side:
-            # 100,000 strands of wavy in a process with Blender beside, alternating, took 0.86
-            # against 0.97 s (median of 10).
-            os.posix_fallocate(self.fd, 0, max(nbytes, 1))
-            buf = mmap.mmap(self.fd, max(nbytes, 1))
-        except OSError as e:
-            os.close(self.fd)
-            raise MemoryError(f"groom: no room for {nbytes / 2 ** 20:,.0f} MiB of shared memory for the strands "
-                              f"({e.strerror}); generate fewer strands or points per strand") from None
-        self.array = np.frombuffer(buf, dtype, int(np.prod(shape))).reshape(shape)
+        size = int(np.prod(shape))
+        nbytes = max(size * dtype.itemsize, 1)
+        buf, self.fd = _take_spare(nbytes)
+        if buf is None:
+            self.fd = os.memfd_create("keystrand-groom", os.MFD_CLOEXEC)
+            try:
+                os.ftruncate(self.fd, nbytes)
+                # The pages made here at once, not by each process's first writes side by side:
+                # 100,000 strands of wavy in a process with Blender beside, alternating, took 0.86
+                # against 0.97 s (median of 10).
+                os.posix_fallocate(self.fd, 0, nbytes)
+                buf = mmap.mmap(self.fd, nbytes)
+            except OSError as e:
+                self.close()
+                raise MemoryError(f"groom: no room for {nbytes / 2 ** 20:,.0f} MiB of shared memory for the "
+                                  f"strands ({e.strerror}); generate fewer strands or points per strand") from None
+        flat = np.frombuffer(buf, dtype, size)
+        self.array = flat.reshape(shape)
         self.handle = (os.getpid(), self.fd, shape, dtype.str)
+        st = os.fstat(self.fd)
+        # Watched at `flat`: every view of the memory (self.array's rows, reshapes, slices)
+        # names it as its base, so it goes last.
+        weakref.finalize(flat, _array_gone, buf, (st.st_dev, st.st_ino))
 
     def close(self):
         if self.fd >= 0:
@@ -271,23 +282,109 @@ class Shared:
             self.fd = -1
 
 
+# Memory files of shared arrays that went while recycling() was open: [(mmap, file id)].
+_SPARES = []
+_SPARE_LOCK = threading.RLock()
+_RECYCLING = [0]    # open recycling() blocks of this process
+
+
+@contextlib.contextmanager
+def recycling():
+    """Within the block, the memory of a shared array that goes (its result dropped) is kept,
+    and shared_empty takes it rather than new pages; leaving the block frees what was not
+    taken. For a caller that replaces one result with the next of about its size (Blender's
+    Generate, which drops the hair it replaces just before it grows the new): the old
+    result's pages, written and mapped already, need neither the kernel's zeroing of fresh
+    pages nor the unmapping of the old ones (100,000 strands of `wavy`, some 200 MB: 0.96 s
+    against 1.16 s a generate, docs/DECISIONS.md)."""
+    with _SPARE_LOCK:
+        _RECYCLING[0] += 1
+    try:
+        yield
+    finally:
+        with _SPARE_LOCK:
+            _RECYCLING[0] -= 1
+            if _RECYCLING[0] == 0:
+                _SPARES.clear()     # their mappings go with these last references
+
+
+def spares():
+    """Bytes of memory files waiting in recycling() for a shared_empty."""
+    with _SPARE_LOCK:
+        return sum(len(buf) for buf, _ in _SPARES)
+
+
+def _array_gone(buf, file_id):
+    # Called while the array's own view of buf may still be letting go: buf is kept or
+    # dropped here, never closed.
+    with _SPARE_LOCK:
+        if _RECYCLING[0] > 0:
+            _SPARES.append((buf, file_id))
+
+
+def _descriptor_of(file_id):
+    """A new descriptor of this process for the memory file `file_id` ((st_dev, st_ino)),
+    which the mapping keeps open (Python's mmap holds a duplicate of the one it was made
+    from), or -1."""
+    for name in os.listdir("/proc/self/fd"):
+        try:
+            st = os.stat(f"/proc/self/fd/{name}")
+        except OSError:
+            continue
+        if (st.st_dev, st.st_ino) == file_id:
+            return os.dup(int(name))
+    return -1
+
+
+def _take_spare(nbytes):
+    """(mmap, descriptor) of a waiting memory file made nbytes long (the one nearest that
+    size), or (None, -1)."""
+    with _SPARE_LOCK:
+        if not _SPARES:
+            return None, -1
+        best = min(range(len(_SPARES)), key=lambda i: abs(len(_SPARES[i][0]) - nbytes))
+        buf, file_id = _SPARES.pop(best)
+    fd = -1
+    try:
+        fd = _descriptor_of(file_id)
+        if fd < 0:
+            return None, -1
+        had = len(buf)
+        if had != nbytes:
+            buf.resize(nbytes)          # the file too; pages past the old end are new
+            if nbytes > had:
+                os.posix_fallocate(fd, had, nbytes - had)
+    except (OSError, ValueError, SystemError, BufferError):
+        if fd >= 0:
+            os.close(fd)
+        return None, -1
+    return buf, fd
+
+
 def shared_empty(shape, dtype=np.float32):
     return Shared(shape, dtype)
 
 
-def open_shared(handle):
-    """The array of a Shared made by the parent process (its handle), mapped here."""
+def open_shared(handle, rows=None):
+    """The array of a Shared made by the parent process (its handle), mapped here; rows:
+    None (all of it, mapped page by page as it is touched) or (lo, hi), rows lo..hi only,
+    mapped at once (a block that writes all its rows: one call instead of a fault a page)."""
     pid, fd, shape, dtype = handle
+    dtype = np.dtype(dtype)
     try:
         own = os.open(f"/proc/{pid}/fd/{fd}", os.O_RDWR)
     except OSError as e:   # a sandbox that hides other processes' files: the caller grows on threads
         raise WorkerDied(f"a groom worker process cannot map its parent's shared memory ({e})") from None
+    row = int(np.prod(shape[1:])) * dtype.itemsize
+    lo, hi = (0, shape[0]) if rows is None else (int(rows[0]), int(rows[1]))
+    start = lo * row - (lo * row) % mmap.ALLOCATIONGRANULARITY
+    skip = lo * row - start
+    flags = mmap.MAP_SHARED | (mmap.MAP_POPULATE if rows is not None and hasattr(mmap, "MAP_POPULATE") else 0)
     try:
-        n = int(np.prod(shape)) * np.dtype(dtype).itemsize
-        buf = mmap.mmap(own, max(n, 1))
+        buf = mmap.mmap(own, max(skip + (hi - lo) * row, 1), flags=flags, offset=start)
     finally:
         os.close(own)
-    return np.frombuffer(buf, np.dtype(dtype), int(np.prod(shape))).reshape(shape)
+    return np.frombuffer(buf, dtype, (hi - lo) * (row // dtype.itemsize), skip).reshape((hi - lo,) + tuple(shape[1:]))
 
 
 # --- the worker's side ----------------------------------------------------------------------

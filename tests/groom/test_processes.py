@@ -53,6 +53,85 @@ def test_shared_memory_a_worker_cannot_map_is_reported_as_a_lost_worker(worker):
     assert worker.alive()
 
 
+def test_a_worker_maps_only_the_rows_of_its_block(worker):
+    shared = processes.shared_empty((5000, 3))
+    shared.array[...] = np.arange(15000, dtype=np.float32).reshape(5000, 3)
+    # Rows 1234..4321 start and end inside pages (12-byte rows, 4096-byte pages).
+    worker.send(processes.open_shared, shared.handle, (1234, 4321))
+    rows = worker.receive()
+    shared.close()
+    assert rows.shape == (3087, 3)
+    np.testing.assert_array_equal(rows, shared.array[1234:4321])
+
+
+def _file_id(fd):
+    st = os.fstat(fd)
+    return st.st_dev, st.st_ino
+
+
+def _open_files():
+    """(st_dev, st_ino) of every file this process holds open (a mapping's too)."""
+    found = set()
+    for name in os.listdir("/proc/self/fd"):
+        try:
+            st = os.stat(f"/proc/self/fd/{name}")
+        except OSError:
+            continue
+        found.add((st.st_dev, st.st_ino))
+    return found
+
+
+def test_inside_recycling_the_next_shared_array_takes_the_memory_of_one_that_went(worker):
+    with processes.recycling():
+        old = processes.shared_empty((1000, 3))
+        old.array[...] = 7.0
+        was = _file_id(old.fd)
+        old.close()
+        del old
+        assert processes.spares() == 12000
+        new = processes.shared_empty((1500, 3))       # bigger: the file grows
+        assert processes.spares() == 0
+        assert _file_id(new.fd) == was
+        assert new.array.shape == (1500, 3) and (new.array[:1000] == 7.0).all()
+        new.array[1000:] = 8.0
+        worker.send(processes.open_shared, new.handle)
+        np.testing.assert_array_equal(worker.receive(), new.array)
+        new.close()
+    assert new.array.sum() == 7.0 * 3000 + 8.0 * 1500
+
+
+def test_memory_still_in_use_is_never_recycled():
+    with processes.recycling():
+        old = processes.shared_empty(1000)
+        old.array[...] = np.arange(1000)
+        was = _file_id(old.fd)
+        view = old.array[10:20]
+        old.close()
+        del old
+        assert processes.spares() == 0
+        new = processes.shared_empty(1000)
+        new.array[...] = -1.0
+        assert _file_id(new.fd) != was
+        new.close()
+    np.testing.assert_array_equal(view, np.arange(10, 20))
+
+
+def test_what_recycling_did_not_take_is_freed_on_leaving_and_outside_it_at_once():
+    with processes.recycling():
+        kept = processes.shared_empty(1000)
+        kept_id = _file_id(kept.fd)
+        kept.close()
+        del kept
+        assert processes.spares() == 4000 and kept_id in _open_files()
+    assert processes.spares() == 0 and kept_id not in _open_files()
+    dropped = processes.shared_empty(1000)
+    dropped_id = _file_id(dropped.fd)
+    dropped.close()
+    assert dropped_id in _open_files()      # the mapping holds the file
+    del dropped
+    assert processes.spares() == 0 and dropped_id not in _open_files()
+
+
 def test_a_worker_keeps_what_it_was_sent_once(worker):
     big = np.arange(10)
     worker.keep("ten", big)
@@ -106,3 +185,35 @@ def test_a_lost_worker_leaves_the_groom_to_threads_with_the_same_numbers(scalp, 
     for name in ("points", "counts", "radius", "color", "alpha"):
         np.testing.assert_array_equal(getattr(got.strands, name), getattr(expected.strands, name))
     assert got.collision == expected.collision
+
+
+def test_a_groom_grown_in_the_memory_of_the_one_it_replaces_is_the_same(scalp, monkeypatch):
+    from groom import Generator, default_collider, load_preset
+    module = importlib.import_module("groom.generate")
+    if parallel.cpu_threads() < 2:
+        pytest.skip("one CPU: no blocks side by side, no shared arrays")
+    placement = load_preset("wavy").place_keys(scalp)
+    params = placement.params.replace(count=1200, seed=5)
+    monkeypatch.setattr(module, "PROCESS_BLOCK", 100)
+
+    def grow():
+        return Generator(scalp, placement.keys, params, collider=default_collider(), block_strands=200).generate()
+    expected = grow()
+    taken = []
+    real = processes._take_spare
+
+    def watched(nbytes):
+        got = real(nbytes)
+        taken.append(got[0] is not None)
+        return got
+    monkeypatch.setattr(processes, "_take_spare", watched)
+    old = grow()
+    assert taken == [False] * 4          # nothing to take outside recycling()
+    old.strands.points[...] = np.nan     # what the new result must not show
+    taken.clear()
+    with processes.recycling():
+        del old
+        got = grow()
+    assert taken == [True] * 4
+    for name in ("points", "counts", "radius", "color", "alpha"):
+        np.testing.assert_array_equal(getattr(got.strands, name), getattr(expected.strands, name))
