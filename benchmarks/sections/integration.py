@@ -7,6 +7,10 @@ arrays; time from "Render Preview" (`hair.render_preview`: camera, render, pixel
 "Hair Preview" image) to pixels, against the tracer alone. Both measured by
 `benchmarks/blender_hooks.py` driving this checkout's add-on (median of runs after a warm-up,
 same process; Generate, Generate without Blender's undo step and groom alone called in turn).
+Generate grows the new hair in the memory of the hair it replaces (groom.processes.recycling,
+docs/DECISIONS.md); groom alone, called as a script would, gets fresh pages each call, which
+in a process with Blender cost more (DECISIONS, "Blocks of strands in worker processes"). So
+the ratio is what an artist's press costs beside the package's own call, not the write alone.
 
 Issue 5: export time and file size per format for one groom, and the `.tfx` resampling
 error (largest distance from the original strand to the resampled one) per vertex count.
