@@ -102,14 +102,17 @@ BEAM_NEAR_FRACTION = 1e-4
 BEAM_MAX_BINS_PER_CYLINDER = 4096
 
 # --- Pixel sampler (RenderSettings.sampler "pixel", shaders/sampler_pixel.glsl) -------------
-# Distinct cylinders one walk keeps (the nearest hit by any of its samples; with one layer
-# each sample keeps its own nearest instead); cylinders shaded per walk, the heaviest, each
-# with its own shadow rays (one more, drawn by weight, stands for the rest); with one layer,
-# strands shaded per walk (every one a walk of 16 samples meets), with one set of shadow rays
-# from one of them drawn by its light (and one more standing for the rest); the most samples
-# one walk takes (a sample is a bit of a 32-bit mask; 5² = 25; a pixel with more takes
-# several walks: settings.pixel_group). Measured choices: docs/DECISIONS.md,
-# "Samples of one pixel share the walk".
+# The most distinct cylinders one walk may keep: a walk of g samples with layers keeps
+# g × layers (all its samples can see; with one layer each sample keeps its own nearest
+# instead), so g × layers may not pass this (the list's loops are unrolled; at 40 and 48 slots
+# they were not, and llvmpipe's loop cap ended the walks; walks of 8 samples × 4 layers cost
+# as much as twice as many walks of 4); cylinders shaded per walk, the heaviest, each with its
+# own shadow rays (one more, drawn by weight, stands for the rest); with one layer, strands
+# shaded per walk (every one a walk of 16 samples meets), with one set of shadow rays from
+# one of them drawn by its light (and one more standing for the rest); the most samples one
+# walk takes (a sample is a bit of a 32-bit mask; 5² = 25; a pixel with more takes several
+# walks: settings.pixel_group). Measured choices: docs/DECISIONS.md, "Samples of one pixel
+# share the walk".
 PIXEL_LIST = 24
 PIXEL_SHADE = 4
 PIXEL_SHADE_ONE = 16
@@ -146,7 +149,7 @@ def glsl_header():
         "WALK_TEXELS": WALK_TEXELS, "BVH_NODE": BVH_NODE, "BVH_SHORT_STACK": BVH_SHORT_STACK,
         "BEAM_ID_BITS": BEAM_ID_BITS, "BEAM_SLICES": BEAM_SLICES, "BEAM_SCAN_CHUNK": BEAM_SCAN_CHUNK,
         "BEAM_BIN_EPS": float(BEAM_BIN_EPS), "BEAM_SLICE_EPS": float(BEAM_SLICE_EPS),
-        "PIX_M": PIXEL_LIST, "PIX_SHADE": PIXEL_SHADE, "PIX_SHADE_ONE": PIXEL_SHADE_ONE, "GROUP": GROUP, "MAX_VISITS": MAX_VISITS, "MAX_REPEATS": MAX_REPEATS,
+        "PIX_SHADE": PIXEL_SHADE, "PIX_SHADE_ONE": PIXEL_SHADE_ONE, "GROUP": GROUP, "MAX_VISITS": MAX_VISITS, "MAX_REPEATS": MAX_REPEATS,
     }
     lines = ["// Generated from tracer/layout.py when the program is made: edit the numbers there."]
     lines += [f"#define {k} {_glsl_literal(v)}" for k, v in values.items()]

@@ -210,6 +210,31 @@ def test_see_through_hair_past_one_list_walks_each_pixel_in_groups(renderer):
     assert np.array_equal(renderer.render(cam, many), renderer.render(cam, RenderSettings(spp=4, layers=25)))
 
 
+def test_a_walk_keeps_every_layer_a_sample_needs_however_many_hidden_ones_come_first(renderer):
+    """Row 15 of the thin-strand camera, each pixel's 4 samples in a 2 × 2 grid: 30 see-through
+    strands stacked in depth cover the row's upper half (its upper two samples), 4 more behind
+    them its lower half. A sample needs its 4 nearest layers: 8 distinct strands a walk, but 34
+    hit a sample, all within one cell or slice of the walk (a strand far away stretches the
+    scene's depth). The list kept the 24 nearest of one epoch, so the lower samples lost their
+    layers to upper ones they could never see (mean alpha 0.38 against 0.76); it now holds
+    every strand some sample may still see."""
+    row_top = 0.5 - 15 * PX                     # row 15 spans z in [row_top - PX, row_top]
+    upper, lower = row_top - 0.25 * PX, row_top - 0.75 * PX
+
+    def along_x(y, z):
+        return np.array([[-0.3, y, z], [0.0, y, z + 1e-6], [0.3, y, z]])
+    lines = [along_x(-0.03 + 0.0005 * k, upper) for k in range(30)]
+    lines += [along_x(0.0 + 0.0005 * k, lower) for k in range(4)]
+    lines.append(along_x(40.0, 0.3))            # far away: one epoch holds the stack
+    renderer.set_strands(make_strands(lines, radius=0.25 * PX, alpha=0.3))
+    cam = Camera.look_at((0.0, -2.0, 0.0), (0.0, 0.0, 0.0), size=(32, 32), type="ORTHO", ortho_scale=1.0)
+    ind = renderer.render(cam, RenderSettings(spp=4))[15, 8:24, 3]
+    pix = renderer.render(cam, RenderSettings(sampler="pixel", spp=4))[15, 8:24, 3]
+    layered = 1.0 - 0.7 ** 4
+    assert abs(ind.mean() - layered) < 0.03, ind      # every sample sees its four layers
+    assert np.abs(pix - ind).max() <= 0.25 + 1e-6 and abs(pix.mean() - ind.mean()) < 0.01, (pix, ind)
+
+
 def test_see_through_layers_in_shadow_keep_their_darkness(renderer):
     """With layers, a walk shades its few heaviest strands, mostly the front ones; the
     layers behind lie in their shadow. One more strand, drawn in proportion to its weight,

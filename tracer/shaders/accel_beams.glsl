@@ -64,7 +64,7 @@ void beam_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_con
 
 #if PIXEL
 // accel_pixel_nearest for the pixel sampler: every sample of camera_pixel lies in its bin, so
-// every candidate is the bin's; entries in key order, a slice an epoch of pixel_offer, until
+// every candidate is the bin's; entries in key order, slice by slice, offered to pixel_offer until
 // the pixel is settled and the next starts farther than its list's farthest entry
 // (footprint_mask puts an entry no nearer than its key).
 void beam_pixel_nearest(vec3 o, vec3 d, float tmax) {
@@ -80,7 +80,7 @@ void beam_pixel_nearest(vec3 o, vec3 d, float tmax) {
 #if COUNT
         counter.w += 1.0;
 #endif
-        pixel_offer(id, cyl(id, CYL_TOP), cyl(id, CYL_TIP), o, d, slice);
+        pixel_offer(id, cyl(id, CYL_TOP), cyl(id, CYL_TIP), o, d);
         if (pixel_settled()) reach = min(reach, beam_reach(list_far()));
     }
 #if COUNT

@@ -228,7 +228,7 @@ void accel_pixel_nearest(vec3 o, vec3 d, float tmax) {
 #endif
         for (int k = 0; k < count; ++k) {
             int id = texelFetch(tex_order, first + k).x;
-            pixel_offer(id, cyl(id, CYL_TOP), cyl(id, CYL_TIP), o, d, i);
+            pixel_offer(id, cyl(id, CYL_TOP), cyl(id, CYL_TIP), o, d);
         }
         if (pixel_settled()) cut = min(cut, list_far());
     }

@@ -287,7 +287,7 @@ float accel_transmittance(vec3 p, vec3 d, float tmax, int own, float tmin, inout
 // times touches, so where a cylinder is as wide as an eighth of a pixel or more, the cells of
 // the central ray list every cylinder a sample hits. No cell range decides where a hit counts
 // (the list takes a cylinder once, by id): a sample's hit need not lie in a cell of the
-// central ray. Each cell is an epoch of pixel_offer. (Walking the scene's unpadded lists
+// central ray. (Walking the scene's unpadded lists
 // instead, through every cell within the samples' reach of the central ray, visited 8 times
 // the cells: docs/DECISIONS.md.)
 void accel_pixel_nearest(vec3 o, vec3 d, float tmax) {
@@ -312,7 +312,7 @@ void accel_pixel_nearest(vec3 o, vec3 d, float tmax) {
             for (int k = 0; k < count; ++k) {
                 vec4 A4, B4;
                 int id = take_candidate(w, k, A4, B4);
-                pixel_offer(id, A4, B4, o, d, it);
+                pixel_offer(id, A4, B4, o, d);
             }
             if (!empty && pixel_settled()) break;
             if (!inside) break;

@@ -17,7 +17,7 @@
 //                   a slice in order: slot = cursors[bin]++, lists[slot] = id | slice << BITS
 // The slices are dispatched one after another, so a bin's entries come slice by slice; within
 // a slice their order depends on the atomics, which no walk depends on (tracer/beams.py; the
-// pixel sampler takes a slice as one epoch: sampler_pixel.glsl, pixel_offer).
+// pixel sampler's list ends the same whatever the order: sampler_pixel.glsl, pixel_offer).
 // A cylinder that reaches the camera's plane, or whose listing could take more than
 // MAX_BINS_PER_CYLINDER loop steps, is counted in flags[0] and flags[1]: the host then gives
 // the family no beams (its rays walk the grid), as the numpy build raises BeamsUnfit.

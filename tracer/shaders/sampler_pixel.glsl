@@ -4,9 +4,9 @@
 // settings.pixel_group keeps a group's layers within the list). The accelerator walks the
 // pixel's central ray and hands every candidate to pixel_offer (accel_pixel_nearest of
 // accel_grid.glsl / accel_bvh.glsl), which tests all the group's sample rays against it at
-// once (footprint_mask) and keeps the PIX_M nearest distinct cylinders any sample hits,
-// each with the mask of the samples it covers (with one layer, each sample's own nearest
-// cylinder instead). trace_main.glsl then composites each sample's own hits (at most LAYERS
+// once (footprint_mask) and keeps the distinct cylinders a sample hits and may see (at most
+// PIX_M = PIX_GROUP × LAYERS), each with the mask of the samples it covers (with one layer,
+// each sample's own nearest cylinder instead). trace_main.glsl then composites each sample's own hits (at most LAYERS
 // per sample, as the independent sampler does) and shades distinct cylinders once each, on
 // the ray of a sample drawn among those that meet it: with layers the PIX_SHADE heaviest;
 // with one layer the PIX_SHADE_ONE heaviest (so every strand of a walk of up to that many
@@ -150,60 +150,99 @@ uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
 }
 
 #if LAYERS > 1
-// The PIX_M nearest distinct cylinders hit by any sample, sorted by (distance along the
-// central ray, id), each with the epoch it came in (below); empty slots (BIG, NO_ID, mask
-// 0). Constant indices only (accel.glsl says why).
-float lt[PIX_M]; float la[PIX_M]; int lid[PIX_M]; uint lm[PIX_M]; int le[PIX_M];
+// The distinct cylinders hit by any sample that some sample may still see, sorted by
+// (distance along the central ray, id); empty slots (BIG, NO_ID, mask 0) at the end.
+// Constant indices only (accel.glsl says why).
+//
+// A cylinder no sample can see (each of its samples has LAYERS entries before it, or an
+// opaque one: `needed` below) stays unseen however many more come, so the cylinders some
+// sample needs are at most LAYERS a sample: PIX_M = PN·LAYERS slots always hold all of them,
+// and when a new one finds the list full, one already there is no longer needed and goes.
+// The list thus ends as the set of needed cylinders among all offered, whatever order they
+// came in (the GPU builds fill lists with atomics), plus perhaps some unneeded ones, which
+// weigh nothing in trace_main.glsl. (A list of 24 that kept the nearest, masked by the hits of
+// earlier cells or slices only, lost hits once one cell or slice overflowed it.)
+const int PIX_M = PN * LAYERS;
+float lt[PIX_M]; float la[PIX_M]; int lid[PIX_M]; uint lm[PIX_M];
 
 void list_clear() {
-    for (int j = 0; j < PIX_M; ++j) { lt[j] = BIG; la[j] = 0.0; lid[j] = NO_ID; lm[j] = 0u; le[j] = 0; }
+    for (int j = 0; j < PIX_M; ++j) { lt[j] = BIG; la[j] = 0.0; lid[j] = NO_ID; lm[j] = 0u; }
 }
 
-// The samples that see nothing past t: those with LAYERS hits among the list's cylinders
-// nearer than t that came in before `epoch` (counted with one mask per count: have[k] holds
-// the samples with more than k hits), and those behind such a cylinder that lets less than
+// Counts, with one mask per count, the samples of an entry (mask m, alpha a): have[k] holds
+// the samples with more than k entries so far, shut those behind one that lets less than
 // t_eps through (compositing stops there, as the independent sampler's walk does:
-// hits_settled). Opaque hair (alpha 1) thus needs one hit a sample, not LAYERS. A product of
-// translucent layers below t_eps is not looked for (that sample only walks on).
-uint samples_full(float t, int epoch) {
+// hits_settled). Opaque hair (alpha 1) thus needs one hit a sample, not LAYERS.
+void count_entry(inout uint have[LAYERS], inout uint shut, uint m, float a) {
+    for (int k = LAYERS - 1; k > 0; --k) have[k] |= have[k - 1] & m;
+    have[0] |= m;
+    shut |= 1.0 - a < t_eps ? m : 0u;
+}
+
+// The samples that see nothing past (t, id): those with LAYERS entries before it in the
+// list's order, or one opaque. A product of translucent layers below t_eps is not looked for
+// (that sample only walks on).
+uint samples_full(float t, int id) {
     uint have[LAYERS];
     uint shut = 0u;
     for (int k = 0; k < LAYERS; ++k) have[k] = 0u;
     for (int j = 0; j < PIX_M; ++j) {
-        uint mj = lt[j] < t && le[j] < epoch ? lm[j] : 0u;
-        for (int k = LAYERS - 1; k > 0; --k) have[k] |= have[k - 1] & mj;
-        have[0] |= mj;
-        shut |= 1.0 - la[j] < t_eps ? mj : 0u;
+        bool before = lt[j] < t || (lt[j] == t && lid[j] < id);
+        count_entry(have, shut, before ? lm[j] : 0u, la[j]);
     }
     return have[LAYERS - 1] | shut;
 }
 
-// Cylinder `id` (its TOP and TIP texels A4, B4) as a candidate of the central ray o + t·d,
-// offered in `epoch` (the walk's cell, slice or leaf: epochs come in increasing order, and
-// within one the candidates come in whatever order the structure's lists hold them): into the
-// list when any sample hits it, once (a cylinder comes from every cell or leaf that lists it;
-// the list keeps the first).
-void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d, int epoch) {
+// Cylinder `id` (its TOP and TIP texels A4, B4) as a candidate of the central ray o + t·d:
+// into the list when some sample hits it and may see it, once (a cylinder comes from every
+// cell or leaf that lists it).
+void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d) {
     float t;
     uint m = footprint_mask(A4, B4, cyl(id, CYL_N2).xyz, o, d, t);
     // Most candidates hit no sample: they cost the footprint test only.
     if (m == 0u) return;
-    // Samples that already have LAYERS nearer hits in the list will never see this one:
-    // their bits go, so the list spends no slot on what is hidden (thin strands end-on
-    // filled it with hidden ones and lost the hits of samples they did not cover). Only hits
-    // of earlier epochs count, so that the list does not depend on the order within one
-    // (the GPU builds fill their lists with atomics): the list then holds the PIX_M
-    // nearest of what the epochs so far admitted, whatever order they came in.
-    m &= ~samples_full(t, epoch);
     bool dup = false;
     for (int j = 0; j < PIX_M; ++j) dup = dup || lid[j] == id;
-    if (m == 0u || dup) return;
-    float ct = t, ca = B4.w; int cid = id; uint cm = m; int ce = epoch;
+    if (dup) return;
+    // Samples that already have LAYERS entries before it never see this one: their bits go.
+    m &= ~samples_full(t, id);
+    if (m == 0u) return;
+    float ca = B4.w;
+    if (lid[PIX_M - 1] != NO_ID) {
+        // Full: the farthest entry, the newcomer counted in its place, that no sample needs
+        // any more goes (there is one: at most PIX_M are needed).
+        uint have[LAYERS];
+        uint shut = 0u;
+        for (int k = 0; k < LAYERS; ++k) have[k] = 0u;
+        int gone = -1;                  // PIX_M: the newcomer itself
+        bool placed = false;
+        for (int j = 0; j < PIX_M; ++j) {
+            bool here = !placed && (t < lt[j] || (t == lt[j] && id < lid[j]));
+            uint full = have[LAYERS - 1] | shut;
+            gone = here && (m & ~full) == 0u ? PIX_M : gone;
+            count_entry(have, shut, here ? m : 0u, ca);
+            placed = placed || here;
+            full = have[LAYERS - 1] | shut;
+            gone = (lm[j] & ~full) == 0u ? j : gone;
+            count_entry(have, shut, lm[j], la[j]);
+        }
+        // (Last in the order: it was needed when checked against the entries before it.)
+        if (gone == PIX_M) return;
+        // None unneeded cannot happen (see above); were it to, the farthest would go.
+        gone = gone < 0 ? PIX_M - 1 : gone;
+        for (int j = 0; j < PIX_M - 1; ++j) {
+            bool sh = j >= gone;
+            lt[j] = sh ? lt[j + 1] : lt[j]; la[j] = sh ? la[j + 1] : la[j];
+            lid[j] = sh ? lid[j + 1] : lid[j]; lm[j] = sh ? lm[j + 1] : lm[j];
+        }
+        lt[PIX_M - 1] = BIG; la[PIX_M - 1] = 0.0; lid[PIX_M - 1] = NO_ID; lm[PIX_M - 1] = 0u;
+    }
+    float ct = t; int cid = id; uint cm = m;
     for (int j = 0; j < PIX_M; ++j) {
         bool sw = ct < lt[j] || (ct == lt[j] && cid < lid[j]);
-        float ft = lt[j], fa = la[j]; int fi = lid[j]; uint fm = lm[j]; int fe = le[j];
-        lt[j] = sw ? ct : ft; la[j] = sw ? ca : fa; lid[j] = sw ? cid : fi; lm[j] = sw ? cm : fm; le[j] = sw ? ce : fe;
-        ct = sw ? ft : ct; ca = sw ? fa : ca; cid = sw ? fi : cid; cm = sw ? fm : cm; ce = sw ? fe : ce;
+        float ft = lt[j], fa = la[j]; int fi = lid[j]; uint fm = lm[j];
+        lt[j] = sw ? ct : ft; la[j] = sw ? ca : fa; lid[j] = sw ? cid : fi; lm[j] = sw ? cm : fm;
+        ct = sw ? ft : ct; ca = sw ? fa : ca; cid = sw ? fi : cid; cm = sw ? fm : cm;
     }
 }
 
@@ -232,7 +271,7 @@ void list_clear() {
     have = 0u;
 }
 
-void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d, int epoch) {
+void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d) {
     float t;
     uint m = footprint_mask(A4, B4, cyl(id, CYL_N2).xyz, o, d, t);
     if (m == 0u) return;
