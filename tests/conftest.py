@@ -18,3 +18,18 @@ def shared_data():
     if not DATA.is_dir():
         pytest.fail(f"real data folder {DATA} is missing; put ../shared beside the checkout or set HAIR_DATA")
     return DATA
+
+
+@pytest.fixture
+def spare_takes(monkeypatch):
+    """A list that records, for every shared array groom makes from here on, whether it took
+    the memory of one that went inside groom.processes.recycling() (True) or new pages."""
+    from groom import processes
+    taken, real = [], processes._take_spare
+
+    def watched(nbytes):
+        got = real(nbytes)
+        taken.append(got[0] is not None)
+        return got
+    monkeypatch.setattr(processes, "_take_spare", watched)
+    return taken

@@ -378,24 +378,18 @@ def test_a_collider_without_faces_is_reported_naming_it(clean):
     run_failing(bpy.ops.hair.generate, "collider 'Points': no faces")
 
 
-def test_generate_again_grows_the_new_hair_in_the_memory_of_the_old(clean, monkeypatch):
+def test_generate_again_grows_the_new_hair_in_the_memory_of_the_old(clean, spare_takes):
     from groom import parallel, processes
     if not processes.available() or parallel.cpu_threads() < 2:
         pytest.skip("the strands grow in shared memory only beside worker processes (Linux, 2 CPUs)")
     _, scalp = add_head()
     assert bpy.ops.hair.load_preset(preset="wavy") == {'FINISHED'}
     first = [a.copy() for a in hair_arrays(generate(scalp, 5000))]
-    taken = []
-    real = processes._take_spare
-
-    def watched(nbytes):
-        got = real(nbytes)
-        taken.append(got[0] is not None)
-        return got
-    monkeypatch.setattr(processes, "_take_spare", watched)
+    assert spare_takes == [False] * 4           # no hair to replace yet
+    spare_takes.clear()
     again = hair_arrays(generate(scalp, 5000))
     # points, radius, colour and alpha, each in a file of the hair it replaced
-    assert taken == [True] * 4 and processes.spares() == 0
+    assert spare_takes == [True] * 4 and processes.spares() == 0
     for a, b in zip(first, again):
         np.testing.assert_array_equal(a, b)
 

@@ -162,58 +162,48 @@ def test_a_worker_that_dies_is_reported_as_lost(worker):
     assert not worker.alive()
 
 
-def test_a_lost_worker_leaves_the_groom_to_threads_with_the_same_numbers(scalp, monkeypatch):
+def _small_blocks(scalp, monkeypatch, seed):
+    """A job that grows 1,200 strands of wavy in blocks of 200, side by side from 100 strands a
+    block (in worker processes where they run): a function that grows it."""
     from groom import Generator, default_collider, load_preset
     module = importlib.import_module("groom.generate")
     if parallel.cpu_threads() < 2:
         pytest.skip("one CPU: no blocks side by side")
     placement = load_preset("wavy").place_keys(scalp)
-    params = placement.params.replace(count=1200, seed=3)
+    params = placement.params.replace(count=1200, seed=seed)
     monkeypatch.setattr(module, "PARALLEL_BLOCK", 100)
     monkeypatch.setattr(module, "PROCESS_BLOCK", 100)
+    return lambda: Generator(scalp, placement.keys, params, collider=default_collider(), block_strands=200).generate()
+
+
+def test_a_lost_worker_leaves_the_groom_to_threads_with_the_same_numbers(scalp, monkeypatch):
+    grow = _small_blocks(scalp, monkeypatch, seed=3)
     monkeypatch.setattr(processes, "_DISABLED", {})
     monkeypatch.setenv(processes.ENV_SWITCH, "0")
-    expected = Generator(scalp, placement.keys, params, collider=default_collider(), block_strands=200).generate()
+    expected = grow()
     monkeypatch.setenv(processes.ENV_SWITCH, "1")
     dead = processes.Worker()
     dead.send(os._exit, 1)
     dead._proc.wait()
     monkeypatch.setattr(processes, "workers", lambda n: [dead] * n)
     with pytest.warns(RuntimeWarning, match="groom worker process died"):
-        got = Generator(scalp, placement.keys, params, collider=default_collider(), block_strands=200).generate()
+        got = grow()
     assert not processes.available()
     for name in ("points", "counts", "radius", "color", "alpha"):
         np.testing.assert_array_equal(getattr(got.strands, name), getattr(expected.strands, name))
     assert got.collision == expected.collision
 
 
-def test_a_groom_grown_in_the_memory_of_the_one_it_replaces_is_the_same(scalp, monkeypatch):
-    from groom import Generator, default_collider, load_preset
-    module = importlib.import_module("groom.generate")
-    if parallel.cpu_threads() < 2:
-        pytest.skip("one CPU: no blocks side by side, no shared arrays")
-    placement = load_preset("wavy").place_keys(scalp)
-    params = placement.params.replace(count=1200, seed=5)
-    monkeypatch.setattr(module, "PROCESS_BLOCK", 100)
-
-    def grow():
-        return Generator(scalp, placement.keys, params, collider=default_collider(), block_strands=200).generate()
+def test_a_groom_grown_in_the_memory_of_the_one_it_replaces_is_the_same(scalp, monkeypatch, spare_takes):
+    grow = _small_blocks(scalp, monkeypatch, seed=5)
     expected = grow()
-    taken = []
-    real = processes._take_spare
-
-    def watched(nbytes):
-        got = real(nbytes)
-        taken.append(got[0] is not None)
-        return got
-    monkeypatch.setattr(processes, "_take_spare", watched)
     old = grow()
-    assert taken == [False] * 4          # nothing to take outside recycling()
+    assert spare_takes == [False] * 8    # nothing to take outside recycling()
     old.strands.points[...] = np.nan     # what the new result must not show
-    taken.clear()
+    spare_takes.clear()
     with processes.recycling():
         del old
         got = grow()
-    assert taken == [True] * 4
+    assert spare_takes == [True] * 4
     for name in ("points", "counts", "radius", "color", "alpha"):
         np.testing.assert_array_equal(getattr(got.strands, name), getattr(expected.strands, name))
