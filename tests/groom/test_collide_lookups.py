@@ -123,3 +123,32 @@ def test_a_strand_walks_to_the_same_points_alone_or_with_others(head):
     alone = np.concatenate([walk(np.array([i])) for i in range(len(strands))])
     assert np.array_equal(together, alone)
     assert not np.array_equal(together, np.concatenate(pts))    # the walk moved something
+
+
+def test_a_field_made_for_no_clearance_serves_the_clearance_its_band_covers_and_the_presets():
+    """A Collider says which clearance it serves: the largest for which its band would come
+    out the same. Made for that clearance it is the same field, bit for bit, and a little
+    more makes a wider one; so with_clearance builds again only where it must, and the
+    shipped hair on the bundled head takes the field made for none (a Generate built it
+    twice, a second a time)."""
+    from groom import default_scalp, list_presets, load_preset
+    from groom.scalp import default_head
+    head_mesh = default_head()
+    none = collide.Collider(head_mesh.vertices, head_mesh.triangles, "head")
+    served = none.clearance
+    assert 0.1 * none.cell < served < 0.5 * none.cell
+    same = collide.Collider(head_mesh.vertices, head_mesh.triangles, "head", served)
+    wider = collide.Collider(head_mesh.vertices, head_mesh.triangles, "head", served * 1.05)
+    assert same.shape == none.shape and np.array_equal(same.phi, none.phi)
+    assert np.array_equal(same.cell_lower, none.cell_lower) and np.array_equal(same.cell_error, none.cell_error)
+    assert wider.band > none.band and wider.clearance >= served * 1.05
+    # Asked again for what it was made for, the cache has it (no rounding below the ask).
+    assert collide.collider_for(head_mesh.vertices, head_mesh.triangles, "h", served * 1.05) is \
+        collide.collider_for(head_mesh.vertices, head_mesh.triangles, "h", served * 1.05)
+    assert collide.with_clearance(none, served) is none and collide.with_clearance(none, 1.01 * served) is not none
+    scalp = default_collider()
+    for name in list_presets():
+        placement = load_preset(name).place_keys(default_scalp())
+        p = placement.params
+        needed = max(p.radius if k.root_radius is None else k.root_radius for k in placement.keys) + p.collision_margin
+        assert collide.with_clearance(scalp, needed) is scalp, name
