@@ -322,18 +322,24 @@ def _array_gone(buf, file_id):
             _SPARES.append((buf, file_id))
 
 
-def _descriptor_of(file_id):
-    """A new descriptor of this process for the memory file `file_id` ((st_dev, st_ino)),
-    which the mapping keeps open (Python's mmap holds a duplicate of the one it was made
-    from), or -1."""
+def open_files():
+    """{(st_dev, st_ino): descriptor} of the files this process holds open, a mapping's
+    too (Python's mmap holds a duplicate of the descriptor it was made from)."""
+    found = {}
     for name in os.listdir("/proc/self/fd"):
         try:
             st = os.stat(f"/proc/self/fd/{name}")
         except OSError:
             continue
-        if (st.st_dev, st.st_ino) == file_id:
-            return os.dup(int(name))
-    return -1
+        found[(st.st_dev, st.st_ino)] = int(name)
+    return found
+
+
+def _descriptor_of(file_id):
+    """A new descriptor of this process for the memory file `file_id` ((st_dev, st_ino)),
+    which its mapping keeps open, or -1."""
+    fd = open_files().get(file_id)
+    return -1 if fd is None else os.dup(fd)
 
 
 def _take_spare(nbytes):

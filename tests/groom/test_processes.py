@@ -69,18 +69,6 @@ def _file_id(fd):
     return st.st_dev, st.st_ino
 
 
-def _open_files():
-    """(st_dev, st_ino) of every file this process holds open (a mapping's too)."""
-    found = set()
-    for name in os.listdir("/proc/self/fd"):
-        try:
-            st = os.stat(f"/proc/self/fd/{name}")
-        except OSError:
-            continue
-        found.add((st.st_dev, st.st_ino))
-    return found
-
-
 def test_inside_recycling_the_next_shared_array_takes_the_memory_of_one_that_went(worker):
     with processes.recycling():
         old = processes.shared_empty((1000, 3))
@@ -122,14 +110,14 @@ def test_what_recycling_did_not_take_is_freed_on_leaving_and_outside_it_at_once(
         kept_id = _file_id(kept.fd)
         kept.close()
         del kept
-        assert processes.spares() == 4000 and kept_id in _open_files()
-    assert processes.spares() == 0 and kept_id not in _open_files()
+        assert processes.spares() == 4000 and kept_id in processes.open_files()
+    assert processes.spares() == 0 and kept_id not in processes.open_files()
     dropped = processes.shared_empty(1000)
     dropped_id = _file_id(dropped.fd)
     dropped.close()
-    assert dropped_id in _open_files()      # the mapping holds the file
+    assert dropped_id in processes.open_files()      # the mapping holds the file
     del dropped
-    assert processes.spares() == 0 and dropped_id not in _open_files()
+    assert processes.spares() == 0 and dropped_id not in processes.open_files()
 
 
 def test_a_worker_keeps_what_it_was_sent_once(worker):

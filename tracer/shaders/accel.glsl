@@ -45,11 +45,17 @@ void hits_clear() {
     for (int i = 0; i < LAYERS; ++i) { ht[i] = BIG; ha[i] = 0.0; hid[i] = NO_ID; hs[i] = 0; }
 }
 
+// The order of hits everywhere (this list, the pixel sampler's, the meshes'): nearer first,
+// equal distances by id, so that the order cylinders come in never changes the image.
+bool precedes(float ta, int ia, float tb, int ib) {
+    return ta < tb || (ta == tb && ia < ib);
+}
+
 // Entry (t, id, surface, alpha) goes in by one pass of compare-and-swap; a miss (BIG,
 // NO_ID) changes nothing, so callers offer branch-free.
 void hits_offer(float ct, int cid, int cs, float ca) {
     for (int i = 0; i < LAYERS; ++i) {
-        bool sw = ct < ht[i] || (ct == ht[i] && cid < hid[i]);
+        bool sw = precedes(ct, cid, ht[i], hid[i]);
         float ft = ht[i], fa = ha[i]; int fi = hid[i], fs = hs[i];
         ht[i] = sw ? ct : ft; ha[i] = sw ? ca : fa; hid[i] = sw ? cid : fi; hs[i] = sw ? cs : fs;
         ct = sw ? ft : ct; ca = sw ? fa : ca; cid = sw ? fi : cid; cs = sw ? fs : cs;

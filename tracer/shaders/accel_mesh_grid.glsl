@@ -37,7 +37,7 @@ float mesh_walk(vec3 o, vec3 d, float tmax, int own, bool any_hit, out int tri, 
             int id = texelFetch(tex_mesh_idx, sc.x + k).x;
             vec3 hn;
             float t = hit_triangle(id, o, d, hn);
-            if (id != own && t > 0.0 && t < tmax && (t < best || (t == best && id < tri))) {
+            if (id != own && t > 0.0 && t < tmax && precedes(t, id, best, tri)) {
                 best = t; tri = id; n = hn;
             }
         }

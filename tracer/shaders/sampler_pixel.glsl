@@ -6,8 +6,8 @@
 // accel_grid.glsl / accel_bvh.glsl), which tests all the group's sample rays against it at
 // once (footprint_mask) and keeps the distinct cylinders a sample hits and may see (at most
 // PIX_M = PIX_GROUP × LAYERS), each with the mask of the samples it covers (with one layer,
-// each sample's own nearest cylinder instead). trace_main.glsl then composites each sample's own hits (at most LAYERS
-// per sample, as the independent sampler does) and shades distinct cylinders once each, on
+// each sample's own nearest cylinder instead). trace_main.glsl then composites each
+// sample's own hits (at most LAYERS per sample, as the independent sampler does) and shades distinct cylinders once each, on
 // the ray of a sample drawn among those that meet it: with layers the PIX_SHADE heaviest;
 // with one layer the PIX_SHADE_ONE heaviest (so every strand of a walk of up to that many
 // samples), with one set of shadow rays a pixel, cast from a strand drawn by its light; and
@@ -155,7 +155,7 @@ uint footprint_mask(vec4 A4, vec4 B4, vec3 n2, vec3 o, vec3 d, out float trep) {
 // Constant indices only (accel.glsl says why).
 //
 // A cylinder no sample can see (each of its samples has LAYERS entries before it, or an
-// opaque one: `needed` below) stays unseen however many more come, so the cylinders some
+// opaque one: samples_full) stays unseen however many more come, so the cylinders some
 // sample needs are at most LAYERS a sample: PIX_M = PN·LAYERS slots always hold all of them,
 // and when a new one finds the list full, one already there is no longer needed and goes.
 // The list thus ends as the set of needed cylinders among all offered, whatever order they
@@ -187,7 +187,7 @@ uint samples_full(float t, int id) {
     uint shut = 0u;
     for (int k = 0; k < LAYERS; ++k) have[k] = 0u;
     for (int j = 0; j < PIX_M; ++j) {
-        bool before = lt[j] < t || (lt[j] == t && lid[j] < id);
+        bool before = precedes(lt[j], lid[j], t, id);
         count_entry(have, shut, before ? lm[j] : 0u, la[j]);
     }
     return have[LAYERS - 1] | shut;
@@ -217,7 +217,7 @@ void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d) {
         int gone = -1;                  // PIX_M: the newcomer itself
         bool placed = false;
         for (int j = 0; j < PIX_M; ++j) {
-            bool here = !placed && (t < lt[j] || (t == lt[j] && id < lid[j]));
+            bool here = !placed && precedes(t, id, lt[j], lid[j]);
             uint full = have[LAYERS - 1] | shut;
             gone = here && (m & ~full) == 0u ? PIX_M : gone;
             count_entry(have, shut, here ? m : 0u, ca);
@@ -239,7 +239,7 @@ void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d) {
     }
     float ct = t; int cid = id; uint cm = m;
     for (int j = 0; j < PIX_M; ++j) {
-        bool sw = ct < lt[j] || (ct == lt[j] && cid < lid[j]);
+        bool sw = precedes(ct, cid, lt[j], lid[j]);
         float ft = lt[j], fa = la[j]; int fi = lid[j]; uint fm = lm[j];
         lt[j] = sw ? ct : ft; la[j] = sw ? ca : fa; lid[j] = sw ? cid : fi; lm[j] = sw ? cm : fm;
         ct = sw ? ft : ct; ca = sw ? fa : ca; cid = sw ? fi : cid; cm = sw ? fm : cm;
@@ -278,7 +278,7 @@ void pixel_offer(int id, vec4 A4, vec4 B4, vec3 o, vec3 d) {
     // Nearer wins, equal distances by id (as the list orders them); a cylinder offered again
     // from another cell changes nothing.
     for (int i = 0; i < PN; ++i) {
-        bool on = (m & (1u << uint(i))) != 0u && (t < st[i] || (t == st[i] && id < sid[i]));
+        bool on = (m & (1u << uint(i))) != 0u && precedes(t, id, st[i], sid[i]);
         st[i] = on ? t : st[i]; sid[i] = on ? id : sid[i]; sa[i] = on ? B4.w : sa[i];
     }
     have |= m;
