@@ -15,6 +15,7 @@ import resource
 import statistics
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -203,6 +204,81 @@ def hwm_mb():
                 if line.startswith("VmHWM:"):
                     return int(line.split()[1]) / 1024.0
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+class PeakMemory:
+    """The peak memory this process and its child processes (groom's workers) hold while the
+    `with` block runs, in MiB, sampled every `every` seconds on a thread: each process's own
+    pages (its proportional set size less its share of shared memory) plus the shared-memory
+    pages made since the block began (the system's Shmem, where groom's memory files live),
+    so a page two processes map counts once, and a page of a memory file counts whether or
+    not some process maps it just then. A sum of the processes' own peaks (VmHWM) gets both
+    wrong: a worker that writes its blocks' rows and unmaps them counts one block at most.
+    Linux only (`peak` stays None elsewhere)."""
+
+    def __init__(self, every=0.01):
+        self.every, self.peak, self.parts = every, None, None
+        self._stop = threading.Event()
+
+    @staticmethod
+    def _shmem_mb():
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("Shmem:"):
+                    return int(line.split()[1]) / 1024.0
+        return 0.0
+
+    @staticmethod
+    def _own_mb(pid):
+        """(Pss - Pss_Shmem) of process pid in MiB, 0 once it is gone."""
+        pss = shmem = 0
+        with contextlib.suppress(OSError, ValueError, IndexError):
+            with open(f"/proc/{pid}/smaps_rollup") as f:
+                for line in f:
+                    if line.startswith("Pss:"):
+                        pss = int(line.split()[1])
+                    elif line.startswith("Pss_Shmem:"):
+                        shmem = int(line.split()[1])
+        return (pss - shmem) / 1024.0
+
+    @staticmethod
+    def _children():
+        me, found = os.getpid(), []
+        for name in os.listdir("/proc"):
+            if name.isdigit():
+                with contextlib.suppress(OSError, ValueError, IndexError):
+                    with open(f"/proc/{name}/stat") as f:
+                        if int(f.read().rsplit(")", 1)[1].split()[1]) == me:
+                            found.append(int(name))
+        return found
+
+    def sample(self):
+        own = self._own_mb(os.getpid())
+        children = sum(self._own_mb(pid) for pid in self._children())
+        shared = max(0.0, self._shmem_mb() - self._shmem0)
+        total = own + children + shared
+        if self.peak is None or total > self.peak:
+            self.peak, self.parts = total, {"own": own, "children": children, "shared": shared}
+
+    def _run(self):
+        while not self._stop.wait(self.every):
+            self.sample()
+
+    def __enter__(self):
+        if not os.path.exists("/proc/self/smaps_rollup"):
+            return self
+        self._shmem0 = self._shmem_mb()
+        self.sample()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        if getattr(self, "_thread", None) is not None:
+            self._stop.set()
+            self._thread.join()
+            self.sample()
+        return False
 
 
 def run_child(code, timeout=600):

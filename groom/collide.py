@@ -107,7 +107,7 @@ _SEARCH_DIRECTIONS = _fibonacci_sphere(200)
 # Strands walked together at most (see resolve_strands), and at least where there are more
 # (the walk goes point by point: two parts of fewer strands each pay its steps' overhead, and
 # only take more CPU time, measured at 10,000 strands of wavy).
-_WALK_PART = 32768
+_WALK_PART = 8192
 _MIN_WALK_PART = 2048
 # Points a strand's translated rest is checked ahead at a time (_first_offence), the first
 # few of them on their own.
@@ -933,19 +933,17 @@ def walk_into(collider, out, points, offsets, counts, radius, margin, strands, k
     (moved (len(strands),) bool, (points moved, points unresolved, largest move)). One part
     per thread (parts of at least _MIN_WALK_PART), or parts of _WALK_PART strands when there
     are more (the walk goes point by point, and each part pays its steps' overhead once; the
-    bound keeps its arrays to some 100 MB)."""
+    bound keeps its arrays to some 100 MB). Each part writes its strands' rows when it is
+    done, so no part's arrays outlive it."""
     n_parts = max(min(-(-len(strands) // _MIN_WALK_PART), threads or cpu_threads()), -(-len(strands) // _WALK_PART))
     parts = [p for p in np.array_split(np.arange(len(strands)), n_parts) if len(p)]
-    walked = run_jobs([partial(_walk_strands, collider, points, offsets, counts, radius, margin, strands[p], k0[p],
-                               root_value[p]) for p in parts], threads)
+    walked = run_jobs([partial(_walk_strands, collider, out, points, offsets, counts, radius, margin, strands[p],
+                               k0[p], root_value[p]) for p in parts], threads)
     moved = np.zeros(len(strands), bool)
     points_moved, unresolved, largest = 0, 0, 0.0
-    for part, (rows, new, changed, part_unresolved, part_largest) in zip(parts, walked):
-        ch = _indices(changed)
-        out[rows[ch]] = _take(new, ch)
-        cnt = counts[strands[part]]
-        moved[part] = np.logical_or.reduceat(changed, np.cumsum(cnt) - cnt)
-        points_moved += int(changed.sum())
+    for part, (part_moved, part_points, part_unresolved, part_largest) in zip(parts, walked):
+        moved[part] = part_moved
+        points_moved += part_points
         unresolved += part_unresolved
         largest = max(largest, part_largest)
     return moved, (points_moved, unresolved, largest)
@@ -1043,16 +1041,23 @@ def _clear_with_middles(collider, p, half, clearance, middles):
     return ok
 
 
-def _walk_strands(collider, points, offsets, counts, radius, margin, strands, k0, root_value):
-    """(rows, new points float64, which rows changed, unresolved points, largest move) of
-    the strands walked."""
-    rows = _flat_points(offsets[strands], counts[strands])
+def _walk_strands(collider, out, points, offsets, counts, radius, margin, strands, k0, root_value):
+    """Walks `strands` and writes the points that move into `out`: (which strands moved,
+    points moved, unresolved points, largest move)."""
+    cnt = counts[strands]
+    rows = _flat_points(offsets[strands], cnt)
     original = _take(points, rows).astype(np.float64)
     target = radius[rows].astype(np.float64) + margin
-    new, unresolved = _walk(collider, original, target, counts[strands], k0, root_value)
-    step = new - original
-    move = np.sqrt(_dot(step, step))
-    return rows, new, move > 0, unresolved, float(move.max())
+    new, unresolved = _walk(collider, original, target, cnt, k0, root_value)
+    del target
+    original -= new
+    move = np.sqrt(_dot(original, original))
+    del original
+    changed = move > 0
+    ch = _indices(changed)
+    out[rows[ch]] = _take(new, ch)
+    return (np.logical_or.reduceat(changed, np.cumsum(cnt) - cnt), int(ch.size), unresolved,
+            float(move.max()))
 
 
 def _flat_points(off, cnt):

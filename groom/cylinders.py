@@ -274,7 +274,8 @@ def strand_attributes(seed, ids, counts, along, base_radius, base_color, params,
     taper_start then linear to 0 ('taper_from'). Colour: base + U(-1,1)·variation per strand
     and per point, clamped to [0, 1]. Alpha: 1 up to alpha_start, then linear to alpha_tip.
     out: None or (radius (P,), colour (P, 3), alpha (P,)) float32 arrays to write into (the
-    rows of a block of the whole result); the arrays written are returned either way."""
+    rows of a block of the whole result; alpha None where it is 1 everywhere, alpha_is_one:
+    nothing is written for it); the arrays written are returned either way."""
     if out is not None:
         made = strand_attributes(seed, ids, counts, along, base_radius, base_color, params) if (
             not isinstance(along, tuple) or np.any(params.color_variation_point)) else None
@@ -282,7 +283,8 @@ def strand_attributes(seed, ids, counts, along, base_radius, base_color, params,
             color = strand_colors(seed, ids, base_color, params)
             return _flat_attributes(along, counts, base_radius, color, params, out=out)
         for whole, part in zip(out, made):
-            whole[...] = part
+            if whole is not None:
+                whole[...] = part
         return out
     n_pts = int(counts.sum())
     color = strand_colors(seed, ids, base_color, params)
@@ -339,8 +341,9 @@ def _flat_attributes(s, counts, base_radius, color, params, threads=None, out=No
         np.multiply(np.repeat(base[lo:hi], n), radius_profile(part, params), out=radius[start:stop])
         for c in range(3):
             rgb[start:stop, c] = np.repeat(clamped[lo:hi, c], n)
-        a = alpha_profile(part, params)
-        alpha[start:stop] = 1.0 if a is None else a
+        if alpha is not None:
+            a = alpha_profile(part, params)
+            alpha[start:stop] = 1.0 if a is None else a
     if len(counts):
         parallel.run_jobs([partial(fill, lo, hi) for lo, hi in parallel.ranges(len(counts))], threads)
     return out
@@ -366,9 +369,21 @@ def radius_profile(s, params):
     return np.clip((np.float32(1.0) - s) / span, 0.0, 1.0)
 
 
+def alpha_is_one(params):
+    """Whether the strands of `params` are opaque throughout (alpha 1 at every point)."""
+    return params.alpha_start >= 1.0 or params.alpha_tip == 1.0
+
+
+def ones(n):
+    """(n,) float32 ones that take no memory a point: a read-only view of one value, the alpha
+    of an opaque groom (4 bytes a point, 250 MB at 1,000,000 strands of 62 points, that say
+    nothing). Code that needs the values laid out (a file, a GPU buffer) lays them out."""
+    return np.broadcast_to(np.float32(1.0), (int(n),))
+
+
 def alpha_profile(s, params):
     """Alpha at fractions s (float32) of the strand length; None where it is 1 everywhere."""
-    if params.alpha_start >= 1.0 or params.alpha_tip == 1.0:
+    if alpha_is_one(params):
         return None
     t = np.clip((s - params.alpha_start) / (1.0 - params.alpha_start), 0.0, 1.0)
     return (1.0 + (params.alpha_tip - 1.0) * t).astype(np.float32)
@@ -376,7 +391,8 @@ def alpha_profile(s, params):
 
 def fill_strand_rows(radius, color, alpha, base_radius, strand_color, radius_prof, alpha_prof):
     """Write radius (S·n,), color (S·n,3), alpha (S·n,) of S strands of n points that share
-    the profiles radius_prof, alpha_prof (n,) (alpha_prof None: 1): each strand's radius
+    the profiles radius_prof, alpha_prof (n,) (alpha_prof None: 1; alpha None: not written,
+    as for an opaque groom's result, cylinders.ones): each strand's radius
     scales the profile, its colour (clamped here) is copied to its points. Whole rows per
     strand, written in place (one strided pass per colour channel: np.repeat copies 12-byte
     rows one at a time and takes about twice as long)."""
@@ -387,7 +403,8 @@ def fill_strand_rows(radius, color, alpha, base_radius, strand_color, radius_pro
     per_point = color.reshape(rows + (3,))
     for c in range(3):
         per_point[:, :, c] = clamped[:, c, None]
-    alpha.reshape(rows)[...] = 1.0 if alpha_prof is None else alpha_prof
+    if alpha is not None:
+        alpha.reshape(rows)[...] = 1.0 if alpha_prof is None else alpha_prof
 
 
 SLIVER = 1e-3   # of a bin: a last segment shorter than this is merged when the bound allows

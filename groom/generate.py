@@ -28,8 +28,8 @@ from hairio.npyfile import NpzWriter
 from hairio.strands import GUIDE_NPZ_NAMES, NPZ_NAMES
 from hairio.validate import check_memory
 
-from .cylinders import (adaptive_sigma, alpha_profile, fill_strand_rows, radius_profile, strand_attributes,
-                        strand_colors)
+from .cylinders import (adaptive_sigma, alpha_is_one, alpha_profile, fill_strand_rows, ones, radius_profile,
+                        strand_attributes, strand_colors)
 from .frames import frame_axes, root_frames
 from .interpolate import (EXACT_SAMPLES, FINE_SAMPLES, KEY_SAMPLES, curvature_bound, evaluate_strands, key_offsets,
                           key_rows, lerp_errors, nested_table, table_samples, LERP_SHARE,
@@ -408,11 +408,16 @@ class _Grower:
         return [partial(fill, lo, hi) for lo, hi in ranges(len(ids))], out
 
 
+def _rows_of(whole, lo, hi):
+    """Rows lo..hi of each array of the whole result (None stays None: an opaque groom's alpha)."""
+    return tuple(None if a is None else a[lo:hi] for a in whole)
+
+
 def _keep_rows(rows, grown):
     """Copy into the result's rows what _grow made in arrays of its own (the work does not
     always allow writing in place)."""
     for whole, part in zip(rows, grown[:1] + grown[2:5]):
-        if not np.may_share_memory(whole, part):
+        if whole is not None and not np.may_share_memory(whole, part):
             whole[...] = part
 
 
@@ -483,7 +488,7 @@ def _worker_grow(i, handles, lo, hi, offsets, first):
     being strand `first` of the run)."""
     g = processes.STATE["grower"]
     inputs, plan = processes.STATE.pop(i)
-    rows = tuple(processes.open_shared(h, (lo, hi)) for h in handles)
+    rows = tuple(None if h is None else processes.open_shared(h, (lo, hi)) for h in handles)
     grown = g._grow(g.context, *inputs, slice(0, len(inputs[4])), _quiet, plan, into=rows, collide=False)
     del plan
     _keep_rows(rows, grown)
@@ -663,17 +668,18 @@ class Generator(_Grower):
         starts = np.concatenate([[0], np.cumsum([int(c.sum()) for _, c in plans])])
         counts = np.concatenate([c for _, c in plans])
         total = int(starts[-1])
-        out = (_plain_empty((total, 3)), _plain_empty(total), _plain_empty((total, 3)), _plain_empty(total))
+        out = (_plain_empty((total, 3)), _plain_empty(total), _plain_empty((total, 3)),
+               None if alpha_is_one(self.params) else _plain_empty(total))     # None: cylinders.ones
 
         def grow(i):
             inputs, idx = block(i)
             plan, plans[i] = plans[i], None     # each block's curve parameters go once it has grown
-            rows = slice(int(starts[i]), int(starts[i + 1]))
+            rows = _rows_of(out, int(starts[i]), int(starts[i + 1]))
             # The block grows straight into its rows of the whole (no copy of some 32 bytes a
             # point, nor the fresh pages of a block's own arrays).
-            grown = self._grow(context, *inputs, idx, _quiet, plan, into=tuple(whole[rows] for whole in out))
+            grown = self._grow(context, *inputs, idx, _quiet, plan, into=rows)
             del plan
-            _keep_rows(tuple(whole[rows] for whole in out), grown)
+            _keep_rows(rows, grown)
             return grown[5]
         stage = self._growing_stage()
         self._report(0.35, stage)
@@ -752,9 +758,11 @@ class Generator(_Grower):
             starts = np.concatenate([[0], np.cumsum([int(c_.sum()) for _, c_ in plans])])
             counts = np.concatenate([c_ for _, c_ in plans])
             total = int(starts[-1])
-            shared = [processes.shared_empty(shape) for shape in ((total, 3), total, (total, 3), total)]
-            out = tuple(a.array for a in shared)
-            handles = [a.handle for a in shared]
+            # An opaque groom's alpha takes no memory (cylinders.ones): no file, no handle.
+            shapes = ((total, 3), total, (total, 3)) + (() if alpha_is_one(self.params) else (total,))
+            shared = [processes.shared_empty(shape) for shape in shapes]
+            out = tuple(a.array for a in shared) + (None,) * (4 - len(shared))
+            handles = [a.handle for a in shared] + [None] * (4 - len(shared))
             edges = np.concatenate([[0], np.cumsum([hi - lo for lo, hi in blocks])])
             offsets = np.zeros(len(counts), np.int64)
             np.cumsum(counts[:-1], out=offsets[1:])
@@ -762,7 +770,9 @@ class Generator(_Grower):
             def grow(i):
                 inputs, idx = block(i)
                 plan, plans[i] = plans[i], None
-                rows = tuple(whole[int(starts[i]):int(starts[i + 1])] for whole in out)
+                for a in shared:
+                    a.reserve(int(starts[i]), int(starts[i + 1]))
+                rows = _rows_of(out, int(starts[i]), int(starts[i + 1]))
                 grown = self._grow(context, *inputs, idx, _quiet, plan, into=rows, collide=False)
                 del plan
                 _keep_rows(rows, grown)
@@ -856,6 +866,8 @@ class Generator(_Grower):
 
     def _build(self, guides, weights, parts):
         pts, counts, radius, color, alpha = parts
+        if alpha_is_one(self.params):
+            alpha = ones(len(pts))      # however it was grown: no memory a point
         s = self.samples
         # The arrays are groom's own, already float32/int32 and checked where their inputs
         # entered (finite keys and scalp, radii >= 0, colours clamped, alpha in [0, 1]), so
@@ -951,6 +963,8 @@ class Generator(_Grower):
         new_counts = old_counts.copy()
         new_counts[sel] = parts[1]
         new_arrays = dict(zip(("pts", "radius", "color", "alpha"), (parts[0], parts[2], parts[3], parts[4])))
+        if alpha_is_one(self.params):
+            del new_arrays["alpha"]     # _build makes it (cylinders.ones)
         old_off = np.zeros(len(old_counts), np.int64)
         np.cumsum(old_counts[:-1], out=old_off[1:])
         part_off = np.zeros(len(sel), np.int64)
@@ -982,7 +996,7 @@ class Generator(_Grower):
             src = np.repeat(base - new_off, new_counts) + np.arange(int(new_counts.sum()))
             for name, new in new_arrays.items():
                 out[name] = np.take(np.concatenate([c[name], new.astype(c[name].dtype)]), src, axis=0)
-        return out["pts"], new_counts, out["radius"], out["color"], out["alpha"]
+        return out["pts"], new_counts, out["radius"], out["color"], out.get("alpha")
 
 
 def generate(scalp, keys, params=None, collider=None, progress=None):

@@ -258,16 +258,15 @@ class Shared:
         if buf is None:
             self.fd = os.memfd_create("keystrand-groom", os.MFD_CLOEXEC)
             try:
+                # No pages yet: each block's are made when it grows (reserve, open_shared), so
+                # the result's memory comes as the blocks' curve parameters go (1,000,000
+                # strands of wavy: 1.9 GB at the peak against 2.7 GB with every page made here).
                 os.ftruncate(self.fd, nbytes)
-                # The pages made here at once, not by each process's first writes side by side:
-                # 100,000 strands of wavy in a process with Blender beside, alternating, took 0.86
-                # against 0.97 s (median of 10).
-                os.posix_fallocate(self.fd, 0, nbytes)
                 buf = mmap.mmap(self.fd, nbytes)
             except OSError as e:
                 self.close()
-                raise MemoryError(f"groom: no room for {nbytes / 2 ** 20:,.0f} MiB of shared memory for the "
-                                  f"strands ({e.strerror}); generate fewer strands or points per strand") from None
+                raise MemoryError(_no_room(nbytes, e)) from None
+        self._row = (nbytes // shape[0]) if shape[0] else 0
         flat = np.frombuffer(buf, dtype, size)
         self.array = flat.reshape(shape)
         self.handle = (os.getpid(), self.fd, shape, dtype.str)
@@ -276,10 +275,31 @@ class Shared:
         # names it as its base, so it goes last.
         weakref.finalize(flat, _array_gone, buf, (st.st_dev, st.st_ino))
 
+    def reserve(self, lo, hi):
+        """Makes the pages of rows lo..hi now (_reserve), before this process writes them."""
+        _reserve(self.fd, lo * self._row, (hi - lo) * self._row)
+
     def close(self):
         if self.fd >= 0:
             os.close(self.fd)
             self.fd = -1
+
+
+def _no_room(nbytes, error):
+    return (f"groom: no room for {nbytes / 2 ** 20:,.0f} MiB of shared memory for the strands "
+            f"({error.strerror}); generate fewer strands or points per strand")
+
+
+def _reserve(fd, offset, length):
+    """Makes the pages of bytes offset..offset + length of memory file fd at once: one call,
+    not a fault a page as they are first written (100,000 strands of wavy in a process with
+    Blender beside, alternating: 0.86 against 0.97 s), and MemoryError where the machine has
+    no room for them, where a write to a page it cannot make would kill the process (SIGBUS)."""
+    if length > 0:
+        try:
+            os.posix_fallocate(fd, offset, length)
+        except OSError as e:
+            raise MemoryError(_no_room(length, e)) from None
 
 
 # Memory files of shared arrays that went while recycling() was open: [(mmap, file id)].
@@ -374,7 +394,8 @@ def shared_empty(shape, dtype=np.float32):
 def open_shared(handle, rows=None):
     """The array of a Shared made by the parent process (its handle), mapped here; rows:
     None (all of it, mapped page by page as it is touched) or (lo, hi), rows lo..hi only,
-    mapped at once (a block that writes all its rows: one call instead of a fault a page)."""
+    their pages made (_reserve) and mapped at once (a block that writes all its rows: one call
+    instead of a fault a page)."""
     pid, fd, shape, dtype = handle
     dtype = np.dtype(dtype)
     try:
@@ -387,6 +408,8 @@ def open_shared(handle, rows=None):
     skip = lo * row - start
     flags = mmap.MAP_SHARED | (mmap.MAP_POPULATE if rows is not None and hasattr(mmap, "MAP_POPULATE") else 0)
     try:
+        if rows is not None:
+            _reserve(own, start, skip + (hi - lo) * row)
         buf = mmap.mmap(own, max(skip + (hi - lo) * row, 1), flags=flags, offset=start)
     finally:
         os.close(own)

@@ -215,6 +215,35 @@ def test_radius_color_and_alpha_profiles(scalp, keys_around):
     np.testing.assert_allclose(const.radius, 2e-4, rtol=1e-6)
 
 
+@pytest.mark.parametrize("side_by_side", [None, "threads", "processes"])
+def test_an_opaque_groom_keeps_one_alpha_for_all_its_points(scalp, side_by_side, monkeypatch):
+    """wavy is opaque: its alpha is a read-only view of one value (no memory a point), however
+    its blocks grew and after an incremental update; a fade gets its values a point, the
+    same in every way of growing."""
+    import importlib
+    from groom import default_collider, load_preset, processes
+    module = importlib.import_module("groom.generate")
+    if side_by_side == "processes" and not processes.available():
+        pytest.skip("worker processes need Linux's memfd")
+    monkeypatch.setenv(processes.ENV_SWITCH, "1" if side_by_side == "processes" else "0")
+    for name in ("PARALLEL_BLOCK", "PROCESS_BLOCK"):
+        monkeypatch.setattr(module, name, 100 if side_by_side else 10 ** 9)
+    placement = load_preset("wavy").place_keys(scalp)
+    params = placement.params.replace(count=1200, seed=2)
+    assert params.alpha_start >= 1.0
+    keys = list(placement.keys)
+    gen = Generator(scalp, keys, params, collider=default_collider(), block_strands=200)
+    for result in (gen.generate(), gen.update_keys({3: keys[4]})):
+        a = result.strands.alpha
+        assert a.shape == (result.strands.num_points,) and a.dtype == np.float32
+        assert a.strides == (0,) and not a.flags.writeable and (a == 1.0).all()
+    fade = params.replace(alpha_start=0.5, alpha_tip=0.3)
+    got = Generator(scalp, keys, fade, collider=default_collider(), block_strands=200).generate().strands.alpha
+    one = Generator(scalp, keys, fade, collider=default_collider(), block_strands=10_000).generate().strands.alpha
+    assert got.strides == (4,) and 0.3 <= got.min() < 0.35 and got.max() == 1.0
+    np.testing.assert_array_equal(got, one)
+
+
 # --- SPEC §9 stress cases ------------------------------------------------------------------
 
 def _samples_at(scalp, points):

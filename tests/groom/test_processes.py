@@ -120,6 +120,35 @@ def test_what_recycling_did_not_take_is_freed_on_leaving_and_outside_it_at_once(
     assert processes.spares() == 0 and dropped_id not in processes.open_files()
 
 
+def _allocated(fd):
+    return os.fstat(fd).st_blocks * 512
+
+
+def test_a_shared_array_takes_its_pages_a_block_of_rows_at_a_time(worker):
+    shared = processes.shared_empty((100_000, 3))       # 1.2 MB
+    assert _allocated(shared.fd) == 0                   # no page before a block reserves its rows
+    shared.reserve(0, 10_000)
+    assert 120_000 <= _allocated(shared.fd) < 1_200_000
+    worker.send(processes.open_shared, shared.handle, (50_000, 60_000))    # a worker's block
+    assert worker.receive().shape == (10_000, 3)
+    assert 240_000 <= _allocated(shared.fd) < 1_200_000
+    shared.close()
+
+
+def test_no_room_for_a_blocks_rows_is_a_memory_error_not_a_killed_process(monkeypatch):
+    import errno
+
+    def full(fd, offset, length):
+        raise OSError(errno.ENOSPC, "No space left on device")
+    shared = processes.shared_empty((1000, 3))
+    monkeypatch.setattr(os, "posix_fallocate", full)
+    with pytest.raises(MemoryError, match="no room for .* generate fewer strands"):
+        shared.reserve(0, 1000)
+    with pytest.raises(MemoryError, match="No space left on device"):
+        processes.open_shared(shared.handle, (0, 500))
+    shared.close()
+
+
 def test_a_worker_keeps_what_it_was_sent_once(worker):
     big = np.arange(10)
     worker.keep("ten", big)
@@ -182,16 +211,21 @@ def test_a_lost_worker_leaves_the_groom_to_threads_with_the_same_numbers(scalp, 
     assert got.collision == expected.collision
 
 
+# The memory files of one run of wavy: points, radius and colour (it is opaque, so its alpha
+# takes none: groom.cylinders.ones).
+FILES = 3
+
+
 def test_a_groom_grown_in_the_memory_of_the_one_it_replaces_is_the_same(scalp, monkeypatch, spare_takes):
     grow = _small_blocks(scalp, monkeypatch, seed=5)
     expected = grow()
     old = grow()
-    assert spare_takes == [False] * 8    # nothing to take outside recycling()
+    assert spare_takes == [False] * (2 * FILES)    # nothing to take outside recycling()
     old.strands.points[...] = np.nan     # what the new result must not show
     spare_takes.clear()
     with processes.recycling():
         del old
         got = grow()
-    assert spare_takes == [True] * 4
+    assert spare_takes == [True] * FILES
     for name in ("points", "counts", "radius", "color", "alpha"):
         np.testing.assert_array_equal(getattr(got.strands, name), getattr(expected.strands, name))
