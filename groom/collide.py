@@ -55,7 +55,7 @@ import numpy as np
 
 from hairio import InputError
 
-from .parallel import cpu_threads, ranges, run_jobs
+from .parallel import cpu_threads, free_memory, ranges, run_jobs
 from .scalp import Scalp, _closest_on_triangles
 
 # Points _locate takes all three axes of at once (see there).
@@ -166,6 +166,7 @@ class Collider:
         if not (np.isfinite(clearance) and clearance >= 0):
             raise InputError(f"collider {self.name!r}: clearance must be a finite distance >= 0, got {clearance}")
         self._build_field(clearance)
+        free_memory()
 
     # --- the mesh ---------------------------------------------------------------------------
 

@@ -1,8 +1,10 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
+import os
 import threading
 
 import pytest
 
+from groom import parallel
 from groom.parallel import ranges, run_each, run_jobs
 
 
@@ -86,3 +88,45 @@ def test_run_each_raises_after_every_started_job_finished():
     with pytest.raises(KeyboardInterrupt):
         run_each([tracked] * 8, threads=2, done=stop)
     assert len(finished) == len(running) < 8
+
+
+_RSS = """
+def rss():
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) / 1024 for line in f if line.startswith("VmRSS"))
+"""
+
+
+def _in_fresh_process(code):
+    import json
+    import subprocess
+    import sys
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    out = subprocess.run([sys.executable, "-c", "import json, sys\nsys.path.insert(0, '.')\n" + _RSS + code],
+                         capture_output=True, text=True, cwd=root, timeout=300)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.skipif(parallel._malloc_trim() is None or not os.path.exists("/proc/self/status"),
+                    reason="glibc's malloc_trim and Linux's /proc")
+def test_free_memory_hands_the_heaps_free_pages_back_and_the_collider_build_leaves_none():
+    got = _in_fresh_process("""
+import numpy as np
+from groom import parallel
+big = np.ones(2 << 20); del big          # glibc now serves arrays below 16 MB from its heap
+parts = [np.ones(1 << 19) for _ in range(40)]
+last = parts[-1]                         # at the heap's top: nothing below it is trimmed on its own
+del parts
+held = rss()
+parallel.free_memory()
+print(json.dumps([held, rss()]))
+""")
+    assert got[0] - got[1] > 100          # of some 160 MB the arrays left
+    got = _in_fresh_process("""
+from groom import default_collider
+before = rss()
+c = default_collider()
+print(json.dumps([before, rss()]))
+""")
+    assert got[1] - got[0] < 60           # its arrays (24 MB) and little else; 144 MB before
