@@ -26,14 +26,12 @@ class AdaptiveResolution:
     needed: np.ndarray
 
 
-# Strands per range of the adaptive resolution's sweep: at least _CHUNK (each of its many
-# small steps per bin has enough strands that the threads are not held up by the interpreter
-# between them), and where the threads at hand have more, one range per thread up to
-# _CHUNK_MAX (its bins x strands arrays, three of float32, then 32 MB): a block of 50,000
-# strands in a worker process took 0.71 s of CPU in one range against 0.80 s in four
-# (100,000 strands of wavy, placement alone, two runs).
+# Strands per range of the adaptive resolution's sweep: its bins x strands arrays (three of
+# float32, 8 MB at this size) stay modest, and each of its many small steps per bin has
+# enough strands that the threads are not held up by the interpreter between them. (One
+# range per thread up to 65,536 strands saved 45 ms of CPU at 100,000 strands but left
+# 300 MB more on the heap at 1,000,000: docs/DECISIONS.md.)
 _CHUNK = 16384
-_CHUNK_MAX = 65536
 
 # A strand the cap stops gets the cap's cylinders placed for a looser tolerance, raised by
 # this factor until they suffice (so it is within 25 % of the best the cap allows).
@@ -140,10 +138,7 @@ def _greedy_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=_
         m = None if mix is None else (mix[0], mix[1], mix[2][lo:hi])
         return _greedy_range(frac[lo:hi], guides[lo:hi], weights[lo:hi], bins_t, tolerance[lo:hi], max_cylinders,
                              table_step, m)
-    here = parallel.threads_here(threads)
-    size = max(chunk, min(_CHUNK_MAX, -(-len(frac) // here)))
-    parts = parallel.run_jobs([partial(part, lo, hi) for lo, hi in parallel.ranges(len(frac), here, size=size)],
-                              threads)
+    parts = parallel.run_jobs([partial(part, lo, hi) for lo, hi in parallel.ranges(len(frac), size=chunk)], threads)
     if not parts:
         return np.zeros(0), np.zeros(0, np.int64), np.zeros(0, bool), np.zeros(0)
     return tuple(np.concatenate([p[i] for p in parts]) for i in range(4))

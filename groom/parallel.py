@@ -80,12 +80,6 @@ def _on_worker():
     return _SERIAL or threading.current_thread().name.startswith(_PREFIX)
 
 
-def threads_here(threads=None):
-    """The threads run_jobs would spread jobs over from the calling thread: one on a pool's
-    thread or in a worker process, else `threads` (default: one per CPU)."""
-    return 1 if _on_worker() else (threads or cpu_threads())
-
-
 def run_serially():
     """From now on this process runs every job on the calling thread (a worker process)."""
     global _SERIAL
