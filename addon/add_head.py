@@ -13,6 +13,7 @@ import bpy
 from bpy.types import Operator
 from bpy_extras.object_utils import AddObjectHelper, add_object_align_init
 
+from . import hair
 from .transaction import reports_errors, transaction
 
 HEAD_NAME = "Hair Head"
@@ -85,6 +86,9 @@ class HAIR_OT_add_head(Operator, AddObjectHelper):
             if obj != scalp:
                 obj.select_set(False)
         context.view_layer.objects.active = scalp
+        # The preset loaded next places its keys out of the head: its collider is built now,
+        # while the artist picks one.
+        hair.prebuild_collider(scalp, context.evaluated_depsgraph_get(), collision=True)
         self.report({'INFO'}, f"Added {head.name!r} with scalp {scalp.name!r}: load a preset onto it")
         return {'FINISHED'}
 

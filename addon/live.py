@@ -257,8 +257,16 @@ def on_load(*_args):
     forget_all()
 
 
+@persistent
+def on_loaded(*_args):
+    """A file is loaded: its scalps' colliders are built meanwhile (hair.prebuild_colliders),
+    so its first Generate does not wait for them."""
+    hair.prebuild_colliders()
+
+
 HANDLERS = ((bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
-            (bpy.app.handlers.load_pre, on_load))
+            (bpy.app.handlers.load_pre, on_load),
+            (bpy.app.handlers.load_post, on_loaded))
 
 
 def register_handlers():

@@ -45,6 +45,7 @@ unless that is the only way out; so a strand let go by the surface bends back to
 direction gradually instead of kinking. The root never moves.
 """
 import hashlib
+import threading
 import time
 import weakref
 from collections import OrderedDict
@@ -732,26 +733,97 @@ def _dot(u, v):
 
 _CACHE = OrderedDict()
 _CACHE_SIZE = 4
+_CACHE_LOCK = threading.Lock()
+_BUILDING = {}      # mesh digest -> (clearance, threading.Event set when that build ends)
 
 
-def collider_for(vertices, triangles, name="collider", clearance=0.0):
-    """A Collider for the mesh, made once per process for the same vertices and triangles
-    and a clearance at least this large (building one takes about a second; a Generate that
-    reruns on the same head reuses it)."""
+def _mesh_key(vertices, triangles):
+    """(vertices float64, triangles, digest) of a mesh, as collider_for keys it."""
     v = np.ascontiguousarray(vertices, dtype=np.float64)
     t = np.ascontiguousarray(triangles)
     if t.dtype.kind in "iu":
         t = t.astype(np.int64)
     digest = hashlib.blake2b(v.tobytes() + b"|" + t.tobytes() + str(v.shape).encode(), digest_size=16).digest()
+    return v, t, digest
+
+
+def _cached(digest, clearance, name):
+    """The cached collider of this mesh for at least `clearance`, named `name`, or None
+    (with _CACHE_LOCK held)."""
     for key, hit in reversed(_CACHE.items()):
         if key[0] == digest and hit.clearance >= clearance:
             _CACHE.move_to_end(key)
             return hit if hit.name == str(name) else _renamed(hit, name)
-    made = Collider(v, t, name, clearance)
-    _CACHE[(digest, clearance)] = made
-    while len(_CACHE) > _CACHE_SIZE:
-        _CACHE.popitem(last=False)
-    return made
+    return None
+
+
+def collider_for(vertices, triangles, name="collider", clearance=0.0):
+    """A Collider for the mesh, made once per process for the same vertices and triangles
+    and a clearance at least this large (building one takes about a second; a Generate that
+    reruns on the same head reuses it). Where another thread is building it
+    (prebuild_collider), waits for that build rather than making a second one; where that
+    build failed, builds it here, so its error is raised here."""
+    v, t, digest = _mesh_key(vertices, triangles)
+    while True:
+        hit, claim = _claim(digest, clearance, name)
+        if hit is not None:
+            return hit
+        if claim[0]:
+            return _build_claimed(v, t, name, clearance, digest, claim[1])
+        claim[1].wait()
+
+
+def _claim(digest, clearance, name):
+    """(the cached collider, None), or (None, (True, event)): this caller builds it and sets
+    event when done, or (None, (False, event)): another thread is building it."""
+    with _CACHE_LOCK:
+        hit = _cached(digest, clearance, name)
+        if hit is not None:
+            return hit, None
+        pending = _BUILDING.get(digest)
+        if pending is not None and pending[0] >= clearance:
+            return None, (False, pending[1])
+        done = threading.Event()
+        _BUILDING[digest] = (clearance, done)
+        return None, (True, done)
+
+
+def _build_claimed(v, t, name, clearance, digest, done):
+    try:
+        made = Collider(v, t, name, clearance)
+        with _CACHE_LOCK:
+            _CACHE[(digest, clearance)] = made
+            while len(_CACHE) > _CACHE_SIZE:
+                _CACHE.popitem(last=False)
+        return made
+    finally:
+        with _CACHE_LOCK:
+            if _BUILDING.get(digest, (None, None))[1] is done:
+                del _BUILDING[digest]
+        done.set()
+
+
+def prebuild_collider(vertices, triangles, name="collider", clearance=0.0):
+    """Starts building collider_for(vertices, triangles, name, clearance) on a thread of its
+    own and returns the thread (None where it is made or being made already): a caller who
+    knows a collider will be wanted soon (Blender's Add Head: the preset loaded next places
+    its keys with it) gets it built meanwhile (numpy leaves the interpreter free most of
+    the time), and a collider_for of the same mesh waits for that build rather than making
+    a second. An error of the build is not raised there: the collider_for that wants the
+    collider builds it again and raises it."""
+    v, t, digest = _mesh_key(vertices, triangles)
+    hit, claim = _claim(digest, clearance, name)
+    if hit is not None or not claim[0]:
+        return None
+
+    def build():
+        try:
+            _build_claimed(v, t, name, clearance, digest, claim[1])
+        except Exception:   # noqa: BLE001 -- raised again, with its message, where it is wanted
+            pass
+    thread = threading.Thread(target=build, name="groom-collider", daemon=True)
+    thread.start()
+    return thread
 
 
 def _renamed(collider, name):

@@ -405,3 +405,52 @@ def test_generate_failing_inside_collision_gives_the_old_hair_back(clean, monkey
     activate(scalp)
     run_failing(bpy.ops.hair.generate, "Boom", internal=True)
     assert len(scalp.keystrand_hair.hair_object.data.curves) == 300
+
+
+def _colliders_built(monkeypatch):
+    """The threads of the Colliders built from here on (groom's cache emptied first)."""
+    import threading
+    from collections import OrderedDict
+    from groom import collide
+    monkeypatch.setattr(collide, "_CACHE", OrderedDict())
+    built, real = [], collide.Collider.__init__
+
+    def counted(self, *args, **kwargs):
+        built.append(threading.current_thread().name)
+        real(self, *args, **kwargs)
+    monkeypatch.setattr(collide.Collider, "__init__", counted)
+    return built
+
+
+def _background_builds_done():
+    import threading
+    for thread in threading.enumerate():
+        if thread.name == "groom-collider":
+            thread.join()
+
+
+def test_add_head_builds_the_heads_collider_while_the_artist_picks_a_preset(clean, monkeypatch):
+    built = _colliders_built(monkeypatch)
+    _, scalp = add_head()
+    _background_builds_done()
+    assert built == ["groom-collider"]
+    assert bpy.ops.hair.load_preset(preset="wavy") == {'FINISHED'}      # places its keys with it
+    assert built == ["groom-collider"]
+
+
+def test_a_loaded_files_scalps_get_their_colliders_built_meanwhile(clean, monkeypatch):
+    live = ext_module(clean, "live")
+    assert (bpy.app.handlers.load_post, live.on_loaded) in live.HANDLERS
+    _, scalp = add_head()
+    _background_builds_done()
+    built = _colliders_built(monkeypatch)
+    scalp.keystrand_hair.collision = False
+    live.on_loaded()
+    _background_builds_done()
+    assert built == []                  # Collision off: nothing to build
+    scalp.keystrand_hair.collision = True
+    live.on_loaded()
+    _background_builds_done()
+    assert built == ["groom-collider"]
+    assert bpy.ops.hair.load_preset(preset="wavy") == {'FINISHED'}
+    assert built == ["groom-collider"]
