@@ -33,3 +33,20 @@ def spare_takes(monkeypatch):
         return got
     monkeypatch.setattr(processes, "_take_spare", watched)
     return taken
+
+
+@pytest.fixture
+def colliders_built(monkeypatch):
+    """A list that records the thread of every groom Collider built from here on (groom's
+    cache of colliders emptied first, so none is found made)."""
+    import threading
+    from collections import OrderedDict
+    from groom import collide
+    monkeypatch.setattr(collide, "_CACHE", OrderedDict())
+    built, real = [], collide.Collider.__init__
+
+    def counted(self, *args, **kwargs):
+        built.append(threading.current_thread().name)
+        real(self, *args, **kwargs)
+    monkeypatch.setattr(collide.Collider, "__init__", counted)
+    return built

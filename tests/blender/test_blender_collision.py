@@ -407,21 +407,6 @@ def test_generate_failing_inside_collision_gives_the_old_hair_back(clean, monkey
     assert len(scalp.keystrand_hair.hair_object.data.curves) == 300
 
 
-def _colliders_built(monkeypatch):
-    """The threads of the Colliders built from here on (groom's cache emptied first)."""
-    import threading
-    from collections import OrderedDict
-    from groom import collide
-    monkeypatch.setattr(collide, "_CACHE", OrderedDict())
-    built, real = [], collide.Collider.__init__
-
-    def counted(self, *args, **kwargs):
-        built.append(threading.current_thread().name)
-        real(self, *args, **kwargs)
-    monkeypatch.setattr(collide.Collider, "__init__", counted)
-    return built
-
-
 def _background_builds_done():
     import threading
     for thread in threading.enumerate():
@@ -429,8 +414,8 @@ def _background_builds_done():
             thread.join()
 
 
-def test_add_head_builds_the_heads_collider_while_the_artist_picks_a_preset(clean, monkeypatch):
-    built = _colliders_built(monkeypatch)
+def test_add_head_builds_the_heads_collider_while_the_artist_picks_a_preset(clean, colliders_built):
+    built = colliders_built
     _, scalp = add_head()
     _background_builds_done()
     assert built == ["groom-collider"]
@@ -438,12 +423,12 @@ def test_add_head_builds_the_heads_collider_while_the_artist_picks_a_preset(clea
     assert built == ["groom-collider"]
 
 
-def test_a_loaded_files_scalps_get_their_colliders_built_meanwhile(clean, monkeypatch):
+def test_a_loaded_files_scalps_get_their_colliders_built_meanwhile(clean, request):
     live = ext_module(clean, "live")
     assert (bpy.app.handlers.load_post, live.on_loaded) in live.HANDLERS
     _, scalp = add_head()
     _background_builds_done()
-    built = _colliders_built(monkeypatch)
+    built = request.getfixturevalue("colliders_built")      # from here on
     scalp.keystrand_hair.collision = False
     live.on_loaded()
     _background_builds_done()

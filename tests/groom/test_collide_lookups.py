@@ -154,24 +154,9 @@ def test_a_field_made_for_no_clearance_serves_the_clearance_its_band_covers_and_
         assert collide.with_clearance(scalp, needed) is scalp, name
 
 
-def _counting_builds(monkeypatch):
-    """A list that records the thread of every Collider built from here on (the cache
-    emptied first, so nothing is found made)."""
-    import threading
-    from collections import OrderedDict
-    monkeypatch.setattr(collide, "_CACHE", OrderedDict())
-    built, real = [], collide.Collider.__init__
-
-    def counted(self, *args, **kwargs):
-        built.append(threading.current_thread().name)
-        real(self, *args, **kwargs)
-    monkeypatch.setattr(collide.Collider, "__init__", counted)
-    return built
-
-
-def test_a_collider_built_on_another_thread_is_waited_for_not_built_twice(monkeypatch):
+def test_a_collider_built_on_another_thread_is_waited_for_not_built_twice(colliders_built):
     from groom import default_head
-    built = _counting_builds(monkeypatch)
+    built = colliders_built
     head = default_head()
     thread = collide.prebuild_collider(head.vertices, head.triangles, "Head")
     assert thread is not None
@@ -185,8 +170,8 @@ def test_a_collider_built_on_another_thread_is_waited_for_not_built_twice(monkey
     assert collide.prebuild_collider(head.vertices, head.triangles, "Head") is None     # made
 
 
-def test_a_collider_that_fails_on_another_thread_fails_with_its_message_where_it_is_wanted(monkeypatch):
-    built = _counting_builds(monkeypatch)
+def test_a_collider_that_fails_on_another_thread_fails_with_its_message_where_it_is_wanted(colliders_built):
+    built = colliders_built
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [np.nan, 0, 1]], float)
     t = np.array([[0, 1, 2], [0, 1, 3]])
     thread = collide.prebuild_collider(v, t, "Broken")
