@@ -260,8 +260,10 @@ def on_load(*_args):
 @persistent
 def on_loaded(*_args):
     """A file is loaded: its scalps' colliders are built meanwhile (hair.prebuild_colliders),
-    so its first Generate does not wait for them."""
-    hair.prebuild_colliders()
+    so its first Generate does not wait for them; not in background mode, where a script
+    that wants one asks at once (and a batch render wants none)."""
+    if not bpy.app.background:
+        hair.prebuild_colliders()
 
 
 HANDLERS = ((bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),

@@ -429,12 +429,13 @@ def test_a_loaded_files_scalps_get_their_colliders_built_meanwhile(clean, reques
     _, scalp = add_head()
     _background_builds_done()
     built = request.getfixturevalue("colliders_built")      # from here on
+    hair = ext_module(clean, "hair")     # what on_loaded does outside background mode
     scalp.keystrand_hair.collision = False
-    live.on_loaded()
+    hair.prebuild_colliders()
     _background_builds_done()
     assert built == []                  # Collision off: nothing to build
     scalp.keystrand_hair.collision = True
-    live.on_loaded()
+    hair.prebuild_colliders()
     _background_builds_done()
     assert built == ["groom-collider"]
     assert bpy.ops.hair.load_preset(preset="wavy") == {'FINISHED'}
