@@ -63,7 +63,10 @@ def prebuild_collider(scalp, depsgraph=None, collision=None):
 
 def prebuild_colliders():
     """prebuild_collider for every scalp of the file with Collision on (a file just loaded)."""
-    depsgraph = bpy.context.evaluated_depsgraph_get()
+    try:
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+    except (AttributeError, RuntimeError):    # no context to evaluate in: the meshes as stored
+        depsgraph = None
     return [prebuild_collider(obj, depsgraph) for obj in bpy.data.objects
             if obj.type == 'MESH' and obj.keystrand_hair.role == 'SCALP' and obj.keystrand_hair.collision]
 
