@@ -260,7 +260,8 @@ class Shared:
             try:
                 # No pages yet: each block's are made when it grows (reserve, open_shared), so
                 # the result's memory comes as the blocks' curve parameters go (1,000,000
-                # strands of wavy: 1.9 GB at the peak against 2.7 GB with every page made here).
+                # strands of wavy: 2,647 MiB at the peak against 2,717 with every page made
+                # here; docs/DECISIONS.md, "The result's memory, counted once").
                 os.ftruncate(self.fd, nbytes)
                 buf = mmap.mmap(self.fd, nbytes)
             except OSError as e:

@@ -70,7 +70,10 @@ def _checked_extras(guides, root_uv, n_s):
 class Strands:
     """points (P,3) f32, counts (S,) i32, radius (P,) f32, color (P,3) f32 linear RGB,
     alpha (P,) f32, wisp (S,) i32. Point 0 of each strand is its root. Optional: guides
-    (a Guides: the key strands and each strand's guides and weights) and root_uv (S,2) f32."""
+    (a Guides: the key strands and each strand's guides and weights) and root_uv (S,2) f32.
+    An array may be a read-only view that takes no memory a point (groom gives an opaque
+    groom's alpha as one 1.0 broadcast: groom.cylinders.ones); code that needs it laid out
+    (a file, a GPU buffer) lays it out, as np.ascontiguousarray does."""
     points: np.ndarray
     counts: np.ndarray
     radius: np.ndarray
