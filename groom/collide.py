@@ -1123,9 +1123,10 @@ def _walk_strands(collider, out, points, offsets, counts, radius, margin, strand
     target = radius[rows].astype(np.float64) + margin
     new, unresolved = _walk(collider, original, target, cnt, k0, root_value)
     del target
-    original -= new
-    move = np.sqrt(_dot(original, original))
-    del original
+    step = original     # each point's move, in place of where it was
+    step -= new
+    move = np.sqrt(_dot(step, step))
+    del original, step
     changed = move > 0
     ch = _indices(changed)
     out[rows[ch]] = _take(new, ch)

@@ -267,7 +267,6 @@ class Shared:
             except OSError as e:
                 self.close()
                 raise MemoryError(_no_room(nbytes, e)) from None
-        self._row = (nbytes // shape[0]) if shape[0] else 0
         flat = np.frombuffer(buf, dtype, size)
         self.array = flat.reshape(shape)
         self.handle = (os.getpid(), self.fd, shape, dtype.str)
@@ -278,7 +277,8 @@ class Shared:
 
     def reserve(self, lo, hi):
         """Makes the pages of rows lo..hi now (_reserve), before this process writes them."""
-        _reserve(self.fd, lo * self._row, (hi - lo) * self._row)
+        row = self.array.strides[0]
+        _reserve(self.fd, lo * row, (hi - lo) * row)
 
     def close(self):
         if self.fd >= 0:
