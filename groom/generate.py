@@ -39,7 +39,7 @@ from .params import GroomParams
 from .sampling import sample_roots
 from .scalp import Scalp
 from . import processes
-from .parallel import MIN_SPLIT, cpu_threads, free_memory, one_thread, ranges, run_each, run_jobs
+from .parallel import MIN_SPLIT, cpu_threads, one_thread, ranges, run_each, run_jobs
 from .collide import CollisionReport, CollisionStats, StrandCollision, first_pass, walk_into
 from .shaping import clump_arguments, shape_strands, shaping_bound
 from .wisps import check_groups, guide_weights_by_guide, root_groups_for
@@ -490,11 +490,10 @@ def _worker_plan(i, inputs):
     return plan[1], g.notes
 
 
-def _worker_grow(i, handles, lo, hi, offsets, first, last=False):
+def _worker_grow(i, handles, lo, hi, offsets, first):
     """Block i grown into rows lo..hi of the parent's shared arrays (handles), then its
     collision's first pass (_first_pass_of; offsets: its strands' first rows, the first
-    being strand `first` of the run); `last`: the last of several blocks this worker grows
-    in the run, after which it hands its free heap back (see _grown_in_processes)."""
+    being strand `first` of the run)."""
     g = processes.STATE["grower"]
     inputs, plan = processes.STATE.pop(i)
     rows = tuple(None if h is None else processes.open_shared(h, (lo, hi)) for h in handles)
@@ -504,9 +503,6 @@ def _worker_grow(i, handles, lo, hi, offsets, first, last=False):
     counts = grown[1]
     del grown
     found = _first_pass_of(g._collision, rows[:2], offsets - lo, counts, 0, len(counts))
-    del rows
-    if last:
-        free_memory()
     return None if found is None else (found[0] + first,) + found[1:]
 
 
@@ -747,12 +743,6 @@ class Generator(_Grower):
         sides = [None] + processes.workers(workers - 1)
         helpers = sides[1:]
         owner = [sides[i % workers] for i in range(len(blocks))]
-        # The last of several blocks a side grows: the heap that the side's earlier blocks
-        # left free goes back to the system around it (parallel.free_memory), in the parent
-        # before the block is grown and in a worker after, since the run's peak comes as
-        # the last blocks' rows are made (1,000,000 strands: 2,248-2,270 MiB against 2,307;
-        # each process held some 130 MB of free heap by then).
-        last = {max(range(s, len(blocks), workers)) for s in range(workers) if len(blocks) > s + workers}
         here = one_thread()
         futures, shared, seconds = [], [], []
         c = self._collision
@@ -797,8 +787,6 @@ class Generator(_Grower):
             def grow(i):
                 inputs, idx = block(i)
                 plan, plans[i] = plans[i], None
-                if i in last:
-                    free_memory()
                 for a in shared:
                     a.reserve(int(starts[i]), int(starts[i + 1]))
                 rows = _rows_of(out, int(starts[i]), int(starts[i + 1]))
@@ -810,7 +798,7 @@ class Generator(_Grower):
             stage = self._growing_stage()
             self._report(0.35, stage)
             found = collect(lambda i: (_worker_grow, i, handles, int(starts[i]), int(starts[i + 1]),
-                                       offsets[edges[i]:edges[i + 1]], int(edges[i]), i in last), grow,
+                                       offsets[edges[i]:edges[i + 1]], int(edges[i])), grow,
                             lambda i: self._report(0.35 + (0.45 if c is not None else 0.6) * (i + 1) / len(blocks),
                                                    stage))
             if c is not None:

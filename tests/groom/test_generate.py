@@ -397,28 +397,20 @@ def test_growing_in_blocks_changes_no_number(scalp, resolution, variation, side_
     if side_by_side == "processes" and not processes.available():
         pytest.skip("worker processes need Linux's memfd")
     monkeypatch.setenv(processes.ENV_SWITCH, "1" if side_by_side == "processes" else "0")
-    grown_on, trims, last_sent = [], [], []
+    grown_on = []
 
     def blocks_do(call):
         """call() with the blocks side by side or not, whatever their size, noting the
-        threads the blocks of this process grew on, this process's heap trims and which
-        blocks sent to a worker were its last."""
-        grow, send = module._Grower._grow, processes.Worker.send
+        threads the blocks of this process grew on."""
+        grow = module._Grower._grow
 
         def noted(self, *args, **kwargs):
             grown_on.append(threading.current_thread())
             return grow(self, *args, **kwargs)
-
-        def sent(self, fn, *args):
-            if fn is module._worker_grow:
-                last_sent.append((args[0], args[-1]))
-            return send(self, fn, *args)
         with monkeypatch.context() as m:
             for name in ("PARALLEL_BLOCK", "PROCESS_BLOCK"):
                 m.setattr(module, name, 100 if side_by_side else 10 ** 9)
             m.setattr(module._Grower, "_grow", noted)
-            m.setattr(module, "free_memory", lambda: trims.append(len(grown_on)))
-            m.setattr(processes.Worker, "send", sent)
             return call()
     placement = load_preset("wavy").place_keys(scalp)
     params = placement.params.replace(count=3000, seed=4, resolution_mode=resolution,
@@ -437,10 +429,6 @@ def test_growing_in_blocks_changes_no_number(scalp, resolution, variation, side_
         # This process grew its share (every second block) on its one thread; the others grew
         # in a worker process.
         assert len(grown_on) == -(-n_blocks // sides) and len(workers) == 1
-        # Each side hands its free heap back around its last block: this process before
-        # growing it, the worker after growing its own.
-        assert trims == [len(grown_on) - 1]
-        assert [i for i, last in last_sent if last] == [max(i for i, _ in last_sent)]
     else:
         assert len(grown_on) >= n_blocks and len(workers) == (sides if side_by_side else 0)
     assert [f for f, _ in reports] == sorted(f for f, _ in reports) and reports[-1][0] == 1.0
