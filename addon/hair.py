@@ -48,17 +48,20 @@ def read_collider(scalp, depsgraph=None, scalp_data=None, collision=None):
 def prebuild_collider(scalp, depsgraph=None, collision=None):
     """Starts building the scalp's collider on a thread of its own (groom.collide's
     prebuild_collider), so the Load Preset or Generate that follows finds it made (about a
-    second on the bundled head) rather than building it then. The mesh is read here, as
+    second on the bundled head) rather than building it then; the same thread then starts
+    groom's worker processes and sends them the collider (generate.prepare_workers), which
+    the first Generate would otherwise wait for. The mesh is read here, as
     read_collider reads it (Blender's data stays on this thread); nothing where collision is
     off or the collider cannot be read: the operator that needs it says why. Returns the
     thread or None."""
     from groom.collide import prebuild_collider as start
+    from groom.generate import prepare_workers
     from hairio import InputError
     try:
         mesh = scene_data.read_collider(scalp, depsgraph, None, collision)
     except InputError:
         return None
-    return None if mesh is None else start(*mesh)
+    return None if mesh is None else start(*mesh, then=prepare_workers)
 
 
 def prebuild_colliders():

@@ -803,14 +803,16 @@ def _build_claimed(v, t, name, clearance, digest, done):
         done.set()
 
 
-def prebuild_collider(vertices, triangles, name="collider", clearance=0.0):
+def prebuild_collider(vertices, triangles, name="collider", clearance=0.0, then=None):
     """Starts building collider_for(vertices, triangles, name, clearance) on a thread of its
     own and returns the thread (None where it is made or being made already): a caller who
     knows a collider will be wanted soon (Blender's Add Head: the preset loaded next places
     its keys with it) gets it built meanwhile (numpy leaves the interpreter free most of
     the time), and a collider_for of the same mesh waits for that build rather than making
     a second. An error of the build is not raised there: the collider_for that wants the
-    collider builds it again and raises it."""
+    collider builds it again and raises it. then: None or a callable given the collider
+    on that thread once it is built (generate.prepare_workers); its errors are dropped,
+    as it only prepares what a later run would otherwise do itself."""
     v, t, digest = _mesh_key(vertices, triangles)
     hit, claim = _claim(digest, clearance, name)
     if hit is not None or not claim[0]:
@@ -818,7 +820,9 @@ def prebuild_collider(vertices, triangles, name="collider", clearance=0.0):
 
     def build():
         try:
-            _build_claimed(v, t, name, clearance, digest, claim[1])
+            made = _build_claimed(v, t, name, clearance, digest, claim[1])
+            if then is not None:
+                then(made)
         except Exception:   # noqa: BLE001 -- raised again, with its message, where it is wanted
             pass
     thread = threading.Thread(target=build, name="groom-collider", daemon=True)

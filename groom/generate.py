@@ -1025,6 +1025,18 @@ class Generator(_Grower):
         return out["pts"], new_counts, out["radius"], out["color"], out.get("alpha")
 
 
+def prepare_workers(collider=None):
+    """Starts the worker processes a Generator of many strands grows its blocks in, and sends
+    them `collider` (a Collider), ahead of the run: the first run in a process otherwise
+    waits for both (40,000 strands of `wavy`: 0.59-0.70 s against 0.42-0.49 s after this and
+    0.31-0.38 s for later runs). For a caller who knows a run is coming (Blender's Add Head
+    and a loaded file's scalps, on the thread that built the collider). Blocks until the
+    workers have it; nothing where workers are not used (one CPU, or not Linux)."""
+    threads = cpu_threads()
+    if threads > 1:
+        processes.prepare(threads - 1, () if collider is None else (collider,))
+
+
 def generate(scalp, keys, params=None, collider=None, progress=None):
     """Grow ordinary strands on `scalp` from `keys` (list of KeyStrand) with `params`
     (GroomParams; defaults when None), kept out of `collider`, telling `progress` how far it

@@ -201,6 +201,26 @@ def discard(found):
     pool[:] = [w for w in pool if w not in found]
 
 
+def prepare(n, objects=()):
+    """Start n workers and have each keep `objects` (Worker.keep), waiting until they have:
+    what a run's first jobs would otherwise wait for (a worker's start and imports, some
+    0.15 s, then the objects, the bundled head's collider being 25 MB). Nothing where
+    workers are off or another thread's run has them; off for the rest of the process
+    when one cannot start."""
+    if n < 1 or not available() or not try_lock():
+        return
+    try:
+        for w in workers(n):
+            for obj in objects:
+                w.keep(token(obj), obj)
+            while w.pending:
+                w.receive()
+    except WorkerDied as e:
+        disable(str(e))
+    finally:
+        unlock()
+
+
 @atexit.register
 def _stop_all():
     for w in _WORKERS.get(os.getpid(), []):

@@ -415,10 +415,18 @@ def _background_builds_done():
 
 
 def test_add_head_builds_the_heads_collider_while_the_artist_picks_a_preset(clean, colliders_built):
+    """...and then starts groom's worker processes and sends them the collider, which the
+    first Generate would otherwise wait for."""
+    import os
+    from groom import collide, parallel, processes
     built = colliders_built
     _, scalp = add_head()
     _background_builds_done()
     assert built == ["groom-collider"]
+    (collider,) = collide._CACHE.values()
+    if processes.available() and parallel.cpu_threads() > 1:
+        workers = processes._WORKERS.get(os.getpid(), [])
+        assert workers and all(processes.token(collider) in w.known for w in workers)
     assert bpy.ops.hair.load_preset(preset="wavy") == {'FINISHED'}      # places its keys with it
     assert built == ["groom-collider"]
 

@@ -1,6 +1,8 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The collider's look-ups and the walk's bookkeeping give the same numbers whichever way a
 call is split: small and large calls, blocks of strands, one part or several."""
+import threading
+
 import numpy as np
 import pytest
 
@@ -158,12 +160,18 @@ def test_a_collider_built_on_another_thread_is_waited_for_not_built_twice(collid
     from groom import default_head
     built = colliders_built
     head = default_head()
-    thread = collide.prebuild_collider(head.vertices, head.triangles, "Head")
+    then = []
+
+    def prepared(collider):
+        then.append((threading.current_thread().name, collider))
+        raise RuntimeError("what prepares a run may fail: the run does it again")
+    thread = collide.prebuild_collider(head.vertices, head.triangles, "Head", then=prepared)
     assert thread is not None
     assert collide.prebuild_collider(head.vertices, head.triangles, "Head") is None     # being made
     got = collide.collider_for(head.vertices, head.triangles, "Head")      # waits for the thread's
     thread.join()
     assert built == ["groom-collider"]
+    assert then == [("groom-collider", got)]        # handed the collider on the building thread
     assert collide.collider_for(head.vertices, head.triangles, "Head") is got
     renamed = collide.collider_for(head.vertices, head.triangles, "Other")
     assert renamed.name == "Other" and renamed.phi is got.phi and built == ["groom-collider"]

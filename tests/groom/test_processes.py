@@ -179,9 +179,10 @@ def test_a_worker_that_dies_is_reported_as_lost(worker):
     assert not worker.alive()
 
 
-def _small_blocks(scalp, monkeypatch, seed):
+def _small_blocks(scalp, monkeypatch, seed, collider=None):
     """A job that grows 1,200 strands of wavy in blocks of 200, side by side from 100 strands a
-    block (in worker processes where they run): a function that grows it."""
+    block (in worker processes where they run), with `collider` (default: the bundled head's):
+    a function that grows it."""
     from groom import Generator, default_collider, load_preset
     module = importlib.import_module("groom.generate")
     if parallel.cpu_threads() < 2:
@@ -190,7 +191,8 @@ def _small_blocks(scalp, monkeypatch, seed):
     params = placement.params.replace(count=1200, seed=seed)
     monkeypatch.setattr(module, "PARALLEL_BLOCK", 100)
     monkeypatch.setattr(module, "PROCESS_BLOCK", 100)
-    return lambda: Generator(scalp, placement.keys, params, collider=default_collider(), block_strands=200).generate()
+    collider = default_collider() if collider is None else collider
+    return lambda: Generator(scalp, placement.keys, params, collider=collider, block_strands=200).generate()
 
 
 def test_a_lost_worker_leaves_the_groom_to_threads_with_the_same_numbers(scalp, monkeypatch):
@@ -229,3 +231,32 @@ def test_a_groom_grown_in_the_memory_of_the_one_it_replaces_is_the_same(scalp, m
     assert spare_takes == [True] * FILES
     for name in ("points", "counts", "radius", "color", "alpha"):
         np.testing.assert_array_equal(getattr(got.strands, name), getattr(expected.strands, name))
+
+
+def test_workers_prepared_with_the_collider_are_sent_neither_again_by_the_first_run(scalp, monkeypatch):
+    """generate.prepare_workers (Blender's Add Head runs it once the head's collider is
+    built): the workers are started and keep the collider, so the run that follows sends
+    it none (25 MB on the bundled head) and starts no worker; its blocks grow in them."""
+    from groom import default_collider
+    from groom.generate import prepare_workers
+    made = default_collider()
+    # The same collider under a token no worker knows yet (tokens outlive a test).
+    collider = object.__new__(type(made))
+    collider.__dict__.update({k: v for k, v in made.__dict__.items() if k != "_worker_token"})
+    grow = _small_blocks(scalp, monkeypatch, seed=7, collider=collider)
+    prepare_workers(collider)
+    assert all(processes.token(collider) in w.known and not w.pending
+               for w in processes.workers(parallel.cpu_threads() - 1))
+    sent, started, send, start = [], [], processes.Worker.send, processes.Worker.__init__
+
+    def noted(self, fn, *args):
+        sent.append(fn.__name__)
+        return send(self, fn, *args)
+
+    def starting(self):
+        started.append(self)
+        start(self)
+    monkeypatch.setattr(processes.Worker, "send", noted)
+    monkeypatch.setattr(processes.Worker, "__init__", starting)
+    grow()
+    assert "_worker_grow" in sent and "_keep" not in sent and not started
