@@ -24,7 +24,7 @@ import numpy as np
 
 from hairio import InputError, Strands
 from hairio.atomic import check_destination
-from hairio.npyfile import NpzWriter
+from hairio.npyfile import AppendBehind, NpzWriter
 from hairio.strands import GUIDE_NPZ_NAMES, NPZ_NAMES
 from hairio.validate import check_memory
 
@@ -1274,10 +1274,12 @@ def generate_to_npz(path, scalp, keys, params=None, collider=None, progress=None
                             ("key_radius", key_strands.radius), ("key_color", key_strands.color),
                             ("key_group", np.array([k.group for k in gen.keys]).astype(np.int32))):
             writer.append(name, array)
-        for block in gen.blocks():
-            for name, array in block.arrays().items():
-                writer.append(name, array)
-            del block, array
+        # The blocks are written on a thread of their own while the next grows (1,000,000
+        # strands of wavy: see AppendBehind's entry in docs/DECISIONS.md).
+        with AppendBehind(writer) as behind:
+            for block in gen.blocks():
+                behind.put(block.arrays())
+                del block
         label = f"writing {os.path.basename(os.fspath(path))}"
         writer.commit(None if progress is None else lambda f: progress(0.9 + 0.1 * f, label))
     if progress is not None:

@@ -16,8 +16,10 @@ uncompressed; savez_compressed of real hair shrinks it 1–3×, far inside the b
 import lzma
 import math
 import os
+import queue
 import struct
 import tempfile
+import threading
 import zipfile
 import zlib
 
@@ -230,6 +232,62 @@ class NpzWriter:
         self._files = {}
         self._held = {name: [] for name in self.names}
         self._held_bytes = 0
+
+
+class AppendBehind:
+    """NpzWriter.append on a thread of its own, one batch behind the caller, so the caller
+    makes its next block while the last is written (writing to a file leaves the
+    interpreter free). put({name: rows, ...}) hands a batch over once the one before is
+    written, so two batches at most are held: the one being written and the caller's next.
+    An error of the writes is raised by the next put or by close; after it nothing more is
+    written. close() (or leaving the `with`) waits for the writes to end."""
+
+    def __init__(self, writer):
+        self.writer = writer
+        self._batches = queue.Queue()
+        self._error = None
+        self._thread = threading.Thread(target=self._run, name="npz-append", daemon=True)
+        self._thread.start()
+
+    def _run(self):
+        while True:
+            batch = self._batches.get()
+            try:
+                if batch is None:
+                    return
+                if self._error is None:
+                    for name, rows in batch.items():
+                        self.writer.append(name, rows)
+            except BaseException as e:  # noqa: BLE001 -- raised on the caller's thread
+                self._error = e
+            finally:
+                del batch
+                self._batches.task_done()
+
+    def _raise(self):
+        if self._error is not None:
+            raise self._error
+
+    def put(self, batch):
+        self._batches.join()
+        self._raise()
+        self._batches.put(batch)
+
+    def close(self):
+        if self._thread.is_alive():
+            self._batches.put(None)
+            self._thread.join()
+        self._raise()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, *rest):
+        if kind is None:
+            self.close()
+        else:   # the caller's error stands; the writes still end before the writer goes
+            self._batches.put(None)
+            self._thread.join()
 
 
 def _remove(f, path):

@@ -63,3 +63,51 @@ def test_a_block_of_another_kind_is_refused(tmp_path):
         with pytest.raises(ValueError, match=r"no data for \['b'\]"):
             w.commit()
     assert os.listdir(tmp_path) == []
+
+
+def test_appends_behind_the_caller_make_the_same_archive_holding_two_batches_at_most(tmp_path):
+    """AppendBehind: the batches are appended on a thread of their own, in order, and a put
+    returns only once the batch before it is written (the caller's next batch and the one
+    being written are all that is held)."""
+    import threading
+    from hairio.npyfile import AppendBehind
+    arrays = _arrays()
+    np.savez(tmp_path / "whole.npz", **arrays)
+    written, gate = [], threading.Event()
+    with NpzWriter(tmp_path / "behind.npz", list(arrays), spill_bytes=1 << 10) as w:
+        real = w.append
+
+        def append(name, rows):
+            assert threading.current_thread().name == "npz-append"
+            gate.wait(5)
+            real(name, rows)
+            written.append((name, len(rows)))
+        w.append = append
+        with AppendBehind(w) as behind:
+            behind.put({"key": arrays["key"], "empty": arrays["empty"]})
+            threading.Timer(0.2, gate.set).start()     # the first appends wait for it
+            handed = 2
+            for lo in range(0, 1000, 250):
+                batch = {"points": arrays["points"][lo:lo + 250]}
+                if lo == 0:
+                    batch["counts"] = arrays["counts"]
+                behind.put(batch)
+                # Every batch before this one was written by the time it was handed over.
+                assert len(written) >= handed
+                handed += len(batch)
+        assert len(written) == handed
+        assert [n for n, _ in written][-1] == "points" and sum(r for n, r in written if n == "points") == 1000
+        w.commit()
+    assert _members(tmp_path / "whole.npz") == _members(tmp_path / "behind.npz")
+
+
+def test_an_append_that_fails_behind_the_caller_fails_the_caller_and_leaves_no_file(tmp_path):
+    from hairio.npyfile import AppendBehind
+    with pytest.raises(ValueError, match="cannot join"):
+        with NpzWriter(tmp_path / "x.npz", ["a"], spill_bytes=0) as w:
+            with AppendBehind(w) as behind:
+                behind.put({"a": np.ones((4, 3), np.float32)})
+                behind.put({"a": np.ones((4, 2), np.float32)})     # refused on the thread
+                behind.put({"a": np.ones((4, 3), np.float32)})     # raises the refusal here
+            w.commit()
+    assert os.listdir(tmp_path) == []
