@@ -456,31 +456,30 @@ class _WorkerGrower(_Grower):
         self.notes = (met, asked, needed)
 
 
-def _first_pass_of(c, out, offsets, counts, lo, hi):
-    """collide.first_pass of strands lo..hi of a run's arrays `out` (points, radius, ...),
-    with the seconds it took (None without a collider c)."""
-    if c is None:
-        return None
+# Strands a range of the collision's first pass when the sides share the collision out
+# (Generator._collide_shared), the ranges dealt to the sides in turn.
+_COLLIDE_RANGE = 2048
+
+
+def _collide_share(c, points, radius, offsets, counts, parts):
+    """The collision of a share of a run's strands, in place in `points`: collide.first_pass
+    over the ranges `parts` [(lo, hi), ...] of the run's strands (offsets, counts: all of
+    them), then the walk of the strands it found (walk_into): (those strands, which of them
+    moved, (points moved, unresolved, largest move), points found inside, seconds)."""
     t0 = time.perf_counter()
-    found = first_pass(c.collider, out[0], offsets, counts, out[1], c.margin,
-                       [(lo + a, lo + b) for a, b in ranges(hi - lo)])
-    return found + (time.perf_counter() - t0,)
+    strands, k0, root_value, inside = first_pass(c.collider, points, offsets, counts, radius, c.margin, parts)
+    moved, totals = np.zeros(0, bool), (0, 0, 0.0)
+    if strands.size:
+        moved, totals = walk_into(c.collider, points, points, offsets, counts, radius, c.margin, strands, k0,
+                                  root_value)
+    return strands, moved, totals, inside, time.perf_counter() - t0
 
 
-def _walk_share(c, points, radius, offsets, counts, k0, root_value):
-    """collide.walk_into of strands at `offsets` with `counts` points, in place in `points`:
-    (moved, (points moved, unresolved, largest move), seconds)."""
-    t0 = time.perf_counter()
-    moved, totals = walk_into(c.collider, points, points, offsets, counts, radius, c.margin,
-                              np.arange(len(counts)), k0, root_value)
-    return moved, totals, time.perf_counter() - t0
-
-
-def _worker_walk(points, radius, offsets, counts, k0, root_value):
-    """_walk_share in a worker, on the parent's shared points and radii (handles)."""
+def _worker_collide(points, radius, offsets, counts, parts):
+    """_collide_share in a worker, on the parent's shared points and radii (handles)."""
     g = processes.STATE["grower"]
-    return _walk_share(g._collision, processes.open_shared(points), processes.open_shared(radius), offsets, counts,
-                       k0, root_value)
+    return _collide_share(g._collision, processes.open_shared(points), processes.open_shared(radius), offsets,
+                          counts, parts)
 
 
 def _worker_setup(spec):
@@ -497,20 +496,14 @@ def _worker_plan(i, inputs):
     return plan[1], g.notes
 
 
-def _worker_grow(i, handles, lo, hi, offsets, first):
-    """Block i grown into rows lo..hi of the parent's shared arrays (handles), then its
-    collision's first pass (_first_pass_of; offsets: its strands' first rows, the first
-    being strand `first` of the run)."""
+def _worker_grow(i, handles, lo, hi):
+    """Block i grown into rows lo..hi of the parent's shared arrays (handles)."""
     g = processes.STATE["grower"]
     inputs, plan = processes.STATE.pop(i)
     rows = tuple(None if h is None else processes.open_shared(h, (lo, hi)) for h in handles)
     grown = g._grow(g.context, *inputs, slice(0, len(inputs[4])), _quiet, plan, into=rows, collide=False)
     del plan
     _keep_rows(rows, grown)
-    counts = grown[1]
-    del grown
-    found = _first_pass_of(g._collision, rows[:2], offsets - lo, counts, 0, len(counts))
-    return None if found is None else (found[0] + first,) + found[1:]
 
 
 def _deal(owner, here, send, job, done, futures):
@@ -741,10 +734,10 @@ class Generator(_Grower):
         workers == 0, on a thread of its pool) and workers - 1 worker processes
         (groom.processes), which keep each block's curve parameters between its placement
         and its growing and write its points into the result's shared arrays. The collision
-        then goes in two steps over the whole: each block's first pass where it grew, and
-        the walk of the strands found, shared out by their points (the strands that collide
-        lie mostly in one part of the scalp, so in few blocks). The numbers are the same:
-        each strand's depend on it alone. WorkerDied when a worker is lost."""
+        then goes over the whole once every block has grown, shared out by ranges of strands
+        in turn (_collide_shared: the strands that collide lie mostly in one part of the
+        scalp, so in few blocks). The numbers are the same: each strand's depend on it
+        alone. WorkerDied when a worker is lost."""
         # This process grows a share too (None): with a worker per CPU instead it took 1.35
         # times as long (2 cores, 100,000 strands, in a process with Blender beside).
         sides = [None] + processes.workers(workers - 1)
@@ -787,9 +780,6 @@ class Generator(_Grower):
             shared = [processes.shared_empty(shape) for shape in shapes]
             out = tuple(a.array for a in shared) + (None,) * (4 - len(shared))
             handles = [a.handle for a in shared] + [None] * (4 - len(shared))
-            edges = np.concatenate([[0], np.cumsum([hi - lo for lo, hi in blocks])])
-            offsets = np.zeros(len(counts), np.int64)
-            np.cumsum(counts[:-1], out=offsets[1:])
 
             def grow(i):
                 inputs, idx = block(i)
@@ -800,18 +790,13 @@ class Generator(_Grower):
                 grown = self._grow(context, *inputs, idx, _quiet, plan, into=rows, collide=False)
                 del plan
                 _keep_rows(rows, grown)
-                del grown
-                return _first_pass_of(c, out, offsets, counts, int(edges[i]), int(edges[i + 1]))
             stage = self._growing_stage()
             self._report(0.35, stage)
-            found = collect(lambda i: (_worker_grow, i, handles, int(starts[i]), int(starts[i + 1]),
-                                       offsets[edges[i]:edges[i + 1]], int(edges[i])), grow,
-                            lambda i: self._report(0.35 + (0.45 if c is not None else 0.6) * (i + 1) / len(blocks),
-                                                   stage))
+            collect(lambda i: (_worker_grow, i, handles, int(starts[i]), int(starts[i + 1])), grow,
+                    lambda i: self._report(0.35 + (0.45 if c is not None else 0.6) * (i + 1) / len(blocks), stage))
             if c is not None:
                 self._report(0.8, "moving hair out of the collider")
-                stats = self._walk_shared(c, sides, here, out, handles, offsets, counts, found, run_idx)
-                self._collision.last = stats
+                self._collision.last = self._collide_shared(c, sides, here, out, handles, counts, run_idx, futures)
         except BaseException:
             # No job of this run may still be running when the caller goes on, and the
             # workers' state is not known: they go, and the next run starts new ones.
@@ -828,34 +813,35 @@ class Generator(_Grower):
         self._report(0.95, "writing strands")
         return out[0], counts, out[1], out[2], out[3]
 
-    def _walk_shared(self, c, sides, here, out, handles, offsets, counts, found, run_idx):
-        """The collision walk of the strands the blocks' first passes `found` (a
-        _first_pass_of each), shared out between this process and the workers with as many
-        of the strands' points each, written into the result's shared arrays: the run's
-        CollisionStats, with c.moved set for the run's strands (run_idx)."""
-        strands = np.concatenate([f[0] for f in found])
-        k0 = np.concatenate([f[1] for f in found])
-        root_value = np.concatenate([f[2] for f in found])
-        stats = CollisionStats(strands=len(counts), points=int(counts.sum()),
-                               points_inside_before=sum(f[3] for f in found), seconds=sum(f[4] for f in found))
+    def _collide_shared(self, c, sides, here, out, handles, counts, run_idx, futures):
+        """The collision of the run's strands (`counts` points each), shared out between
+        this process and the workers, in place in the result's shared arrays: ranges of
+        _COLLIDE_RANGE strands dealt to the sides in turn, each side's first pass over its
+        ranges and the walk of the strands it found in one job (_collide_share). Ranges in
+        turn give each side a like mix of the scalp's regions, whose strands collide unlike
+        much (the first of two blocks of wavy took 80-100 ms to look over, the second
+        50-56), and no side waits for the others between its look and its walk. Returns the
+        run's CollisionStats, with c.moved set for the run's strands (run_idx); `futures`
+        gets this process's job (for the caller to wait for after a failure)."""
+        offsets = np.zeros(len(counts), np.int64)
+        np.cumsum(counts[:-1], out=offsets[1:])
+        parts = _block_ranges(len(counts), _COLLIDE_RANGE)
+        mine = None
+        for k, side in enumerate(sides):
+            share = parts[k::len(sides)]
+            if side is None:
+                mine = here.submit(_collide_share, c, out[0], out[1], offsets, counts, share)
+                futures[:] = [mine]
+            else:
+                side.send(_worker_collide, handles[0], handles[1], offsets, counts, share)
+        stats = CollisionStats(strands=len(counts), points=int(counts.sum()))
         moved = np.zeros(len(counts), bool)
-        if strands.size:
-            # Each share gets about as many points left to walk (each strand's past its first offence).
-            left = np.cumsum(counts[strands] - k0)
-            cuts = np.searchsorted(left, left[-1] * np.arange(1, len(sides)) / len(sides))
-            shares = np.split(np.arange(len(strands)), cuts)
-            mine = []
-            for side, share in zip(sides, shares):
-                args = (offsets[strands[share]], counts[strands[share]], k0[share], root_value[share])
-                if side is None:
-                    mine.append(here.submit(_walk_share, c, out[0], out[1], *args))
-                else:
-                    side.send(_worker_walk, handles[0], handles[1], *args)
-            walked = [side.receive() if side is not None else mine.pop(0).result() for side in sides]
-            for share, (share_moved, totals, took) in zip(shares, walked):
-                moved[strands[share]] = share_moved
-                stats.add_walk(totals)
-                stats.seconds += took
+        for side in sides:
+            strands, share_moved, totals, inside, took = side.receive() if side is not None else mine.result()
+            moved[strands] = share_moved
+            stats.add_walk(totals)
+            stats.points_inside_before += inside
+            stats.seconds += took
         stats.strands_moved = int(moved.sum())
         c.moved[run_idx] = moved
         return stats
