@@ -5,6 +5,7 @@ All model logic is groom's; this module reads the scene (scene_data), builds a
 groom.Generator and writes its strands with blender_curves. The generators stay cached
 per scalp (generator_cache.py) so a key edit regenerates only the affected wisps.
 """
+import threading
 import time
 
 import bpy
@@ -62,6 +63,24 @@ def prebuild_collider(scalp, depsgraph=None, collision=None):
     except InputError:
         return None
     return None if mesh is None else start(*mesh, then=prepare_workers)
+
+
+def prepare_workers_meanwhile(collider):
+    """groom.generate.prepare_workers(collider) on a thread of its own (Load Preset has just
+    made the scalp's collider: the Generate that follows then finds groom's workers started
+    with it). Returns the thread, or None without a collider."""
+    if collider is None:
+        return None
+    from groom.generate import prepare_workers
+
+    def prepare():
+        try:
+            prepare_workers(collider)
+        except Exception:   # noqa: BLE001 -- the Generate to come does it again, and says why
+            pass
+    thread = threading.Thread(target=prepare, name="groom-prepare", daemon=True)
+    thread.start()
+    return thread
 
 
 def prebuild_colliders():

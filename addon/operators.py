@@ -23,7 +23,7 @@ from bpy_extras.io_utils import ExportHelper
 from hairio.formats.registry import BY_NAME, FORMATS
 
 from . import blender_curves, head, preview, progress, progressive, scene_data
-from .hair import existing_hair, generate, read_collider
+from .hair import existing_hair, generate, prepare_workers_meanwhile, read_collider
 from .properties import dict_to_settings, groom_params
 from .scene_data import find_scalp
 from .transaction import reports_errors, transaction
@@ -288,6 +288,7 @@ class HAIR_OT_load_preset(Operator):
             scene_data.remove_key_objects(old)
             for obj, name in zip(made, names):
                 obj.name = obj.data.name = name
+        prepare_workers_meanwhile(collider)
         lifted = f", {len(placement.lifted)} lifted out of {collider.name!r}" if placement.lifted else ""
         self.report({'INFO'}, f"Loaded preset {preset.name!r}: {len(keys)} key strands{lifted}")
         warning = placement.warning()

@@ -49,8 +49,12 @@ _KEPT_MOST = 2
 # The workers of this process, by pid (a forked child inherits the list, not the processes).
 _WORKERS = {}
 # One caller at a time hands out the workers (jobs and answers of two callers would mix);
-# another caller meanwhile grows its blocks on threads (try_lock).
+# another caller meanwhile grows its blocks on threads (try_lock), unless what has them is
+# prepare() (set while it does), which readies them for that caller: it waits, at most
+# _PREPARE_WAIT seconds.
 _LOCK = threading.Lock()
+_PREPARING = threading.Event()
+_PREPARE_WAIT = 10.0
 # Why worker processes are off in this process (by pid), once one was lost.
 _DISABLED = {}
 
@@ -76,8 +80,14 @@ def disable(reason):
 
 
 def try_lock():
-    """Take the workers for one run (True), or False when another thread has them."""
-    return _LOCK.acquire(blocking=False)
+    """Take the workers for one run (True), or False when another thread's run has them; a
+    prepare() that has them is waited for (Generate pressed while Add Head's thread starts
+    the workers grows in them, not on threads)."""
+    if _LOCK.acquire(blocking=False):
+        return True
+    if _PREPARING.is_set():
+        return _LOCK.acquire(timeout=_PREPARE_WAIT)
+    return _LOCK.acquire(blocking=False)    # a prepare() that let go just now (it clears after)
 
 
 def unlock():
@@ -207,8 +217,9 @@ def prepare(n, objects=()):
     0.15 s, then the objects, the bundled head's collider being 25 MB). Nothing where
     workers are off or another thread's run has them; off for the rest of the process
     when one cannot start."""
-    if n < 1 or not available() or not try_lock():
+    if n < 1 or not available() or not _LOCK.acquire(blocking=False):
         return
+    _PREPARING.set()
     try:
         for w in workers(n):
             for obj in objects:
@@ -219,6 +230,7 @@ def prepare(n, objects=()):
         disable(str(e))
     finally:
         unlock()
+        _PREPARING.clear()
 
 
 @atexit.register

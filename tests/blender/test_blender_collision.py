@@ -431,6 +431,28 @@ def test_add_head_builds_the_heads_collider_while_the_artist_picks_a_preset(clea
     assert built == ["groom-collider"]
 
 
+def test_load_preset_starts_the_workers_with_the_collider_it_placed_the_keys_with(clean, colliders_built, monkeypatch):
+    """A scalp of the artist's own gets its collider when Load Preset places the keys; the
+    workers are then started and sent it on a thread of their own, so the Generate that
+    follows waits for neither (and, pressed at once, waits for that rather than growing
+    on threads)."""
+    import os
+    import threading
+    from collections import OrderedDict
+    from groom import collide, parallel, processes
+    _, scalp = add_head()
+    _background_builds_done()
+    monkeypatch.setattr(collide, "_CACHE", OrderedDict())     # as if the head were the artist's own
+    assert bpy.ops.hair.load_preset(preset="wavy") == {'FINISHED'}
+    (collider,) = collide._CACHE.values()
+    for thread in threading.enumerate():
+        if thread.name == "groom-prepare":
+            thread.join()
+    if processes.available() and parallel.cpu_threads() > 1:
+        workers = processes._WORKERS.get(os.getpid(), [])
+        assert workers and all(processes.token(collider) in w.known for w in workers)
+
+
 def test_a_loaded_files_scalps_get_their_colliders_built_meanwhile(clean, request):
     live = ext_module(clean, "live")
     assert (bpy.app.handlers.load_post, live.on_loaded) in live.HANDLERS

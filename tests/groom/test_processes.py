@@ -260,3 +260,33 @@ def test_workers_prepared_with_the_collider_are_sent_neither_again_by_the_first_
     monkeypatch.setattr(processes.Worker, "__init__", starting)
     grow()
     assert "_worker_grow" in sent and "_keep" not in sent and not started
+
+
+def test_a_run_waits_for_the_workers_being_prepared_but_not_for_another_run():
+    """try_lock: while prepare() has the workers (it readies them for the run to come) a run
+    waits for them; while another run has them it grows on threads at once (False)."""
+    import threading
+    import time
+    held, release = threading.Event(), threading.Event()
+
+    def holder(preparing):
+        with processes._LOCK:
+            if preparing:
+                processes._PREPARING.set()
+            held.set()
+            release.wait(5)
+            processes._PREPARING.clear()
+    for preparing in (False, True):
+        held.clear()
+        release.clear()
+        thread = threading.Thread(target=holder, args=(preparing,))
+        thread.start()
+        held.wait(5)
+        threading.Timer(0.3, release.set).start()
+        t0 = time.perf_counter()
+        got = processes.try_lock()
+        waited = time.perf_counter() - t0
+        if got:
+            processes.unlock()
+        thread.join()
+        assert (got, waited >= 0.25) == (preparing, preparing), (preparing, got, waited)
