@@ -818,8 +818,8 @@ class Generator(_Grower):
 
     def _collide_shared(self, c, sides, here, out, handles, counts, run_idx, futures):
         """The collision of the run's strands (`counts` points each), shared out between
-        this process and the workers, in place in the result's shared arrays: ranges of
-        _COLLIDE_RANGE strands dealt to the sides in turn, each side's first pass over its
+        this process and the workers, in place in the result's shared arrays: ranges of at
+        most _COLLIDE_RANGE strands (at least _COLLIDE_TURNS a side) dealt to the sides in turn, each side's first pass over its
         ranges and the walk of the strands it found in one job (_collide_share). Ranges in
         turn give each side a like mix of the scalp's regions, whose strands collide unlike
         much (the first of two blocks of wavy took 80-100 ms to look over, the second
