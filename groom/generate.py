@@ -819,16 +819,18 @@ class Generator(_Grower):
     def _collide_shared(self, c, sides, here, out, handles, counts, run_idx, futures):
         """The collision of the run's strands (`counts` points each), shared out between
         this process and the workers, in place in the result's shared arrays: ranges of at
-        most _COLLIDE_RANGE strands (at least _COLLIDE_TURNS a side) dealt to the sides in turn, each side's first pass over its
-        ranges and the walk of the strands it found in one job (_collide_share). Ranges in
-        turn give each side a like mix of the scalp's regions, whose strands collide unlike
-        much (the first of two blocks of wavy took 80-100 ms to look over, the second
-        50-56), and no side waits for the others between its look and its walk. Returns the
-        run's CollisionStats, with c.moved set for the run's strands (run_idx); `futures`
-        gets this process's job (for the caller to wait for after a failure)."""
+        most _COLLIDE_RANGE strands (at least _COLLIDE_TURNS a side) dealt to the sides in
+        turn, each side's first pass over its ranges and the walk of the strands it found in
+        one job (_collide_share). Ranges in turn give each side a like mix of the scalp's
+        regions, whose strands collide unlike much (the first of two blocks of wavy took
+        80-100 ms to look over, the second 50-56), and no side waits for the others between
+        its look and its walk. Returns the run's CollisionStats, with c.moved set for the
+        run's strands (run_idx); `futures` gets this process's job (for the caller to wait
+        for after a failure)."""
+        turns = -(-len(counts) // (_COLLIDE_TURNS * len(sides)))
         offsets = np.zeros(len(counts), np.int64)
         np.cumsum(counts[:-1], out=offsets[1:])
-        parts = _block_ranges(len(counts), min(_COLLIDE_RANGE, -(-len(counts) // (_COLLIDE_TURNS * len(sides)))))
+        parts = _block_ranges(len(counts), min(_COLLIDE_RANGE, turns))
         mine = None
         for k, side in enumerate(sides):
             share = parts[k::len(sides)]
