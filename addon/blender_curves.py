@@ -143,15 +143,25 @@ def _replace_datablock(old, counts):
 # A point's RGB as one 12-byte item, and the same item at the start of a 16-byte RGBA.
 _RGB_ITEM = np.dtype((np.void, 12))
 _RGB_OF_RGBA = np.dtype({"names": ["rgb"], "formats": [_RGB_ITEM], "offsets": [0], "itemsize": 16})
+_RGBA_ITEM = np.dtype((np.void, 16))
 
 
-def _rgba(color, alpha):
-    """(P, 4) float32 RGBA of (P, 3) colours and (P,) alphas. Each RGB triple moves as one
+def _rgba(strands):
+    """(P, 4) float32 RGBA of the strands' colours and alphas. Each RGB triple moves as one
     12-byte item (structured views): numpy copies three floats a row into a 4-wide array
-    column by column at about twice the cost."""
+    column by column at about twice the cost. Colour held a strand at a time
+    (Strands.strand_color) goes straight from each strand's row, as one 16-byte item, to its
+    points: no (P, 3) array of it is made on the way."""
+    alpha = strands.alpha
     n = len(alpha)
     rgba = np.empty((n, 4), np.float32)
-    rgba.view(_RGB_OF_RGBA).reshape(n)["rgb"] = np.ascontiguousarray(color, np.float32).view(_RGB_ITEM).reshape(n)
+    if strands.strand_color is not None:
+        rows = np.zeros((len(strands.counts), 4), np.float32)
+        rows[:, :3] = strands.strand_color
+        rgba.view(_RGBA_ITEM).reshape(n)[...] = np.repeat(rows.view(_RGBA_ITEM).reshape(-1), strands.counts)
+    else:
+        rgba.view(_RGB_OF_RGBA).reshape(n)["rgb"] = np.ascontiguousarray(
+            strands.color, np.float32).view(_RGB_ITEM).reshape(n)
     rgba[:, 3] = alpha
     return rgba
 
@@ -200,7 +210,7 @@ def fill_curves(curves, strands, root_uv=None):
     _attribute(curves, "radius", 'FLOAT', 'POINT').data.foreach_set(
         "value", np.ascontiguousarray(strands.radius, np.float32))
     _attribute(curves, COLOR_ATTRIBUTE, 'FLOAT_COLOR', 'POINT').data.foreach_set(
-        "color", _rgba(strands.color, strands.alpha).ravel())
+        "color", _rgba(strands).ravel())
     legacy = curves.attributes.get(LEGACY_COLOR_ATTRIBUTE)
     if legacy is not None and legacy.domain == 'POINT' and legacy.data_type == 'FLOAT_COLOR':
         # Written by an earlier version of this module: stale now, so nothing may read it.

@@ -322,14 +322,15 @@ def _flat_attributes(s, counts, base_radius, color, params, threads=None, out=No
     """strand_attributes without per-point colour variation, for strands of any counts at
     fractions s (P,) float32, or (sigma (P,), frac (S,)) whose quotient they are: ranges of
     strands on the worker threads, each writing its own rows (a colour channel at a time:
-    np.repeat of 12-byte rows is slow). out: None or the arrays to write into."""
+    np.repeat of 12-byte rows is slow). out: None or the arrays to write into (colour None:
+    not written, the colour kept a strand at a time, hairio.Strands.strand_color)."""
     ends = np.cumsum(counts)
     n_pts = int(ends[-1]) if len(ends) else 0
     if out is None:
         out = (np.empty(n_pts, np.float32), np.empty((n_pts, 3), np.float32), np.empty(n_pts, np.float32))
     radius, rgb, alpha = out
     base = base_radius.astype(np.float32)
-    clamped = np.clip(color, 0.0, 1.0)
+    clamped = None if rgb is None else np.clip(color, 0.0, 1.0)
 
     def fill(lo, hi):
         start, stop = (int(ends[lo - 1]) if lo else 0), int(ends[hi - 1])
@@ -341,14 +342,22 @@ def _flat_attributes(s, counts, base_radius, color, params, threads=None, out=No
         else:
             part = s[start:stop]
         np.multiply(np.repeat(base[lo:hi], n), radius_profile(part, params), out=radius[start:stop])
-        for c in range(3):
-            rgb[start:stop, c] = np.repeat(clamped[lo:hi, c], n)
+        if rgb is not None:
+            for c in range(3):
+                rgb[start:stop, c] = np.repeat(clamped[lo:hi, c], n)
         if alpha is not None:
             a = alpha_profile(part, params)
             alpha[start:stop] = 1.0 if a is None else a
     if len(counts):
         parallel.run_jobs([partial(fill, lo, hi) for lo, hi in parallel.ranges(len(counts))], threads)
     return out
+
+
+def radius_alpha_rows(s, counts, base_radius, params, radius, alpha):
+    """The radius and alpha of strands_attributes into `radius` (P,) and `alpha` (P,) (None:
+    not written, an opaque groom's), without the colour (kept a strand at a time); s as
+    _flat_attributes takes it."""
+    _flat_attributes(s, counts, base_radius, None, params, out=(radius, None, alpha))
 
 
 def strand_colors(seed, ids, base_color, params):
@@ -394,17 +403,19 @@ def alpha_profile(s, params):
 def fill_strand_rows(radius, color, alpha, base_radius, strand_color, radius_prof, alpha_prof):
     """Write radius (S·n,), color (S·n,3), alpha (S·n,) of S strands of n points that share
     the profiles radius_prof, alpha_prof (n,) (alpha_prof None: 1; alpha None: not written,
-    as for an opaque groom's result, cylinders.ones): each strand's radius
+    as for an opaque groom's result, cylinders.ones; color None: not written, the colour
+    kept a strand at a time): each strand's radius
     scales the profile, its colour (clamped here) is copied to its points. Whole rows per
     strand, written in place (one strided pass per colour channel: np.repeat copies 12-byte
     rows one at a time and takes about twice as long)."""
     n = len(radius_prof)
     rows = (len(base_radius), n)
     np.multiply(base_radius.astype(np.float32)[:, None], radius_prof, out=radius.reshape(rows))
-    clamped = np.clip(strand_color, 0.0, 1.0)
-    per_point = color.reshape(rows + (3,))
-    for c in range(3):
-        per_point[:, :, c] = clamped[:, c, None]
+    if color is not None:
+        clamped = np.clip(strand_color, 0.0, 1.0)
+        per_point = color.reshape(rows + (3,))
+        for c in range(3):
+            per_point[:, :, c] = clamped[:, c, None]
     if alpha is not None:
         alpha.reshape(rows)[...] = 1.0 if alpha_prof is None else alpha_prof
 

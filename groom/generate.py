@@ -28,8 +28,8 @@ from hairio.npyfile import AppendBehind, NpzWriter
 from hairio.strands import GUIDE_NPZ_NAMES, NPZ_NAMES
 from hairio.validate import check_memory
 
-from .cylinders import (adaptive_sigma, alpha_is_one, alpha_profile, fill_strand_rows, ones, radius_profile,
-                        strand_attributes, strand_colors)
+from .cylinders import (adaptive_sigma, alpha_is_one, alpha_profile, fill_strand_rows, ones, radius_alpha_rows,
+                        radius_profile, strand_attributes, strand_colors)
 from .frames import frame_axes, root_frames
 from .interpolate import (EXACT_SAMPLES, FINE_SAMPLES, KEY_SAMPLES, curvature_bound, evaluate_strands, key_offsets,
                           key_rows, lerp_errors, nested_table, table_samples, LERP_SHARE,
@@ -251,6 +251,12 @@ class _Grower:
             self._collision = StrandCollision(collider, self.scalp, p, n)
             self._collision.check_keys(self.keys, p)
 
+    @property
+    def _colors_per_strand(self):
+        """Whether the strands' colour is kept a strand at a time (hairio.Strands.strand_color):
+        where it does not change along them (no colour_variation_point)."""
+        return not np.any(self.params.color_variation_point)
+
     def _report(self, fraction, stage):
         if self.progress is not None:
             self.progress(float(fraction), stage)
@@ -352,7 +358,8 @@ class _Grower:
         lie among the strands (a slice or indices), for the resolution and collision notes;
         plan: their _plan, made here when None; into: None or (points, radius, colour, alpha)
         arrays of the block's rows of the whole result, written where the work allows (the
-        arrays returned are then those); collide False: the caller moves them out of the
+        arrays returned are then those; colour (n, 3), a row a strand, where
+        _colors_per_strand); collide False: the caller moves them out of the
         collider itself. The sixth item returned: the collision's CollisionStats of the
         block, or None without a collider (or collide False)."""
         p = self.params
@@ -387,9 +394,25 @@ class _Grower:
         return (pts, counts) + tuple(attrs) + (stats,)
 
     def _attributes(self, ids, counts, along, g, w, base_radius, out=None):
-        """(radius, colour, alpha) per point (cylinders.strand_attributes) from the guides' colours."""
-        return strand_attributes(self.params.seed, ids, counts, along, base_radius, self._base_color(g, w),
-                                 self.params, out=out)
+        """(radius, colour, alpha) per point (cylinders.strand_attributes) from the guides'
+        colours; where _colors_per_strand, colour (S,3) a strand at a time, clamped, and alpha
+        None for an opaque groom (its result's alpha is cylinders.ones)."""
+        if not self._colors_per_strand:
+            return strand_attributes(self.params.seed, ids, counts, along, base_radius, self._base_color(g, w),
+                                     self.params, out=out)
+        p = self.params
+        color = self._strand_rgb(ids, g, w)
+        if out is None:
+            n_pts = int(counts.sum())
+            out = (np.empty(n_pts, np.float32), None, None if alpha_is_one(p) else np.empty(n_pts, np.float32))
+        else:
+            out[1][...] = color
+        radius_alpha_rows(along, counts, base_radius, p, out[0], out[2])
+        return out[0], color, out[2]
+
+    def _strand_rgb(self, ids, g, w):
+        """Colour a strand (S,3) float32, clamped to [0, 1] (as the points' would be)."""
+        return np.clip(strand_colors(self.params.seed, ids, self._base_color(g, w), self.params), 0.0, 1.0)
 
     def _base_color(self, g, w):
         """The guides' colours blended by the weights, (S,3) float64."""
@@ -407,9 +430,16 @@ class _Grower:
         s = along.astype(np.float32)
         r_prof, a_prof = radius_profile(s, p), alpha_profile(s, p)
         n_pts = len(ids) * n
-        out = (np.empty(n_pts, np.float32), np.empty((n_pts, 3), np.float32), np.empty(n_pts, np.float32))
+        per_strand = self._colors_per_strand
+        out = (np.empty(n_pts, np.float32), np.empty((len(ids) if per_strand else n_pts, 3), np.float32),
+               np.empty(n_pts, np.float32))
 
         def fill(lo, hi):
+            if per_strand:
+                out[1][lo:hi] = self._strand_rgb(ids[lo:hi], g[:, lo:hi], w[:, lo:hi])
+                fill_strand_rows(out[0][lo * n:hi * n], None, out[2][lo * n:hi * n], base_radius[lo:hi], None,
+                                 r_prof, a_prof)
+                return
             color = strand_colors(p.seed, ids[lo:hi], self._base_color(g[:, lo:hi], w[:, lo:hi]), p)
             fill_strand_rows(*(a[lo * n:hi * n] for a in out), base_radius[lo:hi], color, r_prof, a_prof)
         return [partial(fill, lo, hi) for lo, hi in ranges(len(ids))], out
@@ -423,9 +453,12 @@ def _unchanged_runs(sel, n):
     return list(zip(starts[keep].tolist(), stops[keep].tolist()))
 
 
-def _rows_of(whole, lo, hi):
-    """Rows lo..hi of each array of the whole result (None stays None: an opaque groom's alpha)."""
-    return tuple(None if a is None else a[lo:hi] for a in whole)
+def _rows_of(whole, lo, hi, strands=None):
+    """Rows lo..hi of each array of the whole result (None stays None: an opaque groom's
+    alpha); strands: None, or (a, b) the strands of those rows, whose rows of the colour
+    are taken where it is kept a strand at a time."""
+    return tuple(None if a is None else a[slice(*strands) if k == 2 and strands is not None else slice(lo, hi)]
+                 for k, a in enumerate(whole))
 
 
 def _keep_rows(rows, grown):
@@ -499,11 +532,14 @@ def _worker_plan(i, inputs):
     return plan[1], g.notes
 
 
-def _worker_grow(i, handles, lo, hi):
-    """Block i grown into rows lo..hi of the parent's shared arrays (handles)."""
+def _worker_grow(i, handles, lo, hi, strands=None):
+    """Block i grown into rows lo..hi of the parent's shared arrays (handles); strands: None,
+    or (a, b), its strands, the rows of the colour where it is kept a strand at a time."""
     g = processes.STATE["grower"]
     inputs, plan = processes.STATE.pop(i)
-    rows = tuple(None if h is None else processes.open_shared(h, (lo, hi)) for h in handles)
+    rows = tuple(None if h is None else processes.open_shared(h, strands if k == 2 and strands is not None
+                                                                else (lo, hi))
+                 for k, h in enumerate(handles))
     grown = g._grow(g.context, *inputs, slice(0, len(inputs[4])), _quiet, plan, into=rows, collide=False)
     del plan
     _keep_rows(rows, grown)
@@ -700,13 +736,13 @@ class Generator(_Grower):
         starts = np.concatenate([[0], np.cumsum([int(c.sum()) for _, c in plans])])
         counts = np.concatenate([c for _, c in plans])
         total = int(starts[-1])
-        out = (_plain_empty((total, 3)), _plain_empty(total), _plain_empty((total, 3)),
+        out = (_plain_empty((total, 3)), _plain_empty(total), _plain_empty((self._color_rows(len(counts), total), 3)),
                None if alpha_is_one(self.params) else _plain_empty(total))     # None: cylinders.ones
 
         def grow(i):
             inputs, idx = block(i)
             plan, plans[i] = plans[i], None     # each block's curve parameters go once it has grown
-            rows = _rows_of(out, int(starts[i]), int(starts[i + 1]))
+            rows = _rows_of(out, int(starts[i]), int(starts[i + 1]), blocks[i] if self._colors_per_strand else None)
             # The block grows straight into its rows of the whole (no copy of some 32 bytes a
             # point, nor the fresh pages of a block's own arrays).
             grown = self._grow(context, *inputs, idx, _quiet, plan, into=rows)
@@ -720,6 +756,10 @@ class Generator(_Grower):
         self._keep_stats(found)
         self._report(0.95, "writing strands")
         return out[0], counts, out[1], out[2], out[3]
+
+    def _color_rows(self, n_strands, n_points):
+        """Rows of the result's colour: a strand's or a point's (_colors_per_strand)."""
+        return n_strands if self._colors_per_strand else n_points
 
     def _growing_stage(self):
         return "growing strands" + (", moving them out of the collider" if self._collision is not None else "")
@@ -779,7 +819,9 @@ class Generator(_Grower):
             counts = np.concatenate([c_ for _, c_ in plans])
             total = int(starts[-1])
             # An opaque groom's alpha takes no memory (cylinders.ones): no file, no handle.
-            shapes = ((total, 3), total, (total, 3)) + (() if alpha_is_one(self.params) else (total,))
+            per_strand = self._colors_per_strand
+            shapes = ((total, 3), total, (self._color_rows(len(counts), total), 3)) + (
+                () if alpha_is_one(self.params) else (total,))
             shared = [processes.shared_empty(shape) for shape in shapes]
             out = tuple(a.array for a in shared) + (None,) * (4 - len(shared))
             handles = [a.handle for a in shared] + [None] * (4 - len(shared))
@@ -787,15 +829,16 @@ class Generator(_Grower):
             def grow(i):
                 inputs, idx = block(i)
                 plan, plans[i] = plans[i], None
-                for a in shared:
-                    a.reserve(int(starts[i]), int(starts[i + 1]))
-                rows = _rows_of(out, int(starts[i]), int(starts[i + 1]))
+                for k, a in enumerate(shared):
+                    a.reserve(*(blocks[i] if k == 2 and per_strand else (int(starts[i]), int(starts[i + 1]))))
+                rows = _rows_of(out, int(starts[i]), int(starts[i + 1]), blocks[i] if per_strand else None)
                 grown = self._grow(context, *inputs, idx, _quiet, plan, into=rows, collide=False)
                 del plan
                 _keep_rows(rows, grown)
             stage = self._growing_stage()
             self._report(0.35, stage)
-            collect(lambda i: (_worker_grow, i, handles, int(starts[i]), int(starts[i + 1])), grow,
+            collect(lambda i: (_worker_grow, i, handles, int(starts[i]), int(starts[i + 1]),
+                               blocks[i] if per_strand else None), grow,
                     lambda i: self._report(0.35 + (0.45 if c is not None else 0.6) * (i + 1) / len(blocks), stage))
             if c is not None:
                 self._report(0.8, "moving hair out of the collider")
@@ -887,7 +930,9 @@ class Generator(_Grower):
         # The arrays are groom's own, already float32/int32 and checked where their inputs
         # entered (finite keys and scalp, radii >= 0, colours clamped, alpha in [0, 1]), so
         # the Strands is made directly instead of re-validating and copying 3M points.
-        strands = Strands(pts, counts.astype(np.int32), radius, color, alpha, guides[0].astype(np.int32))
+        per_strand = self._colors_per_strand    # colour (S,3) a strand at a time, else (P,3)
+        strands = Strands(pts, counts.astype(np.int32), radius, None if per_strand else color, alpha,
+                          guides[0].astype(np.int32), strand_color=color if per_strand else None)
         self._cache = {"pts": pts, "counts": counts, "radius": radius, "color": color, "alpha": alpha}
         self._result = GroomResult(strands, s.points, self.root_uv, np.ascontiguousarray(guides.T, dtype=np.int32),
                                    np.ascontiguousarray(weights.T, dtype=np.float32), s.ids, s.tri, s.bary,
@@ -980,6 +1025,10 @@ class Generator(_Grower):
         new_arrays = dict(zip(("pts", "radius", "color", "alpha"), (parts[0], parts[2], parts[3], parts[4])))
         if alpha_is_one(self.params):
             del new_arrays["alpha"]     # _build makes it (cylinders.ones)
+        strand_color = None
+        if self._colors_per_strand:     # a row a strand: the changed strands' rows replaced
+            strand_color = c["color"].copy()
+            strand_color[sel] = new_arrays.pop("color")
         old_off = np.zeros(len(old_counts), np.int64)
         np.cumsum(old_counts[:-1], out=old_off[1:])
         part_off = np.zeros(len(sel), np.int64)
@@ -1020,7 +1069,7 @@ class Generator(_Grower):
                     arr[n0:n1] = old[o0:o1]
                 arr[rows] = new
                 out[name] = arr
-        return out["pts"], new_counts, out["radius"], out["color"], out.get("alpha")
+        return out["pts"], new_counts, out["radius"], out.get("color", strand_color), out.get("alpha")
 
 
 def prepare_workers(collider=None):
@@ -1143,6 +1192,9 @@ class BlockGenerator(_Grower):
         self._setup_keys(collider, p.count)
         self._shortfall = (0, 0.0, 0.0)
         self.summary = None
+
+    # Its blocks carry colour a point (GroomBlock, the .npz's layout), written as they come.
+    _colors_per_strand = False
 
     def _check_root_groups(self):
         """wisps.check_groups for every root before any work (roots sampled a block at a

@@ -73,21 +73,40 @@ class Strands:
     (a Guides: the key strands and each strand's guides and weights) and root_uv (S,2) f32.
     An array may be a read-only view that takes no memory a point (groom gives an opaque
     groom's alpha as one 1.0 broadcast: groom.cylinders.ones); code that needs it laid out
-    (a file, a GPU buffer) lays it out, as np.ascontiguousarray does."""
+    (a file, a GPU buffer) lays it out, as np.ascontiguousarray does.
+
+    The colour of strands whose colour does not change along them may be held a strand at a
+    time: strand_color (S,3) f32, with point_color None (Blender's CURVE domain beside its
+    POINT domain). `color` is per point either way: made from strand_color on first use and
+    kept (12 bytes a point that a groom of 1,000,000 strands of 62 points need not hold
+    until something reads them: 714 MiB). Code that can use a colour a strand (a renderer's
+    upload, Blender's attributes) reads strand_color where it is not None."""
     points: np.ndarray
     counts: np.ndarray
     radius: np.ndarray
-    color: np.ndarray
+    point_color: np.ndarray
     alpha: np.ndarray
     wisp: np.ndarray
     guides: "Guides" = None
     root_uv: np.ndarray = None
+    strand_color: np.ndarray = None
+
+    @property
+    def color(self):
+        """(P,3) f32 linear RGB per point (made from strand_color on first use, see above)."""
+        c = self.point_color
+        if c is None:
+            c = repeat_rows(self.strand_color, self.counts)
+            object.__setattr__(self, "point_color", c)
+        return c
 
     @classmethod
     def from_arrays(cls, points, counts, radius=None, color=None, alpha=None, wisp=None,
-                    default_radius=1e-4, default_color=(0.3, 0.2, 0.1), guides=None, root_uv=None):
+                    default_radius=1e-4, default_color=(0.3, 0.2, 0.1), guides=None, root_uv=None,
+                    strand_color=None):
         """Validate and convert; missing per-point arrays get defaults (radius, color, alpha 1).
-        guides: a Guides or None; root_uv: (S, 2) or None.
+        guides: a Guides or None; root_uv: (S, 2) or None; strand_color: (S, 3), the colour a
+        strand at a time, in place of color (give one of them).
 
         Every conversion is checked, so nothing is stored other than what was passed:
         floats beyond float32's range, counts beyond int32 and fractional or NaN wisp ids
@@ -105,11 +124,18 @@ class Strands:
             raise InputError(f"counts: sum is {total} but points has {len(points)} rows; they must match")
         n_p, n_s = len(points), len(counts)
         radius = np.full(n_p, default_radius) if radius is None else radius
-        color = np.broadcast_to(np.asarray(default_color, float), (n_p, 3)) if color is None else color
+        if strand_color is not None:
+            if color is not None:
+                raise InputError("color and strand_color both given; give the colour per point or per strand")
+            strand_color = to_float32("strand_color", check_shape("strand_color", as_array(
+                "strand_color", strand_color), (n_s, 3)))
+        elif color is None:
+            color = np.broadcast_to(np.asarray(default_color, float), (n_p, 3))
         alpha = np.ones(n_p, np.float32) if alpha is None else alpha
         wisp = np.zeros(n_s, np.int32) if wisp is None else wisp
         radius = to_float32("radius", check_shape("radius", as_array("radius", radius), (n_p,)))
-        color = to_float32("color", check_shape("color", as_array("color", color), (n_p, 3)))
+        if color is not None:
+            color = np.ascontiguousarray(to_float32("color", check_shape("color", as_array("color", color), (n_p, 3))))
         alpha = to_float32("alpha", check_shape("alpha", as_array("alpha", alpha), (n_p,)))
         wisp = to_int32("wisp", check_shape("wisp", as_array("wisp", wisp), (n_s,)), allow_integral_floats=True)
         if n_p and radius.min() < 0:
@@ -117,7 +143,8 @@ class Strands:
         if n_p and (alpha.min() < 0 or alpha.max() > 1):
             raise InputError("alpha: values outside [0, 1]; clamp them first")
         guides, root_uv = _checked_extras(guides, root_uv, n_s)
-        return cls(points, counts, radius, np.ascontiguousarray(color), alpha, wisp, guides, root_uv)
+        return cls(points, counts, radius, color, alpha, wisp, guides, root_uv,
+                   None if strand_color is None else np.ascontiguousarray(strand_color))
 
     def with_guides(self, guides=None, root_uv=None):
         """A copy carrying `guides` (a Guides) and `root_uv` (S, 2), each checked; the strand
@@ -181,6 +208,17 @@ class Strands:
             return cls.from_arrays(**_guides_from(arrays))
         except InputError as e:
             raise InputError(f"{path}: {e}") from None
+
+
+def repeat_rows(per_strand, counts):
+    """(P, C) rows of `per_strand` (S, C), each repeated counts[i] times, as np.repeat(...,
+    axis=0) but a column at a time (np.repeat moves a row of C floats as one item, at about
+    twice the cost)."""
+    counts = np.asarray(counts)
+    out = np.empty((int(counts.sum(dtype=np.int64)),) + per_strand.shape[1:], per_strand.dtype)
+    for c in range(per_strand.shape[1]):
+        out[:, c] = np.repeat(per_strand[:, c], counts)
+    return out
 
 
 def _guides_from(arrays):

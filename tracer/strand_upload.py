@@ -234,5 +234,7 @@ def select_strands(strands, ids):
     offsets = strands.offsets
     counts = strands.counts[ids].astype(np.int64)
     pts = np.repeat(offsets[ids], counts) + ranks(counts)
-    return Strands(strands.points[pts], strands.counts[ids], strands.radius[pts], strands.color[pts],
-                   strands.alpha[pts], strands.wisp[ids])
+    per_strand = strands.strand_color is not None and strands.point_color is None
+    return Strands(strands.points[pts], strands.counts[ids], strands.radius[pts],
+                   None if per_strand else strands.color[pts], strands.alpha[pts], strands.wisp[ids],
+                   strand_color=strands.strand_color[ids] if per_strand else None)

@@ -246,6 +246,42 @@ def test_an_opaque_groom_keeps_one_alpha_for_all_its_points(scalp, side_by_side,
     np.testing.assert_array_equal(got, one)
 
 
+@pytest.mark.parametrize("side_by_side, resolution", [(None, "adaptive"), ("threads", "fixed"),
+                                                      ("processes", "adaptive"), ("processes", "fixed")])
+def test_a_groom_of_one_colour_along_each_strand_keeps_it_a_strand_at_a_time(scalp, side_by_side, resolution,
+                                                                             monkeypatch):
+    """Without colour variation along the strands, the result holds each strand's colour once
+    (strand_color (S,3), no (P,3) array), however its blocks grew and after an incremental
+    update; the colour a point, made from it on first use, equals what the same groom with
+    colour a point gives (a variation along the strands too small to change a float32)."""
+    import importlib
+    from groom import default_collider, load_preset, processes
+    module = importlib.import_module("groom.generate")
+    if side_by_side == "processes" and not processes.available():
+        pytest.skip("worker processes need Linux's memfd")
+    monkeypatch.setenv(processes.ENV_SWITCH, "1" if side_by_side == "processes" else "0")
+    for name in ("PARALLEL_BLOCK", "PROCESS_BLOCK"):
+        monkeypatch.setattr(module, name, 100 if side_by_side else 10 ** 9)
+    placement = load_preset("wavy").place_keys(scalp)
+    params = placement.params.replace(count=1200, seed=4, resolution_mode=resolution,
+                                      color_variation=(0.1, 0.05, 0.02))
+    keys = list(placement.keys)
+    moved = KeyStrand(keys[4].points + np.linspace(0, 1, len(keys[4].points))[:, None] * [0.0, 0.01, 0.0],
+                      keys[4].kind, color=(0.9, 0.1, 0.1))
+    per_point = params.replace(color_variation_point=(1e-30,) * 3)
+    gens = [Generator(scalp, list(keys), q, collider=default_collider(), block_strands=200) for q in (params, per_point)]
+    for results in ([g.generate() for g in gens], [g.update_keys({4: moved}) for g in gens]):
+        held, pointwise = (r.strands for r in results)
+        assert held.point_color is None and pointwise.strand_color is None
+        assert held.strand_color.shape == (held.num_strands, 3) and held.strand_color.dtype == np.float32
+        np.testing.assert_array_equal(held.points, pointwise.points)
+        np.testing.assert_array_equal(held.color, pointwise.color)
+        assert held.point_color is not None    # made once, on first use, and kept
+        assert len(np.unique(held.strand_color, axis=0)) > held.num_strands // 2   # per-strand variation
+    s = results[0].strands      # the update's key colour reached its wisp
+    assert s.strand_color[s.wisp == 4, 0].mean() > 0.6 > s.strand_color[s.wisp != 4, 0].mean()
+
+
 # --- SPEC §9 stress cases ------------------------------------------------------------------
 
 def _samples_at(scalp, points):

@@ -231,3 +231,21 @@ def test_updates_across_upload_chunks_equal_a_fresh_upload(build, monkeypatch):
                                       np.frombuffer(fresh.buffers["tex_cyl"].read(n), np.float32))
         np.testing.assert_array_equal(r.render(cam), fresh.render(cam))
         assert sent < fresh.stats.bytes_uploaded      # only the changed chunks went up
+
+
+def test_changed_strands_taken_out_keep_their_colour_a_strand():
+    """select_strands (the strands an update re-uploads) of strands whose colour is held a
+    strand at a time: their own rows of it, no colour a point made for the whole."""
+    from hairio import Strands
+    from tracer.strand_upload import select_strands
+    rng = np.random.default_rng(5)
+    counts = rng.integers(2, 9, 30).astype(np.int32)
+    points = rng.normal(size=(int(counts.sum()), 3)).astype(np.float32)
+    rgb = rng.uniform(0, 1, (30, 3)).astype(np.float32)
+    held = Strands.from_arrays(points, counts, strand_color=rgb)
+    ids = np.array([0, 4, 5, 29])
+    sub = select_strands(held, ids)
+    assert held.point_color is None and sub.point_color is None
+    np.testing.assert_array_equal(sub.strand_color, rgb[ids])
+    np.testing.assert_array_equal(sub.color, np.repeat(rgb[ids], counts[ids], axis=0))
+    np.testing.assert_array_equal(sub.points, np.concatenate([held.strand_points(i) for i in ids]))
