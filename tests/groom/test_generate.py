@@ -217,19 +217,27 @@ def test_radius_color_and_alpha_profiles(scalp, keys_around):
     np.testing.assert_allclose(const.radius, 2e-4, rtol=1e-6)
 
 
-@pytest.mark.parametrize("side_by_side", [None, "threads", "processes"])
-def test_an_opaque_groom_keeps_one_alpha_for_all_its_points(scalp, side_by_side, monkeypatch):
-    """wavy is opaque: its alpha is a read-only view of one value (no memory a point), however
-    its blocks grew and after an incremental update; a fade gets its values a point, the
-    same in every way of growing."""
+def _grow_blocks(side_by_side, monkeypatch):
+    """Blocks grown one after another (None), side by side on threads ("threads") or dealt to
+    worker processes ("processes"; skipped where groom.processes is not available), whatever
+    their size."""
     import importlib
-    from groom import default_collider, load_preset, processes
+    from groom import processes
     module = importlib.import_module("groom.generate")
     if side_by_side == "processes" and not processes.available():
         pytest.skip("worker processes need Linux's memfd")
     monkeypatch.setenv(processes.ENV_SWITCH, "1" if side_by_side == "processes" else "0")
     for name in ("PARALLEL_BLOCK", "PROCESS_BLOCK"):
         monkeypatch.setattr(module, name, 100 if side_by_side else 10 ** 9)
+
+
+@pytest.mark.parametrize("side_by_side", [None, "threads", "processes"])
+def test_an_opaque_groom_keeps_one_alpha_for_all_its_points(scalp, side_by_side, monkeypatch):
+    """wavy is opaque: its alpha is a read-only view of one value (no memory a point), however
+    its blocks grew and after an incremental update; a fade gets its values a point, the
+    same in every way of growing."""
+    from groom import default_collider, load_preset
+    _grow_blocks(side_by_side, monkeypatch)
     placement = load_preset("wavy").place_keys(scalp)
     params = placement.params.replace(count=1200, seed=2)
     assert params.alpha_start >= 1.0
@@ -254,14 +262,8 @@ def test_a_groom_of_one_colour_along_each_strand_keeps_it_a_strand_at_a_time(sca
     (strand_color (S,3), no (P,3) array), however its blocks grew and after an incremental
     update; the colour a point, made from it on first use, equals what the same groom with
     colour a point gives (a variation along the strands too small to change a float32)."""
-    import importlib
-    from groom import default_collider, load_preset, processes
-    module = importlib.import_module("groom.generate")
-    if side_by_side == "processes" and not processes.available():
-        pytest.skip("worker processes need Linux's memfd")
-    monkeypatch.setenv(processes.ENV_SWITCH, "1" if side_by_side == "processes" else "0")
-    for name in ("PARALLEL_BLOCK", "PROCESS_BLOCK"):
-        monkeypatch.setattr(module, name, 100 if side_by_side else 10 ** 9)
+    from groom import default_collider, load_preset
+    _grow_blocks(side_by_side, monkeypatch)
     placement = load_preset("wavy").place_keys(scalp)
     params = placement.params.replace(count=1200, seed=4, resolution_mode=resolution,
                                       color_variation=(0.1, 0.05, 0.02))
