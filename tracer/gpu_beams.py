@@ -31,12 +31,12 @@ class BeamBuilder:
         self._passes = {}
         self._scratch = {}
 
-    def _program(self, pass_, cyl_parts):
-        key = (layout.glsl_header(), pass_, cyl_parts)
+    def _program(self, pass_, cyl_parts, centres=False):
+        key = (layout.glsl_header(), pass_, cyl_parts, bool(centres))
         prog = self._passes.get(key)
         if prog is None:
             prog = self._passes[key] = self.ctx.compute_shader(
-                shader_source(430, BUILD_FILES, {"PASS": pass_, "CYL_PARTS": cyl_parts}))
+                shader_source(430, BUILD_FILES, {"PASS": pass_, "CYL_PARTS": cyl_parts, "CENTRES": int(centres)}))
         return prog
 
     def _buffer(self, name, words):
@@ -97,7 +97,7 @@ class BeamBuilder:
         self._zero(slices, layout.BEAM_SLICES)
         self._zero(flags, 2)
         ctx.memory_barrier()
-        prog = self._program(1, parts)
+        prog = self._program(1, parts, frame.centres)
         self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n)
         for binding, buf in enumerate((counts, slices, perm, sums, flags, filed)):
             buf.bind_to_storage_buffer(binding)
@@ -144,7 +144,7 @@ class BeamBuilder:
         prog.run(*_groups(n))
         ctx.memory_barrier()
         # The lists, a slice a dispatch in order, so each bin's entries come slice by slice.
-        prog = self._program(6, parts)
+        prog = self._program(6, parts, frame.centres)
         self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n)
         lists.buffer.bind_to_storage_buffer(6)
         for k in np.flatnonzero(sizes):

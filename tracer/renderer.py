@@ -286,7 +286,8 @@ class Renderer:
         state.renders += 1
         plan = BeamPlan(cam, suns, light_sun, shift)
         st.beams_s, st.camera_beams_s, st.sun_beams_s = cam_s + sun_s, cam_s, sun_s
-        st.camera_beams = (f"{cam.frame.bin_px} px bins" if cam is not None else f"none: {state.camera_why}")
+        st.camera_beams = (("pixel centres" if cam.frame.centres else f"{cam.frame.bin_px} px bins") if cam is not None
+                           else f"none: {state.camera_why}")
         st.camera_beam_refs = cam.refs if cam is not None else 0
         st.sun_beam_refs = sum(b.refs for b in suns if b is not None)
         st.beam_refs = st.camera_beam_refs + st.sun_beam_refs

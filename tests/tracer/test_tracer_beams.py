@@ -40,7 +40,9 @@ def test_beams_give_the_grids_image(pair, case):
     strands, settings = CASES[case]
     grid, beams = _render_both(pair, strands, CAM, settings)
     assert (grid[..., 3] > 0).mean() > 0.05, "scene not in view: the test would prove nothing"
-    assert pair[1].stats.camera_beams.endswith("px bins")
+    # One independent sample a pixel: lists for the pixels' centres; more: whole bins.
+    want = "pixel centres" if settings.spp == 1 and settings.sampler == "independent" else "1 px bins"
+    assert pair[1].stats.camera_beams == want
     assert np.abs(grid - beams).max() <= 1e-6
 
 
@@ -53,10 +55,11 @@ def test_a_point_light_walks_the_grid_and_a_sun_its_beams(pair):
     assert pair[1].scene.grid is not None        # built for the point light's shadow rays
 
 
-def test_orthographic_camera_from_below(pair):
+@pytest.mark.parametrize("spp, lists", [(1, "pixel centres"), (4, "1 px bins")])
+def test_orthographic_camera_from_below(pair, spp, lists):
     cam = Camera.look_at((0.1, 0.05, -2.0), (0, 0, 0.5), fov_deg=30, size=(48, 48), type="ORTHO", ortho_scale=1.4)
-    grid, beams = _render_both(pair, curls(20, 8, alpha=0.7), cam, RenderSettings(layers=2))
-    assert (grid[..., 3] > 0).mean() > 0.05 and pair[1].stats.camera_beams.endswith("px bins")
+    grid, beams = _render_both(pair, curls(20, 8, alpha=0.7), cam, RenderSettings(layers=2, spp=spp))
+    assert (grid[..., 3] > 0).mean() > 0.05 and pair[1].stats.camera_beams == lists
     assert np.abs(grid - beams).max() <= 1e-6
 
 
@@ -100,7 +103,8 @@ def test_a_camera_among_the_hair_walks_the_grid(pair):
 
 
 def test_lists_past_their_budget_take_coarser_bins_then_the_grid(pair, monkeypatch):
-    strands, settings = CASES["alpha layers, transmittance"]
+    strands, one = CASES["alpha layers, transmittance"]
+    settings = RenderSettings(layers=one.layers, shadow_mode=one.shadow_mode, spp=4)   # whole bins
     want = _render_both(pair, strands, CAM, settings)[0]
     one_px = pair[1].beam_state.camera.refs
     monkeypatch.setattr(layout, "BEAM_MAX_REFS", int(one_px * 0.8))
@@ -135,9 +139,10 @@ def test_camera_moves_upload_nothing_and_a_kept_camera_builds_nothing(pair):
 def test_the_passes_of_a_progressive_render_keep_the_first_ones_beams(pair, sampler, spp):
     """A progressive render's passes move the camera by a fraction of a pixel (Camera.for_pass):
     an independent sample looks up the bin its ray crosses, the pixel sampler its pixel's bin,
-    widened once for the passes' shift; after that no pass builds, and every image is the one
-    a renderer that builds beams for that pass's camera gives (for the independent sampler,
-    the grid's)."""
+    widened once for the passes' shift; one independent sample a pixel gets lists for the
+    first pass's pixel centres, and the second pass, moved, lists of whole bins. After that no
+    pass builds, and every image is the one a renderer that builds beams for that pass's camera
+    gives (for the independent sampler, the grid's)."""
     strands = curls(60, 10, alpha=0.7)
     settings = RenderSettings(layers=3, spp=spp, sampler=sampler)
     for r in pair:
@@ -151,8 +156,10 @@ def test_the_passes_of_a_progressive_render_keep_the_first_ones_beams(pair, samp
         assert (want[..., 3] > 0).mean() > 0.05
         np.testing.assert_allclose(beams, want, atol=1e-6)
         built.append(pair[1].stats.beams_s > 0)
-    assert built[0] and not any(built[2:])
-    assert built[1] == (sampler == "pixel")      # the pixel sampler's lists widened once
+        if k == 0:
+            assert pair[1].stats.camera_beams == ("pixel centres" if sampler == "independent" else "1 px bins")
+    # The pixel sampler's lists widened once; the centres' made whole bins once.
+    assert built[0] and built[1] and not any(built[2:])
 
 
 def test_an_edit_rebuilds_the_beams(pair):
@@ -182,7 +189,7 @@ def test_split_cylinder_buffers_render_as_one(pair):
     small = Renderer(build="gpu", accel="beams", max_buffer_texels=limit)
     small.set_strands(strands)
     img = small.render(cam, settings)
-    assert small.buffers.parts("tex_cyl") == 2 and small.stats.camera_beams.endswith("px bins")
+    assert small.buffers.parts("tex_cyl") == 2 and small.stats.camera_beams == "pixel centres"
     assert (img[..., 3] > 0).mean() > 0.05
     np.testing.assert_array_equal(img, want)
 
@@ -208,26 +215,34 @@ def test_the_numpy_build_walks_the_grid():
 
 # The dense tuft (tracer_scenes.dense_tuft) fills its view: over a hundred list entries a pixel.
 DENSE_CAM = Camera.look_at((0.0, -1.6, 0.0), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
+# Strands of a tuft dense past scene_beams.CENTRE_REFS_PER_RAY at one sample (about 2,000
+# entries of 1-pixel bins a camera ray; the default tuft about 400).
+DENSER_TUFT = 40_000
 
 
 def test_one_sample_of_dense_hair_leaves_the_camera_to_the_grid(pair):
     """Rebuilt at every camera move, the camera's beams are built for a render only when its
-    camera rays are many enough for the lists they would take (CAMERA_REFS_PER_RAY): one sample
-    of the dense tuft walks the grid, sixteen the beams, and the image is the grid's either way."""
+    camera rays are many enough for the lists they would take: one sample of the dense tuft
+    gets lists for the pixels' centres (up to CENTRE_REFS_PER_RAY), sixteen lists of whole
+    pixels (CAMERA_REFS_PER_RAY), and one sample of a tuft five times as dense walks the grid.
+    The image is the grid's every time."""
     grid, beams = _render_both(pair, dense_tuft(), DENSE_CAM, RenderSettings())
-    assert pair[1].stats.camera_beams.startswith("none: about") and pair[1].scene.grid is not None
+    assert pair[1].stats.camera_beams == "pixel centres"
     assert np.abs(grid - beams).max() <= 1e-6
     grid, beams = (r.render(DENSE_CAM, RenderSettings(spp=16)) for r in pair)
-    assert pair[1].stats.camera_beams.endswith("px bins")
+    assert pair[1].stats.camera_beams == "1 px bins"
+    assert np.abs(grid - beams).max() <= 1e-6
+    grid, beams = _render_both(pair, dense_tuft(DENSER_TUFT), DENSE_CAM, RenderSettings())
+    assert pair[1].stats.camera_beams.startswith("none: about") and pair[1].scene.grid is not None
     assert np.abs(grid - beams).max() <= 1e-6
 
 
 def test_a_suns_beams_wait_for_a_second_render_when_the_grid_is_built_anyway(pair):
-    """One sample of the dense tuft walks the grid with its camera rays, so the grid is built
+    """One sample of the denser tuft walks the grid with its camera rays, so the grid is built
     for that render; its few shadow rays would not pay for the sun's beams, which the second
     render of the same strands builds (kept across camera moves, they serve the renders to
     come). The images are the grid's."""
-    strands = dense_tuft()
+    strands = dense_tuft(DENSER_TUFT)
     grid, first = _render_both(pair, strands, DENSE_CAM, RenderSettings())
     assert pair[1].scene.grid is not None and pair[1].beam_state.suns[0] is None
     moved = Camera.look_at((0.3, -1.6, 0.1), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
@@ -287,8 +302,9 @@ def _frames(lo, hi, rmax):
     towards = np.array([-0.3, 0.5, 0.8]) / np.linalg.norm([-0.3, 0.5, 0.8])
     sun = sun_frame(towards, 0.0, lo, hi, rmax, 1.0, 0.02)
     wide_sun = sun_frame(towards, SUN_SPREAD, lo, hi, rmax, 1.0, 0.02)
+    centres = camera_frame(CAM, (0, 0, 64, 64), lo, hi, rmax, 1.0, centres=True)
     return {"perspective": (persp, CAM), "orthographic": (ortho, ortho_cam), "sun": (sun, None),
-            "sun with an angle": (wide_sun, None)}
+            "sun with an angle": (wide_sun, None), "pixel centres": (centres, CAM)}
 
 
 @pytest.mark.parametrize("family", ["perspective", "orthographic", "sun", "sun with an angle"])
@@ -332,7 +348,7 @@ def test_every_surface_point_is_listed_where_its_rays_look_it_up(family):
     assert checked > 500
 
 
-@pytest.mark.parametrize("family", ["perspective", "orthographic", "sun"])
+@pytest.mark.parametrize("family", ["perspective", "orthographic", "sun", "pixel centres"])
 def test_the_compute_passes_list_what_numpy_lists(family):
     r = Renderer(build="gpu", accel="beams")
     strands = curls(40, 12, radius=0.01, seed=2)
@@ -353,6 +369,33 @@ def test_the_compute_passes_list_what_numpy_lists(family):
         run = slice(start[b], start[b] + count[b])
         assert np.all(np.diff(slices[run].astype(np.int64)) >= 0)
         np.testing.assert_array_equal(np.sort(entries[run]), want.entries[run])
+
+
+@pytest.mark.parametrize("radius", [0.01, 0.002])
+def test_a_pixels_centre_ray_finds_every_cylinder_it_meets_in_its_list(radius):
+    """One sample a pixel goes through the pixel's centre, so a bin lists only what that ray
+    may meet (BeamFrame.centres): every cylinder the centre ray of a pixel meets (the float64
+    reference's intersection) is in the pixel's list, in a slice starting no farther than the
+    hit, and the lists hold far fewer entries than whole pixels' lists."""
+    from tracer.reference.shapes import intersect
+    c, lo, hi, rmax = _scene(curls(30, 12, radius=radius))
+    frame, camera = _frames(lo, hi, rmax)["pixel centres"]
+    beams = build_beams(frame, c)
+    whole = build_beams(_frames(lo, hi, rmax)["perspective"][0], c)
+    assert 0 < beams.refs < 0.5 * whole.refs
+    nx, ny = frame.dims
+    px, py = (a.ravel() for a in np.meshgrid(np.arange(nx), np.arange(ny)))
+    o, d = camera.rays(px + 0.5, py + 0.5)
+    hits = 0
+    for k in range(len(c)):
+        t = intersect(c, np.full(len(px), k), o, d)[0]
+        for b in np.flatnonzero(np.isfinite(t) & (t > 0)):
+            run = beams.entries[beams.start[b]:beams.start[b] + beams.count[b]]
+            ids = run & ((1 << layout.BEAM_ID_BITS) - 1)
+            assert k in ids, f"cylinder {k} missing from the list of pixel {b}"
+            assert frame.key0 + int(run[ids == k][0] >> layout.BEAM_ID_BITS) * frame.key_step <= t[b]
+            hits += 1
+    assert hits > 100
 
 
 def test_a_capsule_at_the_cameras_plane_is_refused():

@@ -2,7 +2,8 @@
 // Beams built on the GPU (GL 4.3 compute), the same listing as tracer/beams.py's numpy build:
 // every cylinder in every bin its projected capsule may reach, each entry its id and the
 // depth slice of its key, a bin's entries slice by slice. The host prepends
-// "#version 430 core", PASS and the generated header of tracer/layout.py, then
+// "#version 430 core", PASS, CENTRES (1: lists for the rays through the bins' centres alone,
+// tracer/beams.py's `centres`) and the generated header of tracer/layout.py, then
 // build_cylinders.glsl and capsule.glsl:
 //   PASS 0  zero:   counts[i] = 0 for i < n_items (the bins' counters, then the slices')
 //   PASS 1  count:  counts[bin] += 1 for every (cylinder, bin), slices[slice] += 1 per cylinder,
@@ -108,8 +109,36 @@ void visit(int bin, int id, int slice) {
 #endif
 }
 
+#if CENTRES
+// Where the line A = a crosses the points within P of the segment (A0, B0) + s·(dA, dB):
+// (lo, hi), lo > hi where it does not (tracer/beams.py, centre_span, the same steps).
+const float FAR = 1e30;     // past every bin
+
+vec2 centre_span(float a, float A0, float dA, float B0, float dB, float P) {
+    float lo = FAR, hi = -FAR;
+    for (int e = 0; e < 2; ++e) {
+        float ea = e == 0 ? A0 : A0 + dA, eb = e == 0 ? B0 : B0 + dB;
+        float da = a - ea, h2 = P * P - da * da;
+        float h = sqrt(max(h2, 0.0));
+        if (h2 >= 0.0) { lo = min(lo, eb - h); hi = max(hi, eb + h); }
+    }
+    bool point = abs(dA) < 1e-12;
+    float da = a - A0, sdA = point ? 1.0 : dA;
+    float L2 = dA * dA + dB * dB;
+    float mid = B0 + da / sdA * dB, half_ = P * sqrt(L2) / abs(sdA), t0 = da * dA;
+    bool level = dB == 0.0, on = t0 >= 0.0 && t0 <= L2;
+    float sdB = level ? 1.0 : dB;
+    float f0 = B0 - t0 / sdB, f1 = B0 + (L2 - t0) / sdB;
+    float foot_lo = level ? (on ? -FAR : FAR) : min(f0, f1), foot_hi = level ? (on ? FAR : -FAR) : max(f0, f1);
+    float band_lo = max(mid - half_, foot_lo), band_hi = min(mid + half_, foot_hi);
+    if (!point && band_lo <= band_hi) { lo = min(lo, band_lo); hi = max(hi, band_hi); }
+    return vec2(lo, hi);
+}
+#endif
+
 // Every bin the projected capsule may reach (tracer/beams.py, bins_touched): the segment cut
-// into the bins' columns along its longer side, each column's rows within rho of its part.
+// into the bins' columns along its longer side, each column's rows within rho of its part
+// (CENTRES: the columns and rows whose centre lies within rho of the projected axis).
 // One loop over (column, row), not nested loops (docs/DECISIONS.md, "One loop over the grid
 // build's cells"). False when the bound on its steps passes max_bins.
 bool list_cylinder(int id, vec2 g0, vec2 g1, float rho, int slice) {
@@ -119,8 +148,12 @@ bool list_cylinder(int id, vec2 g0, vec2 g1, float rho, int slice) {
     float B0 = xdom ? g0.y : g0.x, dB = xdom ? dg.y : dg.x;
     int NA = xdom ? dims.x : dims.y, NB = xdom ? dims.y : dims.x;
     int SA = xdom ? 1 : dims.x, SB = xdom ? dims.x : 1;
+#if CENTRES
+    float a_lo = ceil(min(A0, A0 + dA) - rho - 0.5), a_hi = floor(max(A0, A0 + dA) + rho - 0.5);
+#else
     float a_lo = floor(min(A0, A0 + dA) - rho), a_hi = floor(max(A0, A0 + dA) + rho);
-    if (a_hi < 0.0 || a_lo > float(NA - 1)) return true;
+#endif
+    if (a_hi < 0.0 || a_lo > float(NA - 1) || a_lo > a_hi) return true;
     int i0 = int(clamp(a_lo, 0.0, float(NA - 1))), i1 = int(clamp(a_hi, 0.0, float(NA - 1)));
     if (float(i1 - i0 + 1) * min(abs(dB) + 2.0 * rho + 2.0, float(NB)) > float(max_bins)) return false;
     bool no_dir = abs(dA) < 1e-12;
@@ -129,6 +162,10 @@ bool list_cylinder(int id, vec2 g0, vec2 g1, float rho, int slice) {
     for (;;) {
         if (row > row_end) {
             if (col > i1) break;
+#if CENTRES
+            vec2 span = centre_span(float(col) + 0.5, A0, dA, B0, dB, rho);
+            float b_lo = ceil(span.x - 0.5), b_hi = floor(span.y - 0.5);
+#else
             // The part of the segment (s in [0, 1]) within rho of this column, its rows.
             float s0 = 0.0, s1 = 1.0;
             if (!no_dir) {
@@ -138,7 +175,8 @@ bool list_cylinder(int id, vec2 g0, vec2 g1, float rho, int slice) {
             }
             float e0 = B0 + s0 * dB, e1 = B0 + s1 * dB;
             float b_lo = floor(min(e0, e1) - rho), b_hi = floor(max(e0, e1) + rho);
-            bool some = b_hi >= 0.0 && b_lo <= float(NB - 1);
+#endif
+            bool some = b_hi >= 0.0 && b_lo <= float(NB - 1) && b_lo <= b_hi;
             row = int(clamp(b_lo, 0.0, float(NB - 1)));
             row_end = some ? int(clamp(b_hi, 0.0, float(NB - 1))) : row - 1;
             col++;
