@@ -6,8 +6,8 @@
 // tracer/beams.py's `centres`) and the generated header of tracer/layout.py, then
 // build_cylinders.glsl and capsule.glsl:
 //   PASS 0  zero:   counts[i] = 0 for i < n_items (the bins' counters, then the slices')
-//   PASS 1  count:  counts[bin] += 1 for every (cylinder, bin), slices[slice] += 1 per cylinder,
-//                   filed[cylinder] = its slice (-1: never seen)
+//   PASS 1  count:  counts[bin] += 1 for every (cylinder, bin), slices[slice] += 1 per cylinder
+//                   listed somewhere, filed[cylinder] = its slice (-1: listed nowhere)
 //   PASS 2  sums:   sums[c] = the counts of bins c·CHUNK .. (c+1)·CHUNK (counts is padded
 //                   with zeros to whole chunks)
 //   PASS 3  scan:   one invocation: sums become exclusive prefix sums, sums[n_items] the total
@@ -140,8 +140,9 @@ vec2 centre_span(float a, float A0, float dA, float B0, float dB, float P) {
 // into the bins' columns along its longer side, each column's rows within rho of its part
 // (CENTRES: the columns and rows whose centre lies within rho of the projected axis).
 // One loop over (column, row), not nested loops (docs/DECISIONS.md, "One loop over the grid
-// build's cells"). False when the bound on its steps passes max_bins.
-bool list_cylinder(int id, vec2 g0, vec2 g1, float rho, int slice) {
+// build's cells"). False when the bound on its steps passes max_bins; `listed` counts the
+// bins it was listed in.
+bool list_cylinder(int id, vec2 g0, vec2 g1, float rho, int slice, inout int listed) {
     vec2 dg = g1 - g0;
     bool xdom = abs(dg.x) >= abs(dg.y);
     float A0 = xdom ? g0.x : g0.y, dA = xdom ? dg.x : dg.y;
@@ -183,6 +184,7 @@ bool list_cylinder(int id, vec2 g0, vec2 g1, float rho, int slice) {
             continue;
         }
         visit((col - 1) * SA + row * SB, id, slice);
+        listed++;
         row++;
     }
     return true;
@@ -197,11 +199,17 @@ void main() {
     if (i >= n_items) return;
     vec2 g0, g1; float rho; int slice;
     int state = project_cylinder(i, g0, g1, rho, slice);
-    filed[i] = state == 0 ? slice : -1;
+    filed[i] = -1;
     if (state == 2) { atomicAdd(flags[0], 1); return; }
     if (state == 1) return;
-    atomicAdd(slices[slice], 1);
-    if (!list_cylinder(i, g0, g1, rho, slice)) atomicAdd(flags[1], 1);
+    int listed = 0;
+    if (!list_cylinder(i, g0, g1, rho, slice, listed)) atomicAdd(flags[1], 1);
+    // Only a cylinder listed somewhere is filled: the fill goes over filed's cylinders alone
+    // (lists for the pixels' centres hold a few of them).
+    if (listed > 0) {
+        filed[i] = slice;
+        atomicAdd(slices[slice], 1);
+    }
 #elif PASS == 2
     if (i >= n_items) return;
     int s = 0;
@@ -236,6 +244,7 @@ void main() {
     int id = perm[first_item + i];
     vec2 g0, g1; float rho; int slice;
     project_cylinder(id, g0, g1, rho, slice);
-    list_cylinder(id, g0, g1, rho, fill_slice);
+    int listed = 0;
+    list_cylinder(id, g0, g1, rho, fill_slice, listed);
 #endif
 }
