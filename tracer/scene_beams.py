@@ -111,8 +111,6 @@ def _estimated_refs(frame, sample, pad, count):
     if frame.kind == "persp":
         rho = rho / np.maximum(np.minimum(z0, z1), 1e-30)
     rho = rho + frame.drift
-    if frame.centres:       # the bin centres within rho of the projected axis: its stadium's area
-        return float(np.mean(2 * rho * np.hypot(gx1 - gx0, gy1 - gy0) + np.pi * rho * rho)) * count
     major = np.maximum(np.abs(gx1 - gx0), np.abs(gy1 - gy0))
     minor = np.minimum(np.abs(gx1 - gx0), np.abs(gy1 - gy0))
     cols = major + 2 * rho + 1
@@ -185,12 +183,11 @@ def camera_beams(state, scene, buffers, camera, box, pad, samples=1, pixel_n=0):
                               scene.num_cylinders)
         if centred and not moving and one <= CENTRE_REFS_PER_RAY * rays:
             frame = camera_frame(camera, domain, lo, hi, rmax, pad, 1, 0.0, centre, centres=True)
-            if frame.num_bins <= layout.BEAM_MAX_BINS:
-                try:
-                    state.camera = _build(scene, buffers, frame, pad, CAMERA_BUFFERS, budget)
-                    return state.camera, shift, time.perf_counter() - t0
-                except TooManyRefs:
-                    pass
+            try:        # past the bins or the budget (TooManyRefs): whole bins, as below
+                state.camera = _build(scene, buffers, frame, pad, CAMERA_BUFFERS, budget)
+                return state.camera, shift, time.perf_counter() - t0
+            except TooManyRefs:
+                pass
         for b in CAMERA_BIN_PX:
             frame = camera_frame(camera, domain, lo, hi, rmax, pad, b, shift_pad, centre)
             if frame.num_bins > layout.BEAM_MAX_BINS or b < finest:

@@ -47,7 +47,7 @@ layout(std430, binding = 1) buffer Slices { int slices[]; };     // per slice: c
 layout(std430, binding = 2) buffer Perm { int perm[]; };         // cylinders, slice by slice
 layout(std430, binding = 3) buffer Sums { int sums[]; };         // per chunk of bins
 layout(std430, binding = 4) buffer Flags { int flags[]; };       // [0] near the camera, [1] too wide
-layout(std430, binding = 5) buffer Filed { int filed[]; };       // per cylinder: its slice, -1 unseen
+layout(std430, binding = 5) buffer Filed { int filed[]; };       // per cylinder: its slice, -1 listed nowhere
 #if PASS == 4
 layout(std430, binding = 6) writeonly buffer Table { ivec2 table[]; };
 #endif
@@ -157,8 +157,10 @@ bool list_cylinder(int id, vec2 g0, vec2 g1, float rho, int slice, inout int lis
     if (a_hi < 0.0 || a_lo > float(NA - 1) || a_lo > a_hi) return true;
     int i0 = int(clamp(a_lo, 0.0, float(NA - 1))), i1 = int(clamp(a_hi, 0.0, float(NA - 1)));
     if (float(i1 - i0 + 1) * min(abs(dB) + 2.0 * rho + 2.0, float(NB)) > float(max_bins)) return false;
+#if !CENTRES
     bool no_dir = abs(dA) < 1e-12;
     float inv = no_dir ? 1.0 : 1.0 / dA;
+#endif
     int col = i0, row = 0, row_end = -1;
     for (;;) {
         if (row > row_end) {
