@@ -15,10 +15,13 @@ every cell its box touches, most of which a ray crosses without meeting it); a b
 cylinder only where its projected capsule reaches, and a ray tests the few nearest of them.
 
 Lists are kept in order of depth by buckets: the scene's depth range is cut into
-`layout.BEAM_SLICES` slices, and a bin's list holds its entries slice by slice (within a
-slice in any order). Each entry is one 32-bit word, the cylinder id and its slice
-(`id | slice << BEAM_ID_BITS`), so a walk knows without a second fetch that every later
-entry lies at least that slice's depth away. The depth of an entry, its `key`:
+`layout.BEAM_SLICES` slices, each into 2^sub fine ones (at most as many bits as the scene's
+ids leave: layout.beam_sub_bits). Each entry is one 32-bit word, the cylinder id and its fine slice
+(`id | fine << (BEAM_ID_BITS - sub)`), and a bin's list holds its entries fine slice by fine
+slice (in any order within one: the compute passes fill a fine slice a dispatch), so a walk
+knows without a second fetch that every later entry lies at least that fine slice's depth
+away. sub is fine_bits' choice: no more fine slices than the lists' references pay for. The
+depth of an entry, its `key`:
 
     camera   the capsule's nearest distance from the camera (perspective: from its position,
              the distance to its axis less its radius; orthographic: from the camera's plane,
@@ -99,15 +102,35 @@ class BeamFrame:
 
 @dataclass(frozen=True, eq=False)
 class Beams:
-    """A family's bins: the frame, how many entries they hold, and (numpy build) per bin its
-    first entry and entry count (int32, bin id x + nx·y) and the entries (uint32 id | slice <<
-    BEAM_ID_BITS, slice by slice within a bin). The compute passes leave the last three None:
-    their lists exist only on the GPU (tracer.scene_beams.read_beams brings them back)."""
+    """A family's bins: the frame, how many entries they hold, the bits of its fine slices
+    (`sub`, module text), and (numpy build) per bin its first entry and entry count (int32,
+    bin id x + nx·y) and the entries (uint32 id | fine slice << id_bits, sorted within a
+    bin). The compute passes leave the last three None: their lists exist only on the GPU
+    (tracer.scene_beams.read_beams brings them back)."""
     frame: BeamFrame
     refs: int
+    sub: int = 0
     start: np.ndarray = None
     count: np.ndarray = None
     entries: np.ndarray = None
+
+    @property
+    def id_bits(self):
+        return layout.BEAM_ID_BITS - self.sub
+
+    @property
+    def fine_step(self):
+        """The keys' span of one fine slice."""
+        return self.frame.key_step / (1 << self.sub)
+
+    def ids(self, entries):
+        """The cylinder ids of `entries`."""
+        return np.asarray(entries) & np.uint32((1 << self.id_bits) - 1)
+
+    def starts(self, entries):
+        """Where the fine slice of each of `entries` starts: no key of it lies below."""
+        fine = np.asarray(entries) >> np.uint32(self.id_bits)
+        return self.frame.key0 + fine.astype(np.float64) * self.fine_step
 
 
 # --- frames ------------------------------------------------------------------------------
@@ -233,15 +256,15 @@ def _keys_and_radii(frame, top, far, z0, z1, r):
     return key, r * frame.radius_scale / np.where(ok, near, 1.0) + frame.drift + layout.BEAM_BIN_EPS, ok
 
 
-def slice_of(frame, key):
-    """Each key's slice: the last whose start lies at or below it."""
-    k = np.floor((key - frame.key0) / frame.key_step - layout.BEAM_SLICE_EPS)
-    return np.clip(k, 0, layout.BEAM_SLICES - 1).astype(np.int64)
+def slice_of(frame, key, sub=0):
+    """Each key's fine slice (2^sub a slice): the last whose start lies at or below it."""
+    k = np.floor(((key - frame.key0) / frame.key_step - layout.BEAM_SLICE_EPS) * (1 << sub))
+    return np.clip(k, 0, (layout.BEAM_SLICES << sub) - 1).astype(np.int64)
 
 
-def bins_touched(frame, top, far, radius):
+def bins_touched(frame, top, far, radius, sub=0):
     """(cylinder, bin id) for every bin the capsules top..far of `radius` may project into,
-    and each cylinder's slice. BeamsUnfit when one reaches the camera's plane (perspective) or
+    and each cylinder's fine slice (slice_of). BeamsUnfit when one reaches the camera's plane (perspective) or
     spans more than layout.BEAM_MAX_BINS_PER_CYLINDER bins."""
     nx, ny = (int(d) for d in frame.dims)
     gx0, gy0, z0 = project(frame, top)
@@ -308,7 +331,7 @@ def bins_touched(frame, top, far, radius):
     c = owner[owner2]
     bins = col[owner2] * SA[c] + row * SB[c]
     cyl = live[c]
-    return cyl, bins, slice_of(frame, key)
+    return cyl, bins, slice_of(frame, key, sub)
 
 
 def centre_span(a, A0, dA, B0, dB, P):
@@ -347,6 +370,21 @@ def centre_span(a, A0, dA, B0, dB, P):
     return np.where(band, np.minimum(lo, band_lo), lo), np.where(band, np.maximum(hi, band_hi), hi)
 
 
+def fine_bits(sizes, refs):
+    """The bits of fine slices a family's lists get (module text): `sizes` counts its listed
+    cylinders by fine slice at the most bits the ids leave (layout.BEAM_SLICES << top of them),
+    `refs` its references. The most bits for which the fine slices that hold a cylinder number
+    no more than one per layout.BEAM_REFS_PER_FILL references: finer order shortens the walks,
+    but the compute passes fill each fine slice in a dispatch of its own."""
+    sizes = np.asarray(sizes)
+    top = (len(sizes) // layout.BEAM_SLICES).bit_length() - 1
+    for sub in range(top, 0, -1):
+        filled = np.count_nonzero(sizes.reshape(-1, 1 << (top - sub)).sum(axis=1))
+        if filled * layout.BEAM_REFS_PER_FILL <= refs:
+            return sub
+    return 0
+
+
 def build_beams(frame, cylinders, pad_factor=1.0, max_refs=None):
     """Beams of `frame` over tracer.cylinders.Cylinders (capsules widened `pad_factor` times).
     BeamsUnfit past `max_refs` references (default: one buffer texture's worth,
@@ -354,21 +392,26 @@ def build_beams(frame, cylinders, pad_factor=1.0, max_refs=None):
     n = len(cylinders)
     if n >= 1 << layout.BEAM_ID_BITS:
         raise BeamsUnfit(f"{n} cylinders: more than a beam entry's id holds")
+    top = layout.beam_sub_bits(n)
     max_refs = layout.BEAM_MAX_REFS if max_refs is None else max_refs
-    keys = []
+    found = []
+    sizes = np.zeros(layout.BEAM_SLICES << top, np.int64)
     refs = 0
     for a in range(0, n, CHUNK):
         c = cylinders.select(slice(a, min(n, a + CHUNK)))
         axis = c.tip.astype(np.float64) - c.top
         length = np.sqrt(np.einsum("ij,ij->i", axis, axis))
         far = c.tip + axis * (c.extension / np.maximum(length, 1e-30))[:, None]
-        cyl, bins, slc = bins_touched(frame, c.top, far, c.radius.astype(np.float64) * pad_factor)
+        cyl, bins, slc = bins_touched(frame, c.top, far, c.radius.astype(np.float64) * pad_factor, top)
         refs += len(cyl)
         if refs > max_refs:
             raise TooManyRefs(f"more than {max_refs:,} references")
-        entry = (cyl + a) | (slc[cyl] << layout.BEAM_ID_BITS)
-        keys.append((bins << 32) | entry)
+        sizes += np.bincount(slc[np.unique(cyl)], minlength=len(sizes))
+        found.append((cyl + a, bins, slc[cyl]))
+    sub = fine_bits(sizes, refs)
+    id_bits = layout.BEAM_ID_BITS - sub
+    keys = [(bins << 32) | ids | ((slc >> (top - sub)) << id_bits) for ids, bins, slc in found]
     key = np.sort(np.concatenate(keys)) if keys else np.zeros(0, np.int64)
     count = np.bincount(key >> 32, minlength=frame.num_bins).astype(np.int32)
     start = (np.cumsum(count, dtype=np.int64) - count).astype(np.int32)
-    return Beams(frame, len(key), start, count, (key & 0xFFFFFFFF).astype(np.uint32))
+    return Beams(frame, len(key), sub, start, count, (key & 0xFFFFFFFF).astype(np.uint32))

@@ -2,14 +2,15 @@
 """Beams built by compute passes (GL 4.3; shaders/beams_build.glsl), by tracer/beams.py's
 rules, straight into the buffer textures the trace shader reads: count the references of
 every bin, scan the counts into starts on the GPU, bucket the cylinders by the slice of their
-key, then fill the lists slice after slice. Nothing goes up from the host but uniforms (the
-scratch buffers are zeroed by a pass), so a camera move uploads nothing; what comes back is
-the total, the slices' sizes and two flags.
+key's finest slice, then fill the lists fine slice after fine slice.
+Nothing goes up from the host but uniforms and the fine slices' first places (the scratch
+buffers are zeroed by a pass), so a camera move uploads next to nothing; what comes back is
+the total, the fine slices' sizes and two flags.
 """
 import numpy as np
 
 from . import layout
-from .beams import Beams, BeamsUnfit, TooManyRefs
+from .beams import Beams, BeamsUnfit, TooManyRefs, fine_bits
 from .gpu_build import _groups, set_uniforms
 from .shader_source import shader_source
 
@@ -59,7 +60,7 @@ class BeamBuilder:
         buf.bind_to_storage_buffer(0)
         prog.run(*_groups(words))
 
-    def _frame_uniforms(self, prog, frame, pad_factor, tex_cyl, n):
+    def _frame_uniforms(self, prog, frame, pad_factor, tex_cyl, n, sub):
         set_uniforms(prog, n_items=int(n), pad_factor=float(pad_factor), frame_kind=KIND_CODE[frame.kind],
                      frame_origin=tuple(float(x) for x in frame.origin),
                      axis_x=tuple(float(x) for x in frame.axes[0]), axis_y=tuple(float(x) for x in frame.axes[1]),
@@ -67,7 +68,7 @@ class BeamBuilder:
                      frame_offset=tuple(float(x) for x in frame.offset), radius_scale=float(frame.radius_scale),
                      drift=float(frame.drift), key0=float(frame.key0), key_step=float(frame.key_step),
                      near_limit=float(frame.near_limit), dims=tuple(int(d) for d in frame.dims),
-                     max_bins=int(layout.BEAM_MAX_BINS_PER_CYLINDER),
+                     max_bins=int(layout.BEAM_MAX_BINS_PER_CYLINDER), sub_bits=int(sub),
                      cyl_split=tex_cyl.part_texels // layout.TEXELS_PER_CYL)
         for unit, part in enumerate(tex_cyl.parts):
             part.use(unit)
@@ -88,17 +89,19 @@ class BeamBuilder:
         chunks = -(-nbins // layout.BEAM_SCAN_CHUNK)
         parts = len(tex_cyl.parts)
         counts = self._buffer("counts", chunks * layout.BEAM_SCAN_CHUNK)
-        slices = self._buffer("slices", layout.BEAM_SLICES)
+        top = layout.beam_sub_bits(n)
+        fines = layout.BEAM_SLICES << top
+        slices = self._buffer("slices", fines)
         flags = self._buffer("flags", 2)
         sums = self._buffer("sums", chunks + 1)
         perm = self._buffer("perm", max(n, 1))
         filed = self._buffer("filed", max(n, 1))
         self._zero(counts, chunks * layout.BEAM_SCAN_CHUNK)
-        self._zero(slices, layout.BEAM_SLICES)
+        self._zero(slices, fines)
         self._zero(flags, 2)
         ctx.memory_barrier()
         prog = self._program(1, parts, frame.centres)
-        self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n)
+        self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n, top)
         for binding, buf in enumerate((counts, slices, perm, sums, flags, filed)):
             buf.bind_to_storage_buffer(binding)
         prog.run(*_groups(n))
@@ -131,25 +134,28 @@ class BeamBuilder:
         sums.bind_to_storage_buffer(3)
         table.buffer.bind_to_storage_buffer(6)
         prog.run(*_groups(chunks))
-        # The cylinders bucketed by slice: every slice's first place from its count.
-        sizes = np.frombuffer(slices.read(size=4 * layout.BEAM_SLICES), np.int32).astype(np.int64)
+        # The cylinders bucketed by fine slice: every fine slice's first place from its count.
+        sizes = np.frombuffer(slices.read(size=4 * fines), np.int32).astype(np.int64)
         first = np.cumsum(sizes) - sizes
-        self._zero(slices, layout.BEAM_SLICES)
+        slices.write(first.astype(np.int32).tobytes())
         ctx.memory_barrier()
         prog = self._program(5, 1)
         set_uniforms(prog, n_items=int(n))
-        prog["slice_first"].write(first.astype(np.int32).tobytes())
         for binding, buf in enumerate((counts, slices, perm, sums, flags, filed)):
             buf.bind_to_storage_buffer(binding)
         prog.run(*_groups(n))
         ctx.memory_barrier()
-        # The lists, a slice a dispatch in order, so each bin's entries come slice by slice.
+        # The lists, a fine slice of `sub` bits (tracer/beams.py, fine_bits) a dispatch in
+        # order, so each bin's entries come fine slice by fine slice.
+        sub = fine_bits(sizes, total)
+        group = 1 << (top - sub)
+        filled = sizes.reshape(-1, group).sum(axis=1)
         prog = self._program(6, parts, frame.centres)
-        self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n)
+        self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n, sub)
         lists.buffer.bind_to_storage_buffer(6)
-        for k in np.flatnonzero(sizes):
-            set_uniforms(prog, n_items=int(sizes[k]), first_item=int(first[k]), fill_slice=int(k))
-            prog.run(*_groups(int(sizes[k])))
+        for k in np.flatnonzero(filled):
+            set_uniforms(prog, n_items=int(filled[k]), first_item=int(first[k * group]))
+            prog.run(*_groups(int(filled[k])))
             ctx.memory_barrier()
-        return Beams(frame, total)
+        return Beams(frame, total, sub)
 

@@ -79,10 +79,17 @@ BVH_NODE = -1
 BVH_SHORT_STACK = 16
 
 # --- Beams (tracer/beams.py, shaders/accel_beams.glsl, shaders/beams_build.glsl) -----------
-# A beam entry is one 32-bit word: the cylinder id in the low BEAM_ID_BITS bits, the depth
-# slice of its key above them (BEAM_SLICES slices over the scene's depth range).
+# A beam entry is one 32-bit word: the cylinder id in its low bits, the depth slice of its key
+# above them: one of BEAM_SLICES slices over the scene's depth range cut into 2^sub finer ones,
+# and a list is in order of those. sub is at most what the scene's cylinder ids leave
+# (beam_sub_bits; ids take BEAM_ID_BITS - sub bits, 26: 67 M cylinders), and no more than
+# keeps BEAM_REFS_PER_FILL references a fine slice filled (tracer/beams.py, fine_bits): the
+# compute passes fill a list's fine slices one dispatch each, which costs more than the
+# shorter walks save where the lists are short.
 BEAM_ID_BITS = 26
 BEAM_SLICES = 64
+BEAM_SUB_BITS_MAX = 6
+BEAM_REFS_PER_FILL = 65536
 # References one family's lists may hold (one buffer texture's worth and then some room).
 BEAM_MAX_REFS = 96_000_000
 # Bins one family may have (its bin table is one ivec2 texel a bin).
@@ -127,6 +134,11 @@ MAX_REPEATS = 4096          # repeated-point candidates one cylinder pass report
 def cos_sharp():
     """cos(SHARP_BEND_DEG): joints whose axes meet at a smaller cosine are caps."""
     return float(np.cos(np.radians(SHARP_BEND_DEG)))
+
+
+def beam_sub_bits(n):
+    """The most bits of finer slices (above) the beam entries of a scene of `n` cylinders hold."""
+    return max(0, min(BEAM_SUB_BITS_MAX, BEAM_ID_BITS - max(int(n) - 1, 1).bit_length()))
 
 
 def tan_sharp():

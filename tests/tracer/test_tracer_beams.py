@@ -9,7 +9,7 @@ import pytest
 
 from tracer import Camera, Light, Renderer, RenderSettings, strands_to_cylinders
 from tracer import layout
-from tracer.beams import BeamsUnfit, build_beams, camera_frame, project, sun_frame
+from tracer.beams import BeamsUnfit, build_beams, camera_frame, fine_bits, project, sun_frame
 from tracer.gpu_build import compute_available
 from tracer.gl_state import shared_context
 from tracer.scene_beams import CAMERA_BUFFERS, SUN_BUFFERS, beam_scene_box, read_beams
@@ -43,6 +43,22 @@ def test_beams_give_the_grids_image(pair, case):
     # One independent sample a pixel: lists for the pixels' centres; more: whole bins.
     want = "pixel centres" if settings.spp == 1 and settings.sampler == "independent" else "1 px bins"
     assert pair[1].stats.camera_beams == want
+    assert np.abs(grid - beams).max() <= 1e-6
+
+
+@pytest.mark.parametrize("case", ["alpha layers, transmittance", "two suns, one with an angle, chiang"])
+def test_fine_slices_give_the_grids_image(pair, case, monkeypatch):
+    """Lists in their finest order (a fill dispatch for every fine slice however few the
+    references) stop their walks sooner and find the same."""
+    monkeypatch.setattr(layout, "BEAM_REFS_PER_FILL", 1)
+    strands, settings = CASES[case]
+    grid, beams = _render_both(pair, strands, CAM, settings)
+    state = pair[1].beam_state
+    top = layout.beam_sub_bits(pair[1].num_cylinders)
+    assert top == layout.BEAM_SUB_BITS_MAX and state.camera.sub == top
+    suns = [s[1] for s in state.suns if s is not None and s[1] is not None]
+    assert suns and all(b.sub == top for b in suns)
+    assert (grid[..., 3] > 0).mean() > 0.05
     assert np.abs(grid - beams).max() <= 1e-6
 
 
@@ -310,7 +326,7 @@ def _frames(lo, hi, rmax):
 @pytest.mark.parametrize("family", ["perspective", "orthographic", "sun", "sun with an angle"])
 def test_every_surface_point_is_listed_where_its_rays_look_it_up(family):
     """A ray that meets a point of a cylinder's surface looks up a bin that lists the cylinder
-    in a slice starting no farther than the walk goes: a camera ray the bin of the pixel it
+    in a fine slice starting no farther than the walk goes: a camera ray the bin of the pixel it
     goes through, up to the point's distance; a shadow ray the bin of where it leaves (below
     the point, within the sun's angle of its direction), up to minus that origin's height."""
     rng = np.random.default_rng(5)
@@ -340,16 +356,27 @@ def test_every_surface_point_is_listed_where_its_rays_look_it_up(family):
         bins = np.floor(gx).astype(int) + nx * np.floor(gy).astype(int)
         for b, limit in zip(bins[inside], reach[inside]):
             run = beams.entries[beams.start[b]:beams.start[b] + beams.count[b]]
-            ids = run & ((1 << layout.BEAM_ID_BITS) - 1)
+            ids = beams.ids(run)
             assert k in ids, f"cylinder {k} missing from bin {b}"
-            slice_ = int(run[ids == k][0] >> layout.BEAM_ID_BITS)
-            assert frame.key0 + slice_ * frame.key_step <= limit
+            assert beams.starts(run[ids == k])[0] <= limit      # its fine slice starts no farther
             checked += 1
     assert checked > 500
 
 
 @pytest.mark.parametrize("family", ["perspective", "orthographic", "sun", "pixel centres"])
 def test_the_compute_passes_list_what_numpy_lists(family):
+    assert _compute_vs_numpy(family) == 0       # references too few to pay for a fine slice
+
+
+@pytest.mark.parametrize("family", ["perspective", "sun"])
+def test_the_compute_passes_list_in_fine_slices_what_numpy_lists(family, monkeypatch):
+    monkeypatch.setattr(layout, "BEAM_REFS_PER_FILL", 1)
+    assert _compute_vs_numpy(family) == layout.BEAM_SUB_BITS_MAX
+
+
+def _compute_vs_numpy(family):
+    """The lists of `family` built by the compute passes against numpy's (the same entries in
+    the same fine slices of the same bins); their fine slices' bits."""
     r = Renderer(build="gpu", accel="beams")
     strands = curls(40, 12, radius=0.01, seed=2)
     r.set_strands(strands)
@@ -364,11 +391,13 @@ def test_the_compute_passes_list_what_numpy_lists(family):
     start, count, entries = read_beams(built, r.buffers, names)
     np.testing.assert_array_equal(count, want.count)
     np.testing.assert_array_equal(start, want.start)
-    slices = entries >> layout.BEAM_ID_BITS
-    for b in np.flatnonzero(count):       # slice by slice, the same entries
+    assert built.sub == want.sub
+    fine = entries >> built.id_bits
+    for b in np.flatnonzero(count):       # fine slice by fine slice, the same entries
         run = slice(start[b], start[b] + count[b])
-        assert np.all(np.diff(slices[run].astype(np.int64)) >= 0)
+        assert np.all(np.diff(fine[run].astype(np.int64)) >= 0)
         np.testing.assert_array_equal(np.sort(entries[run]), want.entries[run])
+    return built.sub
 
 
 @pytest.mark.parametrize("radius", [0.01, 0.002])
@@ -391,9 +420,9 @@ def test_a_pixels_centre_ray_finds_every_cylinder_it_meets_in_its_list(radius):
         t = intersect(c, np.full(len(px), k), o, d)[0]
         for b in np.flatnonzero(np.isfinite(t) & (t > 0)):
             run = beams.entries[beams.start[b]:beams.start[b] + beams.count[b]]
-            ids = run & ((1 << layout.BEAM_ID_BITS) - 1)
+            ids = beams.ids(run)
             assert k in ids, f"cylinder {k} missing from the list of pixel {b}"
-            assert frame.key0 + int(run[ids == k][0] >> layout.BEAM_ID_BITS) * frame.key_step <= t[b]
+            assert beams.starts(run[ids == k])[0] <= t[b]
             hits += 1
     assert hits > 100
 
@@ -403,3 +432,18 @@ def test_a_capsule_at_the_cameras_plane_is_refused():
     cam = Camera.look_at((0.0, 0.0, 0.5), (1.0, 0.0, 0.5), size=(32, 32))
     with pytest.raises(BeamsUnfit, match="camera's plane"):
         camera_frame(cam, (0, 0, 32, 32), lo, hi, rmax, 1.0)
+
+
+def test_fine_slices_only_where_their_references_pay_for_their_fills():
+    """fine_bits: the most bits whose filled fine slices number no more than one per
+    BEAM_REFS_PER_FILL references."""
+    per = layout.BEAM_REFS_PER_FILL
+    every = np.ones(layout.BEAM_SLICES << 3, np.int64)       # 512, 256, 128, 64 filled at 3..0 bits
+    assert fine_bits(every, 512 * per) == 3
+    assert fine_bits(every, 512 * per - 1) == 2
+    assert fine_bits(every, 128 * per) == 1
+    assert fine_bits(every, 128 * per - 1) == 0
+    whole = np.zeros(layout.BEAM_SLICES << 3, np.int64)
+    whole[::8] = 7                                            # whole slices alone: finer costs nothing
+    assert fine_bits(whole, 64 * per) == 3
+    assert fine_bits(np.ones(layout.BEAM_SLICES, np.int64), 10 ** 9) == 0    # no bits to give

@@ -4,19 +4,29 @@
 // cylinder a ray of the bin can meet, slice by slice in depth. A ray looks its bin up once
 // and tests the list in order until no later entry can change what it finds; the rays of
 // other lights walk the scene's grid (accel_grid.glsl), as do the camera's when it has no
-// beams. An entry is id | slice << BEAM_ID_BITS; no entry after it has a key below its
-// slice's start, key0 + slice·step (camera: the distance from the camera, or from its plane
-// when orthographic, at which its rays can meet the cylinder; sun: minus the cylinder's
-// greatest height toward the sun).
+// beams. An entry is id | fine << (BEAM_ID_BITS - sub), fine one of 2^sub slices a slice
+// (tracer/layout.py), and a list is ordered by its entries' fine slices: no entry after one
+// has a key below its fine slice's start, key0 + fine·step (camera: the distance from the
+// camera, or from its plane when orthographic, at which its rays can meet the cylinder; sun:
+// minus the cylinder's greatest height toward the sun). A walk stops at the first entry whose
+// fine slice starts past what it has found.
 
-const uint BEAM_ID_MASK = (1u << uint(BEAM_ID_BITS)) - 1u;
+// Where entry e's fine slice starts, for keys key0 + fine·step over fine slices of `sub` bits.
+float beam_entry_start(uint e, int sub, float key0, float step) {
+    return key0 + float(e >> uint(BEAM_ID_BITS - sub)) * step;
+}
+
+int beam_entry_id(uint e, int sub) {
+    return int(e & ((1u << uint(BEAM_ID_BITS - sub)) - 1u));
+}
 
 #if CAMERA_BEAMS
 uniform usamplerBuffer tex_beam;        // the camera's lists
 uniform isamplerBuffer tex_beam_cell;   // per bin: first entry, count
 uniform ivec4 beam_box;                 // whole-image pixel of bin (0, 0)'s corner, pixels a bin side, bins across
 uniform int beam_rows;                  // bins down
-uniform vec2 beam_keys;                 // slice 0's start, the slices' step (distances)
+uniform vec2 beam_keys;                 // slice 0's start, the fine slices' step (distances)
+uniform int beam_sub;                   // the fine slices' bits
 uniform vec2 beam_shift;                // the bins' pixel grid less this camera's (a pass moved by a
                                         // fraction of a pixel keeps its first pass's beams)
 
@@ -45,8 +55,8 @@ void beam_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_con
     float reach = beam_reach(tmax);
     for (int k = 0; k < sc.y; ++k) {
         uint e = texelFetch(tex_beam, sc.x + k).x;
-        if (beam_keys.x + float(e >> uint(BEAM_ID_BITS)) * beam_keys.y > reach) break;
-        int id = int(e & BEAM_ID_MASK);
+        if (beam_entry_start(e, beam_sub, beam_keys.x, beam_keys.y) > reach) break;
+        int id = beam_entry_id(e, beam_sub);
 #if COUNT
         counter.w += 1.0;
 #endif
@@ -74,9 +84,8 @@ void beam_pixel_nearest(vec3 o, vec3 d, float tmax) {
     float reach = beam_reach(tmax);
     for (int k = 0; k < sc.y; ++k) {
         uint e = texelFetch(tex_beam, sc.x + k).x;
-        int slice = int(e >> uint(BEAM_ID_BITS));
-        if (beam_keys.x + float(slice) * beam_keys.y > reach) break;
-        int id = int(e & BEAM_ID_MASK);
+        if (beam_entry_start(e, beam_sub, beam_keys.x, beam_keys.y) > reach) break;
+        int id = beam_entry_id(e, beam_sub);
 #if COUNT
         counter.w += 1.0;
 #endif
@@ -92,7 +101,8 @@ void beam_pixel_nearest(vec3 o, vec3 d, float tmax) {
 
 #if SUN_BEAMS > 0
 // Per sun set: its lists and bin table, its axes (u and v across the sun scaled to bins, w
-// toward it), (offset x, offset y, slice 0's start, step), bins across and down.
+// toward it), (offset x, offset y, slice 0's start, fine slices' step), bins across and down,
+// fine slices' bits.
 uniform usamplerBuffer tex_sun0;
 uniform isamplerBuffer tex_sun_cell0;
 #if SUN_BEAMS > 1
@@ -104,6 +114,7 @@ uniform vec3 sun_v[SUN_BEAMS];
 uniform vec3 sun_w[SUN_BEAMS];
 uniform vec4 sun_frame[SUN_BEAMS];
 uniform ivec2 sun_dims[SUN_BEAMS];
+uniform int sun_sub[SUN_BEAMS];
 
 uint sun_entry(int set, int i) {
 #if SUN_BEAMS > 1
@@ -127,17 +138,18 @@ float sun_transmittance(int set, vec3 p, vec3 d, float tmax, int own, float tmin
     if (set == 1) sc = texelFetch(tex_sun_cell1, cell).xy; else
 #endif
     sc = texelFetch(tex_sun_cell0, cell).xy;
-    // An entry whose slice starts past -height(p) lies wholly below p, as do all after it.
+    // An entry whose fine slice starts past -height(p) lies wholly below p, as do all after it.
     float hp = -dot(p, sun_w[set]);
     float below = hp + abs(hp) * 1e-5 + 1e-30;
     float trans = 1.0;
 #if COUNT
     counter.z += 1.0;
 #endif
+    int sub = sun_sub[set];
     for (int k = 0; k < sc.y; ++k) {
         uint e = sun_entry(set, sc.x + k);
-        if (fr.z + float(e >> uint(BEAM_ID_BITS)) * fr.w > below) break;
-        int id = int(e & BEAM_ID_MASK);
+        if (beam_entry_start(e, sub, fr.z, fr.w) > below) break;
+        int id = beam_entry_id(e, sub);
 #if COUNT
         counter.w += 1.0;
 #endif

@@ -6,19 +6,23 @@
 // tracer/beams.py's `centres`) and the generated header of tracer/layout.py, then
 // build_cylinders.glsl and capsule.glsl:
 //   PASS 0  zero:   counts[i] = 0 for i < n_items (the bins' counters, then the slices')
-//   PASS 1  count:  counts[bin] += 1 for every (cylinder, bin), slices[slice] += 1 per cylinder
-//                   listed somewhere, filed[cylinder] = its slice (-1: listed nowhere)
+//   PASS 1  count:  counts[bin] += 1 for every (cylinder, bin), slices[fine slice] += 1 per cylinder
+//                   listed somewhere, filed[cylinder] = its fine slice (-1: listed nowhere)
 //   PASS 2  sums:   sums[c] = the counts of bins c·CHUNK .. (c+1)·CHUNK (counts is padded
 //                   with zeros to whole chunks)
 //   PASS 3  scan:   one invocation: sums become exclusive prefix sums, sums[n_items] the total
 //   PASS 4  starts: per chunk of bins, each bin's first entry into the bin table (start,
 //                   count), and into counts, which become the cursors
-//   PASS 5  bucket: perm[slice_first[slice] + slices[slice]++] = cylinder, by filed (slices zeroed)
-//   PASS 6  fill:   for the cylinders perm[first_item ..] of slice `fill_slice`, one dispatch
-//                   a slice in order: slot = cursors[bin]++, lists[slot] = id | slice << BITS
-// The slices are dispatched one after another, so a bin's entries come slice by slice; within
-// a slice their order depends on the atomics, which no walk depends on (tracer/beams.py; the
-// pixel sampler's list ends the same whatever the order: sampler_pixel.glsl, pixel_offer).
+//   PASS 5  bucket: perm[slices[fine slice]++] = cylinder, by filed (slices hold the fine
+//                   slices' first places, written by the host from their counts)
+//   PASS 6  fill:   for the cylinders perm[first_item ..] of one fine slice of sub_bits (the
+//                   host's choice, tracer/beams.py fine_bits; PASS 1 files them at the most
+//                   bits), one dispatch a fine slice in order: slot = cursors[bin]++,
+//                   lists[slot] = id | fine slice << (BEAM_ID_BITS - sub_bits)
+// The fine slices are dispatched one after another, so a bin's entries come fine slice by fine
+// slice; within one their order depends on the atomics, which no walk depends on
+// (tracer/beams.py; the pixel sampler's list ends the same whatever the order:
+// sampler_pixel.glsl, pixel_offer).
 // A cylinder that reaches the camera's plane, or whose listing could take more than
 // MAX_BINS_PER_CYLINDER loop steps, is counted in flags[0] and flags[1]: the host then gives
 // the family no beams (its rays walk the grid), as the numpy build raises BeamsUnfit.
@@ -39,15 +43,14 @@ uniform float key_step;
 uniform float near_limit;     // perspective: a capsule's key at or below this reaches the camera's plane
 uniform ivec2 dims;
 uniform int max_bins;         // MAX_BINS_PER_CYLINDER
-uniform int fill_slice;
-uniform int slice_first[BEAM_SLICES];
+uniform int sub_bits;         // fine slices a slice: 2^sub_bits (layout.beam_sub_bits)
 
 layout(std430, binding = 0) buffer Counts { int counts[]; };     // per bin: count, then cursor
-layout(std430, binding = 1) buffer Slices { int slices[]; };     // per slice: count, then cursor
+layout(std430, binding = 1) buffer Slices { int slices[]; };     // per fine slice: count, then cursor
 layout(std430, binding = 2) buffer Perm { int perm[]; };         // cylinders, slice by slice
 layout(std430, binding = 3) buffer Sums { int sums[]; };         // per chunk of bins
 layout(std430, binding = 4) buffer Flags { int flags[]; };       // [0] near the camera, [1] too wide
-layout(std430, binding = 5) buffer Filed { int filed[]; };       // per cylinder: its slice, -1 listed nowhere
+layout(std430, binding = 5) buffer Filed { int filed[]; };       // per cylinder: its fine slice, -1 listed nowhere
 #if PASS == 4
 layout(std430, binding = 6) writeonly buffer Table { ivec2 table[]; };
 #endif
@@ -73,7 +76,7 @@ float segment_distance(vec3 c, vec3 a, vec3 b) {
 }
 
 // Cylinder `id`'s projected axis g0..g1 (bins), how far its capsule reaches past it (rho,
-// bins) and its key's slice. Returns 0: to be listed, 1: never seen (wholly behind the
+// bins) and its key's fine slice (tracer/beams.py, slice_of; its slice is fine >> sub_bits). Returns 0: to be listed, 1: never seen (wholly behind the
 // camera), 2: it reaches the camera's plane.
 int project_cylinder(int id, out vec2 g0, out vec2 g1, out float rho, out int slice) {
     vec4 top = cyl(id, CYL_TOP), tip = cyl(id, CYL_TIP), n2 = cyl(id, CYL_N2);
@@ -95,7 +98,8 @@ int project_cylinder(int id, out vec2 g0, out vec2 g1, out float rho, out int sl
     }
     g0 = to_bins(f0);
     g1 = to_bins(f1);
-    slice = clamp(int(floor((key - key0) / key_step - BEAM_SLICE_EPS)), 0, BEAM_SLICES - 1);
+    slice = clamp(int(floor(((key - key0) / key_step - BEAM_SLICE_EPS) * float(1 << sub_bits))), 0,
+                  (BEAM_SLICES << sub_bits) - 1);
     return 0;
 }
 
@@ -105,7 +109,7 @@ void visit(int bin, int id, int slice) {
     atomicAdd(counts[bin], 1);
 #else
     int slot = atomicAdd(counts[bin], 1);
-    lists[slot] = uint(id) | (uint(slice) << uint(BEAM_ID_BITS));
+    lists[slot] = uint(id) | (uint(slice) << uint(BEAM_ID_BITS - sub_bits));
 #endif
 }
 
@@ -240,13 +244,13 @@ void main() {
     if (i >= n_items) return;
     int slice = filed[i];
     if (slice < 0) return;
-    perm[slice_first[slice] + atomicAdd(slices[slice], 1)] = i;
+    perm[atomicAdd(slices[slice], 1)] = i;
 #elif PASS == 6
     if (i >= n_items) return;
     int id = perm[first_item + i];
     vec2 g0, g1; float rho; int slice;
     project_cylinder(id, g0, g1, rho, slice);
     int listed = 0;
-    list_cylinder(id, g0, g1, rho, fill_slice, listed);
+    list_cylinder(id, g0, g1, rho, slice, listed);
 #endif
 }
