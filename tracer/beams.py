@@ -16,11 +16,11 @@ cylinder only where its projected capsule reaches, and a ray tests the few neare
 
 Lists are kept in order of depth by buckets: the scene's depth range is cut into
 `layout.BEAM_SLICES` slices, each into 2^sub fine ones (at most as many bits as the scene's
-ids leave: layout.beam_sub_bits). Each entry is one 32-bit word, the cylinder id and its fine slice
-(`id | fine << (BEAM_ID_BITS - sub)`), and a bin's list holds its entries fine slice by fine
-slice (in any order within one: the compute passes fill a fine slice a dispatch), so a walk
-knows without a second fetch that every later entry lies at least that fine slice's depth
-away. sub is fine_bits' choice: no more fine slices than the lists' references pay for. The
+ids leave: layout.beam_sub_bits). Each entry is one 32-bit word, the cylinder id and its
+fine slice (`id | fine << (BEAM_ID_BITS - sub)`), and a bin's list holds its entries fine
+slice by fine slice (in any order within one: the compute passes fill a fine slice a
+dispatch), so a walk knows without a second fetch that every later entry lies at least that
+fine slice's depth away. sub is fine_bits' choice: no more fine slices than the lists' references pay for. The
 depth of an entry, its `key`:
 
     camera   the capsule's nearest distance from the camera (perspective: from its position,
@@ -264,8 +264,8 @@ def slice_of(frame, key, sub=0):
 
 def bins_touched(frame, top, far, radius, sub=0):
     """(cylinder, bin id) for every bin the capsules top..far of `radius` may project into,
-    and each cylinder's fine slice (slice_of). BeamsUnfit when one reaches the camera's plane (perspective) or
-    spans more than layout.BEAM_MAX_BINS_PER_CYLINDER bins."""
+    and each cylinder's fine slice (slice_of, `sub` bits). BeamsUnfit when one reaches the
+    camera's plane (perspective) or spans more than layout.BEAM_MAX_BINS_PER_CYLINDER bins."""
     nx, ny = (int(d) for d in frame.dims)
     gx0, gy0, z0 = project(frame, top)
     gx1, gy1, z1 = project(frame, far)

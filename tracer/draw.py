@@ -280,22 +280,23 @@ def _set_beam_uniforms(prog, beams):
     if cam is not None:
         f = cam.frame
         set_uniforms(prog, beam_box=(int(f.box[0]), int(f.box[1]), int(f.bin_px), int(f.dims[0])),
-                     beam_rows=int(f.dims[1]), beam_keys=(float(f.key0), float(cam.fine_step)), beam_sub=int(cam.sub),
+                     beam_rows=int(f.dims[1]), beam_keys=(float(f.key0), float(cam.fine_step)),
+                     beam_sub=int(cam.sub),
                      beam_shift=tuple(float(x) for x in beams.camera_shift))
     suns = [b for b in beams.suns]
     used = max([k + 1 for k in beams.light_sun if k >= 0], default=0)
     if used:
         sets = suns[:used]
-        pick = lambda fn, dtype: np.array([fn(b.frame, b) if b is not None else fn(None, None) for b in sets], dtype)  # noqa: E731
+        pick = lambda fn, dtype: np.array([fn(b) for b in sets], dtype)  # noqa: E731
         zero3 = (0.0, 0.0, 0.0)
         for name, fn, dtype in (
-                ("sun_u", lambda f, b: f.axes[0] if f else zero3, np.float32),
-                ("sun_v", lambda f, b: f.axes[1] if f else zero3, np.float32),
-                ("sun_w", lambda f, b: f.axes[2] if f else zero3, np.float32),
-                ("sun_frame", lambda f, b: (f.offset[0], f.offset[1], f.key0, b.fine_step) if f else (0.0,) * 4,
-                 np.float32),
-                ("sun_dims", lambda f, b: tuple(int(d) for d in f.dims) if f else (0, 0), np.int32),
-                ("sun_sub", lambda f, b: int(b.sub) if b else 0, np.int32)):
+                ("sun_u", lambda b: b.frame.axes[0] if b else zero3, np.float32),
+                ("sun_v", lambda b: b.frame.axes[1] if b else zero3, np.float32),
+                ("sun_w", lambda b: b.frame.axes[2] if b else zero3, np.float32),
+                ("sun_frame", lambda b: (b.frame.offset[0], b.frame.offset[1], b.frame.key0, b.fine_step) if b
+                 else (0.0,) * 4, np.float32),
+                ("sun_dims", lambda b: tuple(int(d) for d in b.frame.dims) if b else (0, 0), np.int32),
+                ("sun_sub", lambda b: int(b.sub) if b else 0, np.int32)):
             if name in prog:
                 prog[name].write(pick(fn, dtype).tobytes())
     if "light_sun" in prog:

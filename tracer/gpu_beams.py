@@ -1,8 +1,8 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Beams built by compute passes (GL 4.3; shaders/beams_build.glsl), by tracer/beams.py's
 rules, straight into the buffer textures the trace shader reads: count the references of
-every bin, scan the counts into starts on the GPU, bucket the cylinders by the slice of their
-key's finest slice, then fill the lists fine slice after fine slice.
+every bin, scan the counts into starts on the GPU, bucket the cylinders by the finest slice
+of their key, then fill the lists fine slice after fine slice (tracer/beams.py, fine_bits).
 Nothing goes up from the host but uniforms and the fine slices' first places (the scratch
 buffers are zeroed by a pass), so a camera move uploads next to nothing; what comes back is
 the total, the fine slices' sizes and two flags.

@@ -6,8 +6,9 @@
 // tracer/beams.py's `centres`) and the generated header of tracer/layout.py, then
 // build_cylinders.glsl and capsule.glsl:
 //   PASS 0  zero:   counts[i] = 0 for i < n_items (the bins' counters, then the slices')
-//   PASS 1  count:  counts[bin] += 1 for every (cylinder, bin), slices[fine slice] += 1 per cylinder
-//                   listed somewhere, filed[cylinder] = its fine slice (-1: listed nowhere)
+//   PASS 1  count:  counts[bin] += 1 for every (cylinder, bin), slices[fine slice] += 1 per
+//                   cylinder listed somewhere, filed[cylinder] = its fine slice (-1: listed
+//                   nowhere), the fine slices of the most bits the ids leave
 //   PASS 2  sums:   sums[c] = the counts of bins c·CHUNK .. (c+1)·CHUNK (counts is padded
 //                   with zeros to whole chunks)
 //   PASS 3  scan:   one invocation: sums become exclusive prefix sums, sums[n_items] the total
@@ -27,7 +28,7 @@
 // MAX_BINS_PER_CYLINDER loop steps, is counted in flags[0] and flags[1]: the host then gives
 // the family no beams (its rays walk the grid), as the numpy build raises BeamsUnfit.
 uniform int n_items;          // cylinders, bins (zero: words) or chunks of this pass
-uniform int first_item;       // fill: the slice's first place in perm
+uniform int first_item;       // fill: the fine slice's first place in perm
 uniform float pad_factor;     // capsules widened this many times
 // The frame (tracer/beams.py, BeamFrame): kind 0 perspective, 1 orthographic, 2 sun.
 uniform int frame_kind;
@@ -43,11 +44,11 @@ uniform float key_step;
 uniform float near_limit;     // perspective: a capsule's key at or below this reaches the camera's plane
 uniform ivec2 dims;
 uniform int max_bins;         // MAX_BINS_PER_CYLINDER
-uniform int sub_bits;         // fine slices a slice: 2^sub_bits (layout.beam_sub_bits)
+uniform int sub_bits;         // fine slices a slice: 2^sub_bits (count: the most, fill: the host's choice)
 
 layout(std430, binding = 0) buffer Counts { int counts[]; };     // per bin: count, then cursor
 layout(std430, binding = 1) buffer Slices { int slices[]; };     // per fine slice: count, then cursor
-layout(std430, binding = 2) buffer Perm { int perm[]; };         // cylinders, slice by slice
+layout(std430, binding = 2) buffer Perm { int perm[]; };         // cylinders, fine slice by fine slice
 layout(std430, binding = 3) buffer Sums { int sums[]; };         // per chunk of bins
 layout(std430, binding = 4) buffer Flags { int flags[]; };       // [0] near the camera, [1] too wide
 layout(std430, binding = 5) buffer Filed { int filed[]; };       // per cylinder: its fine slice, -1 listed nowhere
@@ -76,8 +77,8 @@ float segment_distance(vec3 c, vec3 a, vec3 b) {
 }
 
 // Cylinder `id`'s projected axis g0..g1 (bins), how far its capsule reaches past it (rho,
-// bins) and its key's fine slice (tracer/beams.py, slice_of; its slice is fine >> sub_bits). Returns 0: to be listed, 1: never seen (wholly behind the
-// camera), 2: it reaches the camera's plane.
+// bins) and its key's fine slice of sub_bits (tracer/beams.py, slice_of). Returns 0: to be
+// listed, 1: never seen (wholly behind the camera), 2: it reaches the camera's plane.
 int project_cylinder(int id, out vec2 g0, out vec2 g1, out float rho, out int slice) {
     vec4 top = cyl(id, CYL_TOP), tip = cyl(id, CYL_TIP), n2 = cyl(id, CYL_N2);
     vec3 far = capsule_far(top.xyz, tip.xyz, n2.xyz, top.w);
