@@ -20,8 +20,8 @@ ids leave: layout.beam_sub_bits). Each entry is one 32-bit word, the cylinder id
 fine slice (`id | fine << (BEAM_ID_BITS - sub)`), and a bin's list holds its entries fine
 slice by fine slice (in any order within one: the compute passes fill a fine slice a
 dispatch), so a walk knows without a second fetch that every later entry lies at least that
-fine slice's depth away. sub is fine_bits' choice: no more fine slices than the lists' references pay for. The
-depth of an entry, its `key`:
+fine slice's depth away. sub is fine_bits' choice: no more fine slices than the lists'
+references pay for. The depth of an entry, its `key`:
 
     camera   the capsule's nearest distance from the camera (perspective: from its position,
              the distance to its axis less its radius; orthographic: from the camera's plane,

@@ -283,10 +283,9 @@ def _set_beam_uniforms(prog, beams):
                      beam_rows=int(f.dims[1]), beam_keys=(float(f.key0), float(cam.fine_step)),
                      beam_sub=int(cam.sub),
                      beam_shift=tuple(float(x) for x in beams.camera_shift))
-    suns = [b for b in beams.suns]
     used = max([k + 1 for k in beams.light_sun if k >= 0], default=0)
     if used:
-        sets = suns[:used]
+        sets = list(beams.suns)[:used]
         pick = lambda fn, dtype: np.array([fn(b) for b in sets], dtype)  # noqa: E731
         zero3 = (0.0, 0.0, 0.0)
         for name, fn, dtype in (
