@@ -18,8 +18,8 @@ def grid_scale(scale):
     from tracer import grid as gmod
     original = gmod.grid_dims
 
-    def scaled(box_size, extent, count=None):
-        d = np.asarray(original(box_size, extent, count), np.float64) * scale
+    def scaled(box_size, extent, count=None, max_refs=None):
+        d = np.asarray(original(box_size, extent, count, max_refs), np.float64) * scale
         # Keep the cell table within what a run can afford (the tracer caps its own choice too).
         over = np.prod(d) / MAX_GRID_CELLS
         if over > 1:

@@ -22,6 +22,14 @@ MAX_REFS_PER_CYLINDER = 8.0
 MAX_CELLS_PER_CYLINDER = 4.0
 MAX_REFS = 32_000_000   # references in all (128 MB of lists), see choose_resolution
 MIN_REFS_PER_CYLINDER = 5.0     # ... but never fewer than this per cylinder
+# A render of more rays than one sample a pixel at 512x512 (RAYS_TUNED, where the figures
+# above were measured) pays the trace more often for one build, so its grid aims at
+# (rays / RAYS_TUNED)^RAYS_EXPONENT times the references per cylinder, up to
+# MAX_REFS_PER_CYLINDER_MANY and a share of what the lists' buffers hold: see refs_per_cylinder.
+RAYS_TUNED = 512 * 512
+RAYS_EXPONENT = 0.4
+MAX_REFS_PER_CYLINDER_MANY = 12.0
+CAPACITY_SHARE = 0.9
 CHUNK = 1 << 16         # cylinders per build job (see build_grid)
 
 
@@ -64,6 +72,27 @@ def expected_refs(box_size, h):
     return float(np.mean((1.0 + e[:, 0]) * (1.0 + e[:, 1] / m) * (1.0 + e[:, 2] / m)))
 
 
+def refs_per_cylinder(count, rays=None, capacity=None):
+    """The references per cylinder a grid of `count` cylinders aims at (choose_resolution's
+    `max_refs`) for a render of `rays` camera rays (None: one sample a pixel at RAYS_TUNED)
+    whose lists' buffers hold `capacity` references (None: no limit).
+
+    A build costs about the same per reference, and on 1,000,000 wavy strands (61 M
+    cylinders, 512x512) a ray's cylinder tests fell as the references to the power -1.5
+    (4.2 a cylinder: build 9.5 s, one sample 6.9 s; 7.7: 18.7 s and 2.8 s). Build plus
+    trace is least where the build costs 1.5 times the trace, so the references that pay
+    grow as the rays to the power 1 / (1 + 1.5) = RAYS_EXPONENT: 16 samples want three times
+    as many. Never fewer than the rule for one sample."""
+    base = float(np.clip(MAX_REFS / max(1, count), MIN_REFS_PER_CYLINDER, MAX_REFS_PER_CYLINDER))
+    work = (rays or 0) / RAYS_TUNED
+    if work <= 1.0:
+        return base
+    aim = min(base * work ** RAYS_EXPONENT, MAX_REFS_PER_CYLINDER_MANY)
+    if capacity is not None:
+        aim = min(aim, CAPACITY_SHARE * capacity / max(1, count))
+    return max(base, aim)
+
+
 def choose_resolution(box_size, extent, max_refs=None, count=None):
     """Cell counts per axis: the smallest cell size h at which a cylinder is listed in about
     `max_refs` cells on average (found by bisection on a sample of boxes).
@@ -83,7 +112,7 @@ def choose_resolution(box_size, extent, max_refs=None, count=None):
     n = len(box_size)
     count = n if count is None else count
     if max_refs is None:
-        max_refs = float(np.clip(MAX_REFS / max(1, count), MIN_REFS_PER_CYLINDER, MAX_REFS_PER_CYLINDER))
+        max_refs = refs_per_cylinder(count)
     sample = box_size if n <= 20_000 else box_size[:: n // 20_000 + 1]
     cells = min(layout.MAX_CELLS, MAX_CELLS_PER_CYLINDER * count)
     floor_h = max(float(extent.max()) / layout.MAX_DIM, float(np.prod(extent) / max(cells, 1)) ** (1 / 3))
@@ -96,10 +125,11 @@ def choose_resolution(box_size, extent, max_refs=None, count=None):
     return _dims_for(extent, hi_h)
 
 
-def grid_frame(lo, hi, box_size, dims=None, count=None):
+def grid_frame(lo, hi, box_size, dims=None, count=None, max_refs=None):
     """(corner, cell size, cell counts) of the grid over the scene box lo..hi whose `count`
     cylinders (default len(box_size)) have padded boxes of sizes `box_size` (N,3, or a
-    sample); `dims` overrides the resolution."""
+    sample), aiming at `max_refs` references a cylinder (default: refs_per_cylinder's for
+    one sample a pixel); `dims` overrides the resolution."""
     lo = np.asarray(lo, np.float64)
     extent = np.asarray(hi, np.float64) - lo
     # A flat scene (all hair in one plane) still needs a non-zero cell along that axis.
@@ -108,7 +138,7 @@ def grid_frame(lo, hi, box_size, dims=None, count=None):
     lo = lo - extent * 1e-6
     extent = extent * (1 + 2e-6)
     if dims is None:
-        dims = grid_dims(box_size, extent, count)
+        dims = grid_dims(box_size, extent, count, max_refs)
     dims = np.asarray(dims, np.int64)
     return lo, extent / dims, dims
 
@@ -117,19 +147,19 @@ def grid_frame(lo, hi, box_size, dims=None, count=None):
 FRAME_SAMPLE = 20_000
 
 
-def plan_frame(plan, pad_factor=1.0, bounds=None, dims=None):
+def plan_frame(plan, pad_factor=1.0, bounds=None, dims=None, max_refs=None):
     """(corner, cell size, cell counts) of the grid over a tracer.cylinders.CylinderPlan
     whose capsules are widened `pad_factor` times: the one frame both builds use, made
     from the plan alone (the GPU build never has the cylinders on the host). `bounds`:
-    column_bounds of the plan's points when the caller has them already; `dims`
-    overrides the resolution. The reach past the points' box comes from their largest
+    column_bounds of the plan's points when the caller has them already; `max_refs` as
+    grid_frame's; `dims` overrides the resolution. The reach past the points' box comes from their largest
     radius, which bounds every cylinder's (the mean of two of them)."""
     step = max(1, len(plan) // FRAME_SAMPLE + 1)
     top = plan.top_point[::step]
     rmax = float(plan.radius.max()) if len(plan.radius) else 0.0
     return _segments_frame(column_bounds(plan.points) if bounds is None else bounds, rmax,
                            plan.points[top], plan.points[top + 1], segment_radius(plan.radius, top), pad_factor,
-                           len(plan), dims)
+                           len(plan), dims, max_refs)
 
 
 def cylinders_frame(cylinders, pad_factor=1.0, dims=None):
@@ -142,7 +172,7 @@ def cylinders_frame(cylinders, pad_factor=1.0, dims=None):
                            cylinders.tip[::step], cylinders.radius[::step], pad_factor, len(cylinders), dims)
 
 
-def _segments_frame(bounds, rmax, top, tip, radius, pad_factor, count, dims):
+def _segments_frame(bounds, rmax, top, tip, radius, pad_factor, count, dims, max_refs=None):
     """The frame over segments whose end points lie within `bounds`, widened by `rmax`:
     every capsule lies within its points' box widened by its radius times the pad, plus
     the reach of a bent cylinder past its tip (at most r·tan(SHARP_BEND_DEG), see
@@ -152,12 +182,12 @@ def _segments_frame(bounds, rmax, top, tip, radius, pad_factor, count, dims):
     lo, hi = bounds
     a, b = top.astype(np.float64), tip.astype(np.float64)
     size = np.abs(b - a) + 2 * pad_factor * radius[:, None]
-    return grid_frame(lo - reach, hi + reach, size, dims, count=count)
+    return grid_frame(lo - reach, hi + reach, size, dims, count=count, max_refs=max_refs)
 
 
-def grid_dims(box_size, extent, count=None):
+def grid_dims(box_size, extent, count=None, max_refs=None):
     """The resolution every build uses (a seam for measuring other resolutions)."""
-    return choose_resolution(box_size, extent, count=count)
+    return choose_resolution(box_size, extent, max_refs=max_refs, count=count)
 
 
 def _cells_touched(cylinders, pad_factor, lo, cs, dims):

@@ -21,11 +21,22 @@ def build_scene_grid(scene, buffers, use_gpu, bounds=None):
     compute passes when `use_gpu` (falling back to numpy for a scene they cannot list),
     else in numpy. `bounds`: column_bounds of the plan's points when the caller has them
     already. Sets scene.grid and the grid's stats (the pixel sampler's wide grid, built from
-    the old cylinders, goes); returns the seconds spent uploading."""
+    the old cylinders, goes); returns the seconds spent uploading. The resolution aims at
+    scene.grid_aim references per cylinder where that is set (tracer/grid.py,
+    refs_per_cylinder)."""
     stats = buffers.stats
     t0 = time.perf_counter()
     scene.grid = scene.wide_grid = None
-    scene.grid, stats.grid_build, upload_s, table_s = _build(scene, buffers, use_gpu, bounds, scene.grid_pad, MAIN)
+    try:
+        built = _build(scene, buffers, use_gpu, bounds, scene.grid_pad, MAIN)
+    except InputError:
+        if not scene.grid_aim:
+            raise
+        # The finer lists of a render of many rays (scene.grid_aim) outgrew the buffers,
+        # which the estimate of their length allows for: the one-sample grid instead.
+        scene.grid_aim_failed, scene.grid_aim = scene.grid_aim, 0.0
+        built = _build(scene, buffers, use_gpu, bounds, scene.grid_pad, MAIN)
+    scene.grid, stats.grid_build, upload_s, table_s = built
     g = scene.grid
     stats.grid_s = (time.perf_counter() - t0) - upload_s - table_s
     stats.grid_dims = tuple(int(x) for x in g.dims)
@@ -57,7 +68,8 @@ def _build(scene, buffers, use_gpu, bounds, pad, names):
     making and uploading its cell table) of the scene's cylinders bounded `pad` times their radius,
     into buffers `names` (MAIN or WIDE)."""
     grid, upload_s = None, 0.0      # the GPU build uploads only counters (bytes counted in it)
-    frame = plan_frame(scene.plan, pad, bounds) if scene.num_cylinders else None
+    aim = (scene.grid_aim or None) if names == MAIN else None
+    frame = plan_frame(scene.plan, pad, bounds, max_refs=aim) if scene.num_cylinders else None
     if use_gpu and scene.num_cylinders:
         grid = _build_gpu(scene, buffers, frame, pad, names[0])
     build = "gpu" if grid is not None else "numpy"

@@ -45,6 +45,13 @@ class Scene:
     # The grid lists cylinders with their true radius until a render asks for minimum
     # pixel width; then it is rebuilt once with radii widened by GRID_WIDEN_CAP and kept.
     grid_pad: float = 1.0
+    # References per cylinder the grid aims at beyond the rule for one sample a pixel (0:
+    # that rule): raised by a render of many rays (Renderer._grid_aim), kept by the
+    # grid's rebuilds after strand updates, reset by new strands.
+    grid_aim: float = 0.0
+    # An aim whose lists outgrew the buffers (0: none): no render of these strands aims as
+    # high again.
+    grid_aim_failed: float = 0.0
     # The pixel sampler's own grid (radii widened by GRID_WIDEN_CAP) beside an unpadded one,
     # built on its first render of these strands (tracer/scene_grid.py, build_wide_grid).
     wide_grid: Optional[Grid] = None

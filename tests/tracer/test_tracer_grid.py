@@ -64,3 +64,32 @@ def test_empty_grid():
     from hairio import Strands
     g = build_grid(strands_to_cylinders(Strands.empty()))
     assert len(g.indices) == 0 and g.cell_count.sum() == 0
+
+
+def test_renders_of_many_rays_aim_at_more_references_per_cylinder():
+    from tracer import grid as tg
+    for count in (10_000, 6_000_000, 61_000_000):
+        one = tg.refs_per_cylinder(count)
+        aims = [tg.refs_per_cylinder(count, k * tg.RAYS_TUNED) for k in (0.25, 1, 2, 4, 16, 64, 1024)]
+        assert aims[0] == aims[1] == one                    # one sample at 512x512 or fewer: the rule
+        assert all(a <= b for a, b in zip(aims, aims[1:]))  # never coarser for more rays
+        assert aims[4] > 1.4 * one                          # 16 samples pay for finer cells
+        assert aims[-1] <= max(one, tg.MAX_REFS_PER_CYLINDER_MANY)
+    # What the lists' buffers hold bounds the aim, but never below the rule for one sample.
+    count, capacity = 61_000_000, 4 * (1 << 27)
+    capped = tg.refs_per_cylinder(count, 16 * tg.RAYS_TUNED, capacity)
+    assert capped * count <= tg.CAPACITY_SHARE * capacity * (1 + 1e-9)
+    assert capped > tg.refs_per_cylinder(count)
+    assert tg.refs_per_cylinder(count, 16 * tg.RAYS_TUNED, 2 * count) == tg.refs_per_cylinder(count)
+
+
+def test_more_references_per_cylinder_give_smaller_cells_and_more_references():
+    from tracer.grid import build_grid, cylinders_frame, grid_frame
+    c = strands_to_cylinders(curls(300, 12, seed=2))
+    lo, cs, dims = cylinders_frame(c)
+    size = np.abs(c.tip - c.top) + 2 * c.radius[:, None]
+    fine = build_grid(c, frame=grid_frame(lo, lo + cs * dims, size, max_refs=16.0))
+    coarse = build_grid(c, frame=grid_frame(lo, lo + cs * dims, size, max_refs=4.0))
+    assert fine.num_cells > 2 * coarse.num_cells
+    assert len(fine.indices) > 1.5 * len(coarse.indices)
+    assert abs(len(fine.indices) / len(c) - 16.0) < 6.0       # near the aim, as estimated
