@@ -34,9 +34,10 @@ from .stats import RenderStats
 from .strand_upload import GpuUpload, NumpyUpload, Scene, select_strands
 
 BUILDS = ("auto", "gpu", "numpy")
-# A render builds the grid again, finer, when its rays pay for this many times the references
-# per cylinder of the grid there (tracer/grid.py, refs_per_cylinder): 1,000,000 wavy strands,
-# 16 samples at 512x512 (a build of 18.6 s saves 4 s a sample), not 4 samples.
+# A render builds the grid again, finer, when its rays pay for more than this many times the
+# references per cylinder of the grid there (tracer/grid.py, refs_per_cylinder): 1,000,000
+# wavy strands, 16 samples at 512x512 (a build of 18.6 s saves 4 s a sample), not 4 samples;
+# a scene of fewer cylinders, whose grid aims at 8 already, never (12 at most).
 REFINE_GRID = 1.5
 
 
@@ -262,7 +263,7 @@ class Renderer:
         aim = refs_per_cylinder(count, settings.spp * (box[2] - box[0]) * (box[3] - box[1]), capacity)
         if scene.grid_aim_failed and aim >= scene.grid_aim_failed:
             return 0.0
-        return aim if aim >= REFINE_GRID * (scene.grid_aim or refs_per_cylinder(count)) else 0.0
+        return aim if aim > REFINE_GRID * (scene.grid_aim or refs_per_cylinder(count)) else 0.0
 
     def _grid_for_beams(self, settings, box):
         """With beams: the scene's grid, built now if it is not there yet (some ray needs it)
