@@ -300,11 +300,9 @@ def _report(sec, cfg, scenes, size):
             sec.data.setdefault("rows", []).append({"scene": sc.name, "spp": spp, "cycles": theirs.median,
                                                     "sampler": key[1] if isinstance(key, tuple) else "independent",
                                                     "first": first.median, "rerender": again.median})
-            if isinstance(key, tuple):
-                sec.summary.append(f"{sc.name}: {spp} spp with the pixel sampler: first {fmt_time(first.median)} = "
-                                   f"{ratio(first.median, theirs.median):.2f}× Cycles {spp} spp "
-                                   f"({fmt_time(theirs.median)}); re-render "
-                                   f"{ratio(again.median, theirs.median):.2f}×; " + err)
+            if spp == top and top > min(cfg.anc_spp):
+                sec.summary.append(_top_line(sc.name, spp, isinstance(key, tuple), first.median, again.median,
+                                             theirs.median) + ("; " + err if isinstance(key, tuple) else ""))
         lowest = sc.ours.get(min(cfg.anc_spp))
         if isinstance(lowest, tuple) and c1:
             f1, a1 = lowest[0].median, lowest[1].median
@@ -329,6 +327,13 @@ def _report(sec, cfg, scenes, size):
               rows, caption=f"The tracer against Cycles at {size[0]}×{size[1]} (medians, same run).")
     if pics:
         _side_by_side(sec, pics)
+
+
+def _top_line(name, spp, pixel, first, again, cycles):
+    """The summary's line for a scene's highest sample count, with either sampler."""
+    how = "with the pixel sampler" if pixel else "independent samples"
+    return (f"{name}: {spp} spp, {how}: first {fmt_time(first)} = {ratio(first, cycles):.2f}× Cycles {spp} spp "
+            f"({fmt_time(cycles)}); re-render {ratio(again, cycles):.2f}×")
 
 
 def _stages(st):
