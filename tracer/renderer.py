@@ -28,7 +28,7 @@ from .mesh_upload import upload_meshes
 from .scene_buffers import SceneBuffers
 from .scene_bvh import build_scene_bvh, bvh_bounds
 from .scene_beams import BeamPlan, BeamState, beam_scene_box, camera_beams, sun_beams, sun_slots
-from .scene_grid import build_scene_grid, build_wide_grid, grid_indices, grid_refs
+from .scene_grid import build_scene_grid, build_wide_grid, grid_indices, grid_refs, lists_capacity
 from .settings import ACCELS, DEFAULT_ACCEL, GRID_WIDEN_CAP, RenderSettings, pixel_group
 from .stats import RenderStats
 from .strand_upload import GpuUpload, NumpyUpload, Scene, select_strands
@@ -259,8 +259,8 @@ class Renderer:
         that or its lists outgrew the buffers at that aim before."""
         scene = self.scene
         count = scene.num_cylinders
-        capacity = layout.MAX_BUFFER_PARTS * self.buffers.part_size("tex_idx")
-        aim = refs_per_cylinder(count, settings.spp * (box[2] - box[0]) * (box[3] - box[1]), capacity)
+        aim = refs_per_cylinder(count, settings.spp * (box[2] - box[0]) * (box[3] - box[1]),
+                                lists_capacity(self.buffers, "tex_idx"))
         if scene.grid_aim_failed and aim >= scene.grid_aim_failed:
             return 0.0
         return aim if aim > REFINE_GRID * (scene.grid_aim or refs_per_cylinder(count)) else 0.0

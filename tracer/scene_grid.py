@@ -11,7 +11,7 @@ import numpy as np
 from hairio import InputError
 
 from . import layout
-from .grid import Grid, build_grid, plan_frame
+from .grid import CAPACITY_SHARE, Grid, build_grid, plan_frame, refs_per_cylinder
 from .gl_state import gpu_builder
 from .scene_buffers import SplitBuffer
 
@@ -27,15 +27,20 @@ def build_scene_grid(scene, buffers, use_gpu, bounds=None):
     stats = buffers.stats
     t0 = time.perf_counter()
     scene.grid = scene.wide_grid = None
-    try:
-        built = _build(scene, buffers, use_gpu, bounds, scene.grid_pad, MAIN)
-    except InputError:
-        if not scene.grid_aim:
-            raise
-        # The finer lists of a render of many rays (scene.grid_aim) outgrew the buffers,
-        # which the estimate of their length allows for: the one-sample grid instead.
-        scene.grid_aim_failed, scene.grid_aim = scene.grid_aim, 0.0
-        built = _build(scene, buffers, use_gpu, bounds, scene.grid_pad, MAIN)
+    built = None
+    while built is None:
+        try:
+            built = _build(scene, buffers, use_gpu, bounds, scene.grid_pad, MAIN)
+        except ListsTooLong as e:
+            if not scene.grid_aim:
+                raise
+            # The finer lists of a render of many rays (scene.grid_aim) outgrew the buffers,
+            # which the estimate of their length allows for: once more at the aim that
+            # length says fits, then the one-sample grid, and these strands never aim as
+            # high again.
+            fits = scene.grid_aim * CAPACITY_SHARE * e.capacity / max(e.total, 1)
+            retry = not scene.grid_aim_failed and fits > refs_per_cylinder(scene.num_cylinders)
+            scene.grid_aim_failed, scene.grid_aim = scene.grid_aim, (fits if retry else 0.0)
     scene.grid, stats.grid_build, upload_s, table_s = built
     g = scene.grid
     stats.grid_s = (time.perf_counter() - t0) - upload_s - table_s
@@ -76,7 +81,10 @@ def _build(scene, buffers, use_gpu, bounds, pad, names):
     if grid is None:      # the numpy build, or a scene the GPU passes cannot list
         grid = build_grid(scene.cylinders, pad_factor=pad, frame=frame)
         t1 = time.perf_counter()
-        buffers.upload(names[0], grid.indices, 1, "i4", slack=layout.IDX_SLACK)
+        try:
+            buffers.upload(names[0], grid.indices, 1, "i4", slack=layout.IDX_SLACK)
+        except InputError as e:
+            raise ListsTooLong(str(e), len(grid.indices), lists_capacity(buffers, names[0])) from None
         upload_s = time.perf_counter() - t1
     t2 = time.perf_counter()
     # An empty cell's start is unused; EMPTY_BLOCK there says its whole block of BLOCK³
@@ -85,8 +93,27 @@ def _build(scene, buffers, use_gpu, bounds, pad, names):
     B = layout.BLOCK
     occupied = block_occupancy(grid).astype(bool)
     in_full_block = occupied.repeat(B, 0).repeat(B, 1).repeat(B, 2)[:nz, :ny, :nx].ravel()
-    buffers.upload(names[1], layout.cell_table(grid.cell_start, grid.cell_count, in_full_block), 2, "i4")
+    try:
+        buffers.upload(names[1], layout.cell_table(grid.cell_start, grid.cell_count, in_full_block), 2, "i4")
+    except InputError as e:     # a table of more cells than one buffer holds: fewer, as for lists
+        raise ListsTooLong(str(e), grid.num_cells, buffers.max_texels) from None
     return grid, build, upload_s, time.perf_counter() - t2
+
+
+class ListsTooLong(InputError):
+    """A grid's lists (`total` references) outgrew what their buffers hold (`capacity`), or
+    its cell table (`total` cells) one buffer."""
+
+    def __init__(self, message, total, capacity):
+        super().__init__(message)
+        self.total, self.capacity = int(total), int(capacity)
+
+
+def lists_capacity(buffers, name):
+    """References the lists' buffer `name` may hold: four parts for the scene's, one for the
+    pixel sampler's wide grid."""
+    parts = layout.MAX_BUFFER_PARTS if name == MAIN[0] else 1
+    return parts * buffers.part_size(MAIN[0]) - layout.IDX_SLACK
 
 
 def grid_refs(grid):
@@ -108,9 +135,9 @@ def _build_gpu(scene, buffers, frame, pad, name):
     start = (start - counts).astype(np.int32)      # fewer than 2^31: a buffer holds them
     try:
         tex_idx = buffers.store(name, total + layout.IDX_SLACK, 1, "i4")
-    except InputError:
+    except InputError as e:
         cells.release()
-        raise
+        raise ListsTooLong(str(e), total, lists_capacity(buffers, name)) from None
     if not isinstance(tex_idx, SplitBuffer):        # the wide grid's one buffer
         tex_idx = SplitBuffer([tex_idx], buffers.part_texels("tex_idx"))
     builder.fill(n, tex_cyl, lo, cs, dims, pad, cells, start, tex_idx)

@@ -204,3 +204,34 @@ def test_finer_lists_that_outgrow_the_buffers_fall_back_to_the_rule_for_one_samp
     rebuilds = r.stats.grid_rebuilds
     r.render(cam, many)                     # not tried again for these strands
     assert r.stats.grid_rebuilds == rebuilds
+
+
+def test_an_estimate_that_lists_too_much_is_corrected_by_the_lists_it_counted(renderer, monkeypatch):
+    """Where the estimate of the lists' length is off (here 0.7 of the true one, with no floor
+    on the cell size) and the finer lists outgrow their buffers, the build tries once more at
+    the aim the counted length says fits, and keeps that grid rather than falling back to the
+    one-sample rule."""
+    from tracer import grid as tg
+    from tracer import layout
+    monkeypatch.setattr(tg, "MAX_REFS_PER_CYLINDER", 3.0)
+    monkeypatch.setattr(tg, "MIN_REFS_PER_CYLINDER", 2.0)
+    monkeypatch.setattr(tg, "MAX_CELLS_PER_CYLINDER", 64.0)
+    strands = dense_tuft(3000)
+    cam = Camera.look_at((0.0, -1.6, 0.0), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
+    many = RenderSettings(spp=16, layers=3, shadow_mode="transmittance")
+    kept = Renderer(build=renderer.build, accel="grid")
+    kept.set_strands(strands)
+    want = kept.render(cam, many)
+    coarse = kept.stats.grid_refs
+    estimate = tg.expected_refs
+    monkeypatch.setattr(tg, "expected_refs", lambda box_size, h: 0.7 * estimate(box_size, h))
+    monkeypatch.setattr(tg, "RAYS_TUNED", 32 * 32)
+    monkeypatch.setattr(layout, "MAX_BUFFER_PARTS", 1)
+    r = Renderer(build=renderer.build, accel="grid")
+    r.buffers.max_texels = 4 * coarse               # one buffer of lists holds 4x the rule's
+    r.set_strands(strands)
+    one = r.stats.grid_refs
+    got = r.render(cam, many)
+    assert one < r.stats.grid_refs <= 4 * coarse
+    assert r.scene.grid_aim_failed > r.scene.grid_aim > 0   # the first aim failed, the second held
+    assert np.abs(got - want).max() <= 1e-5
