@@ -152,8 +152,8 @@ def plan_frame(plan, pad_factor=1.0, bounds=None, dims=None, max_refs=None):
     whose capsules are widened `pad_factor` times: the one frame both builds use, made
     from the plan alone (the GPU build never has the cylinders on the host). `bounds`:
     column_bounds of the plan's points when the caller has them already; `max_refs` as
-    grid_frame's; `dims` overrides the resolution. The reach past the points' box comes from their largest
-    radius, which bounds every cylinder's (the mean of two of them)."""
+    grid_frame's; `dims` overrides the resolution. The reach past the points' box comes from
+    their largest radius, which bounds every cylinder's (the mean of two of them)."""
     step = max(1, len(plan) // FRAME_SAMPLE + 1)
     top = plan.top_point[::step]
     rmax = float(plan.radius.max()) if len(plan.radius) else 0.0
