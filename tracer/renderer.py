@@ -273,7 +273,7 @@ class Renderer:
         if settings.min_pixel_width and scene.grid_pad < GRID_WIDEN_CAP:
             scene.grid_pad = GRID_WIDEN_CAP
             scene.grid = None
-        aim = self._grid_aim(settings, box) if scene.num_cylinders else 0.0
+        aim = self._grid_aim(settings, box) if scene.num_cylinders and box is not None else 0.0
         if aim:
             scene.grid_aim, scene.grid = aim, None
         if scene.grid is None and scene.num_cylinders:
