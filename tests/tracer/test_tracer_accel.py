@@ -138,71 +138,75 @@ def test_a_short_stack_that_overflows_loses_no_hit(renderer, monkeypatch):
     assert boxes_one_slot > roomy.stats.cells_visited      # the fallback walk ran
 
 
+# The grid's rules scaled down to a tuft of 3,000 faint strands seen through 32² pixels, which
+# stands for a dense scene: one sample aims at 3 references a cylinder, and (once the tests set
+# RAYS_TUNED to 32²) a render of 16 samples counts as many rays.
+TUFT_CAM = Camera.look_at((0.0, -1.6, 0.0), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
+
+
+def _tuft(renderer, monkeypatch, accel, settings):
+    """(strands, the image of `settings` on the rule's grid, that grid's references) with the
+    scaled-down rules in place."""
+    from tracer import grid as tg
+    monkeypatch.setattr(tg, "MAX_REFS_PER_CYLINDER", 3.0)
+    monkeypatch.setattr(tg, "MIN_REFS_PER_CYLINDER", 2.0)
+    strands = dense_tuft(3000)
+    kept = Renderer(build=renderer.build, accel=accel)
+    kept.set_strands(strands)
+    want = kept.render(TUFT_CAM, settings)      # 16 x 32² rays: fewer than RAYS_TUNED
+    assert (want[..., 3] > 0).mean() > 0.3, "tuft not in view: the test would prove nothing"
+    return strands, want, kept.stats.grid_refs
+
+
 @pytest.mark.parametrize("accel", ["grid", "beams"])
 def test_a_render_of_many_rays_refines_the_grid_and_finds_the_same_hits(renderer, monkeypatch, accel):
     """A render of 16 samples a pixel builds the grid again with more references per
     cylinder (tracer/grid.py, refs_per_cylinder) where its rays pay for them; it keeps that
     grid for the renders after it, and new strands start from the rule for one sample. With
-    beams the grid serves the shadow rays toward a point light. The tuft stands for a dense
-    scene: the grid's rules are scaled down to its size (one sample aims at 3 references a
-    cylinder; with RAYS_TUNED a 32² image counts as many rays)."""
+    beams the grid serves the shadow rays toward a point light."""
     import dataclasses
     from tracer import grid as tg
-    monkeypatch.setattr(tg, "MAX_REFS_PER_CYLINDER", 3.0)
-    monkeypatch.setattr(tg, "MIN_REFS_PER_CYLINDER", 2.0)
-    strands = dense_tuft(3000)
-    cam = Camera.look_at((0.0, -1.6, 0.0), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
     one = RenderSettings(layers=3, shadow_mode="transmittance", lights=(Light("point", (0.6, -1.0, 1.2)),))
     many = dataclasses.replace(one, spp=16)
-    kept = Renderer(build=renderer.build, accel=accel)
-    kept.set_strands(strands)
-    want = kept.render(cam, many)       # 16 x 32² rays: fewer than RAYS_TUNED, the rule's grid
-    coarse = kept.stats.grid_refs
-    assert (want[..., 3] > 0).mean() > 0.3, "tuft not in view: the test would prove nothing"
+    strands, want, coarse = _tuft(renderer, monkeypatch, accel, many)
     monkeypatch.setattr(tg, "RAYS_TUNED", 32 * 32)
     r = Renderer(build=renderer.build, accel=accel)
     r.set_strands(strands)
-    r.render(cam, one)
+    r.render(TUFT_CAM, one)
     assert r.stats.grid_refs == coarse
     rebuilds = r.stats.grid_rebuilds
-    got = r.render(cam, many)
+    got = r.render(TUFT_CAM, many)
     assert r.stats.grid_rebuilds == rebuilds + 1
     assert r.stats.grid_refs > 2 * coarse
     assert np.abs(got - want).max() <= 1e-5
     finer = r.stats.grid_refs
-    r.render(cam, one)                      # fewer rays keep the finer grid
-    r.render(cam, many)
+    r.render(TUFT_CAM, one)                 # fewer rays keep the finer grid
+    r.render(TUFT_CAM, many)
     assert r.stats.grid_rebuilds == rebuilds + 1 and r.stats.grid_refs == finer
     r.set_strands(strands)
-    r.render(cam, one)
+    r.render(TUFT_CAM, one)
     assert r.stats.grid_refs == coarse
+
+
+MANY = RenderSettings(spp=16, layers=3, shadow_mode="transmittance")
 
 
 def test_finer_lists_that_outgrow_the_buffers_fall_back_to_the_rule_for_one_sample(renderer, monkeypatch):
     """The aim is kept within a share of what the lists' buffers hold by an estimate; where
     the lists still outgrow them, the render builds the one-sample grid and renders the same
     image instead of failing."""
-    import dataclasses
     from tracer import grid as tg
-    monkeypatch.setattr(tg, "MAX_REFS_PER_CYLINDER", 3.0)
-    monkeypatch.setattr(tg, "MIN_REFS_PER_CYLINDER", 2.0)
-    strands = dense_tuft(3000)
-    cam = Camera.look_at((0.0, -1.6, 0.0), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
-    many = RenderSettings(spp=16, layers=3, shadow_mode="transmittance")
-    kept = Renderer(build=renderer.build, accel="grid")
-    kept.set_strands(strands)
-    want = kept.render(cam, many)
-    coarse = kept.stats.grid_refs
+    strands, want, coarse = _tuft(renderer, monkeypatch, "grid", MANY)
     monkeypatch.setattr(tg, "RAYS_TUNED", 32 * 32)
     monkeypatch.setattr(tg, "CAPACITY_SHARE", 100.0)        # an estimate far off
     r = Renderer(build=renderer.build, accel="grid")
     r.buffers.max_texels = 2 * coarse // 4                  # lists of four parts hold 2x the rule's
     r.set_strands(strands)
-    got = r.render(cam, many)
+    got = r.render(TUFT_CAM, MANY)
     assert r.stats.grid_refs == coarse
     assert np.abs(got - want).max() <= 1e-5
     rebuilds = r.stats.grid_rebuilds
-    r.render(cam, many)                     # not tried again for these strands
+    r.render(TUFT_CAM, MANY)                # not tried again for these strands
     assert r.stats.grid_rebuilds == rebuilds
 
 
@@ -213,16 +217,8 @@ def test_an_estimate_that_lists_too_much_is_corrected_by_the_lists_it_counted(re
     one-sample rule."""
     from tracer import grid as tg
     from tracer import layout
-    monkeypatch.setattr(tg, "MAX_REFS_PER_CYLINDER", 3.0)
-    monkeypatch.setattr(tg, "MIN_REFS_PER_CYLINDER", 2.0)
     monkeypatch.setattr(tg, "MAX_CELLS_PER_CYLINDER", 64.0)
-    strands = dense_tuft(3000)
-    cam = Camera.look_at((0.0, -1.6, 0.0), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
-    many = RenderSettings(spp=16, layers=3, shadow_mode="transmittance")
-    kept = Renderer(build=renderer.build, accel="grid")
-    kept.set_strands(strands)
-    want = kept.render(cam, many)
-    coarse = kept.stats.grid_refs
+    strands, want, coarse = _tuft(renderer, monkeypatch, "grid", MANY)
     estimate = tg.expected_refs
     monkeypatch.setattr(tg, "expected_refs", lambda box_size, h: 0.7 * estimate(box_size, h))
     monkeypatch.setattr(tg, "RAYS_TUNED", 32 * 32)
@@ -231,7 +227,7 @@ def test_an_estimate_that_lists_too_much_is_corrected_by_the_lists_it_counted(re
     r.buffers.max_texels = 4 * coarse               # one buffer of lists holds 4x the rule's
     r.set_strands(strands)
     one = r.stats.grid_refs
-    got = r.render(cam, many)
+    got = r.render(TUFT_CAM, MANY)
     assert one < r.stats.grid_refs <= 4 * coarse
     assert r.scene.grid_aim_failed > r.scene.grid_aim > 0   # the first aim failed, the second held
     assert np.abs(got - want).max() <= 1e-5
