@@ -14,7 +14,10 @@ pixel by pixel: the structures must find the same hits.
 Builds: the grid and the beams by the compute passes (the renderer's default build), the BVH
 in numpy (its only build). The grid and the BVH are built by set_strands; the beams by the
 first render that needs them (the camera's again at every camera move, the sun's once), and
-the grid beside them only when some ray needs it: their build time is that render's. With
+the grid beside them only when some ray needs it: their build time is that render's. A
+16-spp render builds the grid again, finer, where its rays pay for that (tracer/grid.py,
+refs_per_cylinder: at 100,000 strands), and its time includes that build; the work per ray
+is measured on the structures of the 1-spp renders. With
 beams, 1-spp renders of dense hair leave the camera's rays to the grid, which a camera move
 does not make again (tracer/scene_beams.py, CAMERA_REFS_PER_RAY): the column "camera rays"
 says what they walked.
@@ -26,7 +29,9 @@ less. The ratios to the grid are the figures to read.
 
 1,000,000 `wavy` strands (~61 M cylinders, more than one buffer texture of the driver holds:
 the cylinders and the cell lists are split over two each) are measured with the grid and the
-beams, once at 1 spp. The BVH is not built there: its numpy build took 30 s and 280 MB at
+beams, once at 1 spp, and with the grid a render of 16 samples builds there (finer cells:
+tracer/grid.py, refs_per_cylinder), once at 16 spp, its build included, and its work per ray.
+The BVH is not built there: its numpy build took 30 s and 280 MB at
 100,000 strands and grows with the cylinders, past the section's time and this machine's
 memory at ten times as many.
 
@@ -122,6 +127,9 @@ def run(sec, cfg):
                 builds[accel] = _beams_build(r)
         wall1, cpu1, images = _alternate(renderers, cam, rs1, runs)
         camera1 = renderers["beams"].stats.camera_beams if "beams" in renderers else ""
+        # The work per ray on the structures of the 1-spp renders, before a 16-spp render
+        # builds the grid finer where its rays pay for that (tracer/grid.py, refs_per_cylinder).
+        work = {accel: _work(r, cam, kw) for accel, r in renderers.items()}
         wall16 = cpu16 = None
         camera16 = ""
         if 16 * sum(wall1.values()) < left(sec, 0.8) / 2:
@@ -130,7 +138,7 @@ def run(sec, cfg):
         diffs = {a: float(np.abs(images["grid"] - img).max()) for a, img in images.items() if a != "grid"}
         for accel, r in renderers.items():
             st = builds[accel]
-            pw, pt, sw, stt = _work(r, cam, kw)
+            pw, pt, sw, stt = work[accel]
             ratio16 = "" if cpu16 is None else f"{cpu16[accel] / (16 * cpu1[accel]):.2f}"
             walked = {"grid": "grid", "bvh": "BVH"}.get(accel) or f"1 spp: {_said(camera1)}" + (
                 f"; 16 spp: {_said(camera16)}" if camera16 else "")
@@ -164,6 +172,43 @@ def run(sec, cfg):
               caption="Work per ray (tracer counters, 1 spp). Steps are BVH boxes tested, grid cells visited or "
                       "beam bins looked up (one a ray; with beams a 1-spp camera ray of dense hair walks the grid); "
                       "tests are cylinder (BVH: piece) intersection tests.")
+
+
+FINE = "grid, 16-spp aim"
+
+
+def _huge_grid_for_many_rays(sec, tracer, label, strands, cam, kw, rows, work_rows):
+    """The grid a render of 16 samples builds on the huge scene (tracer/grid.py,
+    refs_per_cylinder): one such render, which builds it (its time includes the build), then
+    the work per ray on it at 1 spp, which keeps it."""
+    r = tracer.Renderer(build="auto", accel="grid")
+    try:
+        once(lambda: r.set_strands(strands))
+        t0, c0 = time.perf_counter(), time.process_time()
+        r.render(cam, settings(spp=16, **kw))
+        wall16, cpu16 = time.perf_counter() - t0, time.process_time() - c0
+        st = r.stats.as_dict()
+        parts = (r.buffers.parts("tex_cyl"), r.buffers.parts("tex_idx"))
+        pw, pt, sw, stt = _work(r, cam, kw) if left(sec) > 0.25 * wall16 else (None,) * 4
+    except InputError as e:
+        rows.append([label, FINE, f"refused: {e}"])
+        return
+    finally:
+        r.buffers.release()
+    build = _build_cell("grid", st) + f", {st['grid_refs']:,} references"
+    rows.append([label, FINE, f"{strands.num_segments:,}", build,
+                 f"{st['accel_bytes'] / 2**20:.1f}", "", "",
+                 f"{fmt_time(cpu16)} (wall {fmt_time(wall16)}, the build included)", "",
+                 f"cylinders in {parts[0]} buffer textures, cell lists in {parts[1]}", "grid"])
+    work_rows.append([label, FINE] + (["not measured: time budget", "", "", ""] if pw is None
+                                      else [fmt_num(pw), fmt_num(pt), fmt_num(sw), fmt_num(stt)]))
+    sec.data.setdefault(label, {})[FINE] = {
+        "build_s": st["accel_s"], "bytes": st["accel_bytes"], "wall_16spp_s": wall16, "cpu_16spp_s": cpu16,
+        "primary_steps": pw, "primary_tests": pt, "shadow_steps": sw, "shadow_tests": stt,
+        "grid_refs": st["grid_refs"], "grid_dims": st["grid_dims"]}
+    sec.summary.append(f"{label}: the grid of a 16-spp render (build {_build_cell('grid', st)}, "
+                       f"{st['accel_bytes'] / 2**20:.0f} MB), 16 spp {fmt_time(wall16)} with the build"
+                       + ("" if pt is None else f"; {pt:.0f} tests a camera ray, {stt:.0f} a shadow ray"))
 
 
 def _said(camera_beams):
@@ -228,5 +273,6 @@ def _huge_scene(sec, tracer, label, strands, cam, kw, rows, work_rows):
             "shadow_tests": stt, "buffer_parts": parts, "grid_refs": st["grid_refs"], "grid_dims": st["grid_dims"]}
         sec.summary.append(f"{label}: {accel} (build {_build_cell(accel, st)}, {st['accel_bytes'] / 2**20:.0f} MB), "
                            f"1 spp {fmt_time(wall1)}")
+    _huge_grid_for_many_rays(sec, tracer, label, strands, cam, kw, rows, work_rows)
     rows.append([label, "bvh", f"{strands.num_segments:,}", "not measured: the numpy BVH build at this size needs "
                  "more time than the section has and more memory than this machine has (see the text)"])
