@@ -9,7 +9,8 @@ Resolution. A camera bin is `bin_px` pixels a side, the smallest of CAMERA_BIN_P
 ONE_SAMPLE_BIN_PX for a render of one sample a pixel) whose lists are estimated (from an
 even sample of the cylinders) to stay within their share of
 layout.BEAM_MAX_REFS; a sun's bins are squares sized so that a cylinder is listed in about
-SUN_REFS_PER_CYLINDER bins (fewer for large scenes, within the same budget). Smaller bins list
+SUN_REFS_PER_CYLINDER bins (fewer for large scenes, within the same budget), or half as many
+until the renders have traced rays enough to pay for those (SUN_FINE_RAYS_PER_BIN). Smaller bins list
 each cylinder more often but hand a ray fewer cylinders to test: docs/DECISIONS.md, "Beams".
 """
 import time
@@ -59,6 +60,21 @@ CENTRE_REFS_PER_RAY = 1000.0
 SUN_REFS_PER_CYLINDER = 8.0
 SUN_MIN_REFS_PER_CYLINDER = 4.0
 SUN_REFS_PER_RAY = 100.0
+# Which of those two: the finer lists (SUN_REFS_PER_CYLINDER) take longer to build, in
+# proportion to the cylinders, and save each shadow ray tests, in proportion to the entries
+# its bin lists (the hair's depth seen from the sun, which grows with the cylinders too): so
+# they pay once the renders of these strands have traced some rays a bin of the lists,
+# SUN_FINE_RAYS_PER_BIN of the fine ones (samples times pixels, this render's included);
+# fewer take SUN_MIN_REFS_PER_CYLINDER. Measured on llvmpipe at 512x512, first render and
+# re-render, 4 references a cylinder against 8: 100,000 wavy strands at one sample (135 k
+# rays, 0.5 a fine bin) 2.39-2.47 and 0.67-0.69 s against 2.77-3.15 and 0.47-0.54; at 16
+# samples (8 a bin) 11.2 and 9.1 s against 9.6 and 6.6; 10,000 at one sample (0.5 a bin)
+# 0.31-0.32 and 0.13-0.16 s against 0.39-0.45 and 0.10-0.12; straight.hair (150,000 long
+# cylinders, 4.9 rays a fine bin) 0.33-0.45 and 0.26-0.33 s against 0.32 and 0.18. Coarse
+# lists are built again, fine, by the render that brings the rays traced to
+# SUN_FINE_RAYS_PER_BIN a fine bin (the third of 10,000 strands at one sample): a camera
+# move or a progressive preview's passes pay for them once.
+SUN_FINE_RAYS_PER_BIN = 1.5
 SUN_MAX_SIDE = 2048          # bins along either side of a sun's plane
 SAMPLE = 20_000              # cylinders whose projections decide a resolution
 
@@ -73,12 +89,13 @@ class BeamState:
     camera_why: str = ""
     suns: list = field(default_factory=lambda: [None] * MAX_SUN_BEAMS)
     renders: int = 0            # renders of these strands so far
+    traced: int = 0             # rays those renders traced (samples times pixels)
 
     def forget(self):
         self.camera_view = self.camera = None
         self.camera_why = ""
         self.suns = [None] * MAX_SUN_BEAMS
-        self.renders = 0
+        self.renders = self.traced = 0
 
 
 @dataclass
@@ -229,33 +246,52 @@ def sun_slots(settings):
     return slots
 
 
-def sun_beams(state, scene, buffers, light, slot, rays=None):
+def sun_beams(state, scene, buffers, light, slot, rays=None, traced=0):
     """The Beams of shadow rays toward directional `light` in sun slot `slot`, built (or
     kept while the light's direction and angle stay) into SUN_BUFFERS[slot]; None where beams
     cannot serve it or would not pay. `rays`: the shadow rays this render may cast, when the
     grid is to be built for it anyway (None: it is not: beams spare it; see SUN_REFS_PER_RAY).
+    `traced`: the rays this render traces (samples times pixels), which with those of the
+    renders before (state.traced) choose coarse or fine lists (SUN_FINE_RAYS_PER_BIN).
     Returns (beams, seconds building or 0.0)."""
     packed, _ = light.packed()
     towards = -np.asarray(packed[:3], np.float32).astype(np.float64)
     spread = float(light.extent()[1][3])
     key = (towards.tobytes(), spread, id(scene.plan))
+    traced = state.traced + traced
     kept = state.suns[slot]
+    # A kept entry: (key, beams, the fine frame they are to be built again for, or None).
     if kept is not None and kept[0] == key:
-        return kept[1], 0.0
-    t0 = time.perf_counter()
+        if kept[2] is None or traced < SUN_FINE_RAYS_PER_BIN * kept[2].num_bins:
+            return kept[1], 0.0
+        return _sun_build(state, scene, buffers, slot, key, kept[2], None)
     budget = min(layout.BEAM_MAX_REFS, buffers.max_texels)
-    target = min(0.5 * budget / max(scene.num_cylinders, 1), SUN_REFS_PER_CYLINDER)
-    if target < SUN_MIN_REFS_PER_CYLINDER:
-        state.suns[slot] = (key, None)       # never: as many cylinders next time
+    most = min(0.5 * budget / max(scene.num_cylinders, 1), SUN_REFS_PER_CYLINDER)
+    if most < SUN_MIN_REFS_PER_CYLINDER:
+        state.suns[slot] = (key, None, None)     # never: as many cylinders next time
         return None, 0.0
-    if rays is not None and state.renders == 0 and target * scene.num_cylinders > SUN_REFS_PER_RAY * rays:
+    if rays is not None and state.renders == 0 and SUN_MIN_REFS_PER_CYLINDER * scene.num_cylinders > (
+            SUN_REFS_PER_RAY * rays):
         return None, 0.0                     # not kept: the next render of these strands asks again
-    beams = None
+    t0 = time.perf_counter()
+    fine = _sun_frame(scene, towards, spread, most)
+    if most > SUN_MIN_REFS_PER_CYLINDER and traced < SUN_FINE_RAYS_PER_BIN * fine.num_bins:
+        frame = _sun_frame(scene, towards, spread, SUN_MIN_REFS_PER_CYLINDER)
+    else:
+        frame, fine = fine, None
+    beams, _ = _sun_build(state, scene, buffers, slot, key, frame, fine)
+    return beams, time.perf_counter() - t0
+
+
+def _sun_build(state, scene, buffers, slot, key, frame, later):
+    """sun_beams's build of `frame` into slot `slot`, kept with `later` (the fine frame to
+    build again for once the rays pay, or None): (beams or None, seconds)."""
+    t0 = time.perf_counter()
     try:
-        beams = _build(scene, buffers, _sun_frame(scene, towards, spread, target), 1.0, SUN_BUFFERS[slot], budget)
+        beams = _build(scene, buffers, frame, 1.0, SUN_BUFFERS[slot], min(layout.BEAM_MAX_REFS, buffers.max_texels))
     except BeamsUnfit:
         beams = None
-    state.suns[slot] = (key, beams)
+    state.suns[slot] = (key, beams, later if beams is not None else None)
     return beams, time.perf_counter() - t0
 
 

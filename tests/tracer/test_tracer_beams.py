@@ -268,6 +268,34 @@ def test_a_suns_beams_wait_for_a_second_render_when_the_grid_is_built_anyway(pai
     assert np.abs(pair[0].render(moved, RenderSettings()) - again).max() <= 1e-6
 
 
+def test_a_suns_lists_are_coarse_for_few_rays_and_fine_once_the_rays_pay_for_them(pair):
+    """A render of few rays gets a sun's coarse lists (SUN_MIN_REFS_PER_CYLINDER references a
+    cylinder: half the build), kept with the fine frame; the render that brings the rays
+    traced to SUN_FINE_RAYS_PER_BIN a fine bin builds the fine lists, which later renders
+    keep. The images are the grid's every time."""
+    from tracer import scene_beams
+    strands = dense_tuft()
+    grid, first = _render_both(pair, strands, DENSE_CAM, RenderSettings())
+    assert np.abs(grid - first).max() <= 1e-6
+    state = pair[1].beam_state
+    _, coarse, fine = state.suns[0]
+    assert coarse is not None and fine is not None
+    assert coarse.refs <= 0.75 * scene_beams.SUN_REFS_PER_CYLINDER * pair[1].num_cylinders
+    assert state.traced < scene_beams.SUN_FINE_RAYS_PER_BIN * fine.num_bins
+    # Samples enough (a square number) that the rays so far reach the fine lists' share: the
+    # first render traced state.traced rays at one sample.
+    spp = int(np.ceil(np.sqrt(scene_beams.SUN_FINE_RAYS_PER_BIN * fine.num_bins / state.traced))) ** 2
+    grid, again = (r.render(DENSE_CAM, RenderSettings(spp=spp)) for r in pair)
+    assert np.abs(grid - again).max() <= 1e-6
+    _, rebuilt, later = state.suns[0]
+    assert later is None and pair[1].stats.sun_beams_s > 0
+    assert rebuilt.frame.num_bins == fine.num_bins and rebuilt.refs > 1.5 * coarse.refs
+    moved = Camera.look_at((0.3, -1.6, 0.1), (0.0, 0.0, 0.0), fov_deg=22, size=(32, 32))
+    grid, kept = (r.render(moved, RenderSettings()) for r in pair)
+    assert pair[1].stats.sun_beams_s == 0 and state.suns[0][1] is rebuilt
+    assert np.abs(grid - kept).max() <= 1e-6
+
+
 def test_a_sun_of_too_many_cylinders_for_fine_bins_walks_the_grid(pair, monkeypatch):
     """Where the budget leaves a sun under SUN_MIN_REFS_PER_CYLINDER references a cylinder its
     bins would hand a shadow ray more entries than the grid's cells: its rays walk the grid."""
