@@ -297,22 +297,31 @@ def _sun_build(state, scene, buffers, slot, key, frame, later):
 
 def _sun_frame(scene, towards, spread, target):
     """A sun's frame with bins sized for about `target` references a cylinder, within
-    SUN_MAX_SIDE bins a side."""
+    SUN_MAX_SIDE bins a side: the bins' side by bisection of _estimated_refs's count, which
+    for a sun's bins of side h is the sample's extents across the sun (scene units, from one
+    projection) over h."""
     lo, hi = scene.box
     rmax = float(scene.plan.radius.max())
     u, v, _ = sun_basis(towards)
     corners = box_corners(lo, hi)
     span = max(float(np.ptp(corners @ u)), float(np.ptp(corners @ v)), 1e-30)
-    sample = _segments_sample(scene.plan)
-    floor_h = span / SUN_MAX_SIDE
-    h_lo, h_hi = floor_h, span
-    frame = sun_frame(towards, spread, lo, hi, rmax, 1.0, h_lo)
-    if _estimated_refs(frame, sample, 1.0, 1) <= target:
-        return frame
+    unit = sun_frame(towards, spread, lo, hi, rmax, 1.0, 1.0)      # bins of one scene unit
+    top, tip, r = _segments_sample(scene.plan)
+    gx0, gy0, _ = project(unit, top)
+    gx1, gy1, _ = project(unit, tip)
+    du, dv = np.abs(gx1 - gx0), np.abs(gy1 - gy0)
+    major, minor = np.maximum(du, dv), np.minimum(du, dv)
+    reach = 2.0 * (r * unit.radius_scale + unit.drift)
+
+    def refs(h):
+        """_estimated_refs of the bins of side h (a cylinder's columns times its rows)."""
+        return float(np.mean(((major + reach) / h + 1.0) * (minor / np.maximum(major, h) + reach / h + 1.0)))
+    h_lo, h_hi = span / SUN_MAX_SIDE, span
+    if refs(h_lo) <= target:
+        return sun_frame(towards, spread, lo, hi, rmax, 1.0, h_lo)
     for _ in range(20):      # bisection: references fall as bins grow
         h = 0.5 * (h_lo + h_hi)
-        frame = sun_frame(towards, spread, lo, hi, rmax, 1.0, h)
-        if _estimated_refs(frame, sample, 1.0, 1) > target:
+        if refs(h) > target:
             h_lo = h
         else:
             h_hi = h
