@@ -128,11 +128,21 @@ def _distinct_points(strands, strand_of_point):
 SPACING_PER_RADIUS_MAX = 16.0
 
 
-def check_float32_precision(strands):
+def points_reach(points, bounds=None):
+    """The largest |coordinate| of (N,3) points (0 for none), from their column_bounds when
+    the caller has them (no pass over the points)."""
+    if not len(points):
+        return 0.0
+    lo, hi = column_bounds(points) if bounds is None else bounds
+    return float(np.abs(np.concatenate([lo, hi])).max())
+
+
+def check_float32_precision(strands, reach=None):
     """InputError when float32 points (SPEC §0) cannot resolve the thinnest strand: when the
     float32 spacing at the strands' coordinates exceeds SPACING_PER_RADIUS_MAX times the
     smallest strand radius (a strand's largest radius), and the image would otherwise come
-    out empty or wrong without a word (SPEC §9)."""
+    out empty or wrong without a word (SPEC §9). `reach`: points_reach of the points when the
+    caller has it."""
     if not strands.num_points:
         return
     # A strand's thickness is its largest radius: tapered tips go towards zero by design
@@ -142,7 +152,7 @@ def check_float32_precision(strands):
     pos = thick[thick > 0]
     if not pos.size:
         return
-    far = float(np.abs(strands.points).max())
+    far = points_reach(strands.points) if reach is None else reach
     spacing = float(np.spacing(np.float32(far)))
     rmin = float(pos.min())
     if spacing > SPACING_PER_RADIUS_MAX * rmin:
@@ -172,14 +182,15 @@ class CylinderPlan:
         return len(self.top_point)
 
 
-def plan_cylinders(strands, drop_repeats=True, candidates=None):
+def plan_cylinders(strands, drop_repeats=True, candidates=None, reach=None):
     """hairio.Strands -> CylinderPlan. InputError where float32 cannot resolve the strands
     (check_float32_precision). With drop_repeats False, points that repeat their
     predecessor are kept and `strand` is None: for a caller that checks for repeats itself
     (the GPU build does, while it makes the cylinders) and comes back for the full plan
     when there are any, with `candidates`: the points whose successors may repeat them (a
-    superset; only these are checked, by the same rule)."""
-    check_float32_precision(strands)
+    superset; only these are checked, by the same rule). `reach`: points_reach of the
+    strands' points when the caller has it."""
+    check_float32_precision(strands, reach)
     counts = strands.counts.astype(np.int64)
     if not drop_repeats:
         return CylinderPlan(strands.points, strands.radius, strands.color, strands.alpha, None,

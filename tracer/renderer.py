@@ -18,7 +18,7 @@ import numpy as np
 from hairio import InputError, Strands
 
 from . import layout
-from .cylinders import plan_cylinders
+from .cylinders import column_bounds, plan_cylinders, points_reach
 from .draw import Drawer, screen_bounds
 from .gl_state import context_backend, shared_context
 from .gpu_build import compute_available
@@ -127,8 +127,12 @@ class Renderer:
             raise InputError(f"strands: expected hairio.Strands, got {type(strands).__name__}; "
                              "build one with Strands.from_arrays")
         t0 = time.perf_counter()
-        check_gpu_range(strands)
-        plan = plan_cylinders(strands, drop_repeats=self._upload.drops_repeats)
+        # One pass over the points for their bounds: the range checks' reach and the grid's
+        # frame (with a plan that keeps every point) come from it.
+        bounds = column_bounds(strands.points) if strands.num_points else None
+        reach = points_reach(strands.points, bounds)
+        check_gpu_range(strands, reach)
+        plan = plan_cylinders(strands, drop_repeats=self._upload.drops_repeats, reach=reach)
         plan_s = time.perf_counter() - t0
         # New strands get an unpadded grid: renders on one padded for minimum pixel width
         # cost 15-30 % more. Minimum pixel width pads every one of its renders, so after one
@@ -137,7 +141,7 @@ class Renderer:
             self.scene.grid_pad = 1.0
         self.scene.grid_aim = self.scene.grid_aim_failed = 0.0
         try:
-            cylinders_s, upload_s, bounds = self._upload.set(self.scene, strands, plan)
+            cylinders_s, upload_s, bounds = self._upload.set(self.scene, strands, plan, bounds)
             self._finish_upload(plan_s + cylinders_s, upload_s, bounds)
         except Exception:
             self.scene.forget()
@@ -414,12 +418,13 @@ class Renderer:
         return img
 
 
-def check_gpu_range(strands):
+def check_gpu_range(strands, reach=None):
     """InputError when strands lie farther from the origin than the GPU's float32 arithmetic
-    can square (layout.MAX_POINT_COORDINATE), naming how far they reach."""
+    can square (layout.MAX_POINT_COORDINATE), naming how far they reach. `reach`:
+    cylinders.points_reach of their points when the caller has it."""
     if not strands.num_points:
         return
-    far = float(np.abs(strands.points).max()) + float(strands.radius.max())
+    far = (points_reach(strands.points) if reach is None else reach) + float(strands.radius.max())
     if not far <= layout.MAX_POINT_COORDINATE:
         raise InputError(f"points: coordinates reach {far:.3g}; the GPU tracer squares distances in float32, so "
                          f"it takes strands within ±{layout.MAX_POINT_COORDINATE:.0e} of the origin: scale them down "

@@ -99,8 +99,9 @@ class NumpyUpload:
     def __init__(self, buffers):
         self.buffers = buffers
 
-    def set(self, scene, strands, plan):
-        """Uploads the scene's cylinders; returns (cylinders_s, upload_s, point bounds or None)."""
+    def set(self, scene, strands, plan, bounds=None):
+        """Uploads the scene's cylinders; returns (cylinders_s, upload_s, point bounds or None).
+        `bounds`: column_bounds of the strands' points (unused here)."""
         t0 = time.perf_counter()
         scene.set_plan(strands, plan)
         scene.cylinders_ = cylinders_from_plan(plan)
@@ -144,9 +145,11 @@ class GpuUpload:
     def __init__(self, buffers):
         self.buffers = buffers
 
-    def set(self, scene, strands, plan):
+    def set(self, scene, strands, plan, bounds=None):
         """Uploads the points and makes the cylinders; returns (cylinders_s, upload_s, point
-        bounds for the grid's frame, or None when they must be taken again)."""
+        bounds for the grid's frame, or None when they must be taken again). `bounds`:
+        column_bounds of the strands' points when the caller has them (the plan keeps every
+        point, so they are its points' too)."""
         t0 = time.perf_counter()
         scene.set_plan(strands, plan)
         scene.cylinders_ = None
@@ -156,7 +159,8 @@ class GpuUpload:
         t1 = time.perf_counter()
         # Twice the numpy build's distance: float32 rounding on the GPU cannot hide a
         # repeat, and plan_cylinders checks the candidates by the numpy rule.
-        bounds = column_bounds(plan.points)     # the grid's frame needs them too
+        if bounds is None or plan.points is not strands.points:
+            bounds = column_bounds(plan.points)     # the grid's frame needs them too
         repeats = self._make_cylinders(scene, 2.0 * repeat_distance(plan.points, bounds))
         upload_s = t1 - t0
         if repeats is None or len(repeats):
