@@ -333,10 +333,13 @@ def render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass=0, re
     return begin_render(scene, hair_obj, camera_obj, settings, meshes, sample_pass, refine=refine).result()
 
 
-def begin_render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass=0, wait=True, refine=False):
+def begin_render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass=0, wait=True, refine=False,
+                 refine_to=0):
     """As render, but returns a PendingImage. With wait=False and the renderer process, the
     render runs while Blender goes on (uploads, rare, are still waited for); in process it
-    is done on return either way."""
+    is done on return either way. refine_to: the samples a pixel that refinement passes after
+    this first image are to reach (RenderSettings.samples_to_come: what the first image
+    builds for the scene is sized for their rays too)."""
     global _uploaded, _uploaded_meshes, _uploaded_opaque
     t0 = time.perf_counter()
     size = preview_size(scene, settings)
@@ -366,6 +369,8 @@ def begin_render(scene, hair_obj, camera_obj, settings, meshes=None, sample_pass
             uploaded = True
         if refine:
             rs = rs.refinement(_uploaded_opaque)
+        elif refine_to > rs.spp:
+            rs = replace(rs, samples_to_come=int(refine_to - rs.spp))
         camera = view.for_pass(sample_pass, rs.spp_n)
         t2 = time.perf_counter()
         timings = {"prepare_s": t1 - t0, "upload_s": t2 - t1, "uploaded": uploaded, "spp": rs.spp}

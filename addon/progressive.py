@@ -137,7 +137,8 @@ def _restart(context, session, wait=True):
 
 def _begin_pass(context, session, k, wait=False):
     return preview.begin_render(context.scene, session.hair, session.camera, session.scalp.keystrand_hair,
-                                meshes=session.meshes, sample_pass=k, wait=wait, refine=k > 0)
+                                meshes=session.meshes, sample_pass=k, wait=wait, refine=k > 0,
+                                refine_to=TARGET_SAMPLES)
 
 
 def _collect(session):

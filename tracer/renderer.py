@@ -301,14 +301,16 @@ class Renderer:
         # Whether the grid is built for this render whatever the suns get: then a sun's beams
         # must pay for themselves against it (scene_beams.SUN_REFS_PER_RAY).
         grid_anyway = cam is None or any(s and k < 0 for s, k in zip(shadowed, slots)) or self.scene.grid is not None
-        traced = settings.spp * (box[2] - box[0]) * (box[3] - box[1])
+        area = (box[2] - box[0]) * (box[3] - box[1])
+        traced = settings.spp * area
         rays = traced if grid_anyway else None
         suns, light_sun, sun_s = [None] * len(state.suns), [], 0.0
         for light, slot in zip(settings.lights, slots):
             if slot < 0:
                 light_sun.append(-1)
                 continue
-            beams, s = sun_beams(state, self.scene, self.buffers, light, slot, rays, traced)
+            beams, s = sun_beams(state, self.scene, self.buffers, light, slot, rays, traced,
+                                 settings.samples_to_come * area)
             sun_s += s
             suns[slot] = beams
             light_sun.append(slot if beams is not None else -1)

@@ -246,19 +246,20 @@ def sun_slots(settings):
     return slots
 
 
-def sun_beams(state, scene, buffers, light, slot, rays=None, traced=0):
+def sun_beams(state, scene, buffers, light, slot, rays=None, traced=0, to_come=0):
     """The Beams of shadow rays toward directional `light` in sun slot `slot`, built (or
     kept while the light's direction and angle stay) into SUN_BUFFERS[slot]; None where beams
     cannot serve it or would not pay. `rays`: the shadow rays this render may cast, when the
     grid is to be built for it anyway (None: it is not: beams spare it; see SUN_REFS_PER_RAY).
     `traced`: the rays this render traces (samples times pixels), which with those of the
-    renders before (state.traced) choose coarse or fine lists (SUN_FINE_RAYS_PER_BIN).
+    renders before (state.traced) and `to_come`, the rays later renders are to trace
+    (RenderSettings.samples_to_come), choose coarse or fine lists (SUN_FINE_RAYS_PER_BIN).
     Returns (beams, seconds building or 0.0)."""
     packed, _ = light.packed()
     towards = -np.asarray(packed[:3], np.float32).astype(np.float64)
     spread = float(light.extent()[1][3])
     key = (towards.tobytes(), spread, id(scene.plan))
-    traced = state.traced + traced
+    traced = state.traced + traced + to_come
     kept = state.suns[slot]
     # A kept entry: (key, beams, the fine frame they are to be built again for, or None).
     if kept is not None and kept[0] == key:

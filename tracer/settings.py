@@ -307,6 +307,10 @@ class RenderSettings:
     transmittance_eps: float = 1e-3   # stop compositing (and shadow products) below this
     tile: int = 512                   # pixels per side of one draw call (GPU watchdogs)
     count: bool = False               # write per-pixel work counters into Renderer.stats
+    # Samples a pixel that later renders of this view are to add (a progressive preview's
+    # refinement up to its target): what a render builds and keeps for the scene (a sun's
+    # lists, tracer/scene_beams.py) is sized for their rays too. The image does not depend on it.
+    samples_to_come: int = 0
     # The "chiang" model's sliders, named and defaulted as Cycles' Principled Hair BSDF
     # (tracer/hair_bsdf.py); hair_color says what a strand's colour means (shading/chiang.py).
     hair_color: str = "strand"        # "strand": the hair's colour; "melanin": a tint over the melanin
@@ -345,6 +349,8 @@ class RenderSettings:
             raise InputError(f"spp: {self.spp} samples per pixel, summed in float32, can be off by up to "
                              f"{self.spp * 2.0 ** -24:.2%} of a pixel's value; use at most {MAX_SPP} "
                              f"(error {MAX_SPP * 2.0 ** -24:.3%})")
+        if not isinstance(self.samples_to_come, (int, np.integer)) or self.samples_to_come < 0:
+            raise InputError(f"samples_to_come: {self.samples_to_come}; use 0 or more samples a pixel")
         if self.sampler not in SAMPLERS:
             raise InputError(f"sampler: {self.sampler!r}; use one of {', '.join(map(repr, SAMPLERS))}")
         if self.sampler == "pixel":

@@ -121,8 +121,12 @@ def run(sec, cfg):
         if len(renderers) < 2:
             continue
         rs1, rs16 = settings(spp=1, **kw), settings(spp=16, **kw)
+        # The first render says the renders to come (the timed ones, the counters' and the
+        # 16-spp one: RenderSettings.samples_to_come), so the beams are built once for them, as
+        # the other structures are (a sun's lists are otherwise coarse until rays pay for fine ones).
+        first = settings(spp=1, samples_to_come=runs + 2 + 16, **kw)
         for accel, r in renderers.items():
-            r.render(cam, rs1)          # compiles the programs (and builds the beams)
+            r.render(cam, first)        # compiles the programs (and builds the beams)
             if accel == "beams":
                 builds[accel] = _beams_build(r)
         wall1, cpu1, images = _alternate(renderers, cam, rs1, runs)

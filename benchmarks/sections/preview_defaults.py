@@ -50,6 +50,10 @@ from benchmarks.sections import left
 
 REF_SPP = 64
 TARGET_SPP = 16
+# The samples a pixel the preview refines to (addon/progressive.py, TARGET_SAMPLES): its first
+# image says so (RenderSettings.samples_to_come), and what it builds for the scene is sized
+# for the passes to come.
+PREVIEW_SAMPLES = 64
 WINDOW = (480, 270)             # the middle of a 1920x1080 frame whose errors are measured
 WINDOW_PIXELS = 512 * 512       # images larger than this are measured on WINDOW
 MOHAWK_VIEW = np.array([0.0, 1.0, -0.2])       # from the front, a little above (the mohawk faces -Y once Z up)
@@ -91,8 +95,8 @@ def paired(default, job, runs):
 def _progressive(tracer, renderer, camera):
     """The Blender preview's first refined image as a job: its first image (the default
     settings, one sample) and one refinement pass at the next pass's offset, the mean of their
-    samples (addon/progressive.py)."""
-    first = tracer.RenderSettings()
+    samples (addon/progressive.py), the first image saying how far the refinement goes."""
+    first = tracer.RenderSettings(samples_to_come=PREVIEW_SAMPLES - 1)
 
     def job():
         a = renderer.render(camera, first).astype(np.float64)

@@ -23,10 +23,10 @@ from benchmarks.harness import fmt_num, fmt_time, once
 from benchmarks.scenes import tracer_api, tracer_camera, view_matrix
 from benchmarks.sections import left
 from benchmarks.metrics import hair_rmse
-from benchmarks.sections.preview_defaults import REF_SPP, TARGET_SPP, _scenes
+from benchmarks.sections.preview_defaults import PREVIEW_SAMPLES, REF_SPP, TARGET_SPP, _scenes
 
 SIZE = (512, 512)
-MAX_SAMPLES = 64                 # the preview's TARGET_SAMPLES
+MAX_SAMPLES = PREVIEW_SAMPLES    # the preview's TARGET_SAMPLES
 
 
 def _refine(tracer, strands, camera, pixel, target, reference, sec):
@@ -34,7 +34,8 @@ def _refine(tracer, strands, camera, pixel, target, reference, sec):
     `target`."""
     renderer = tracer.Renderer()
     renderer.set_strands(strands)
-    first = tracer.RenderSettings()
+    # The preview's first image, which says how far the refinement goes (samples_to_come).
+    first = tracer.RenderSettings(samples_to_come=MAX_SAMPLES - 1)
     renderer.render(camera, first)           # shaders compiled, buffers made: as a warm preview
     rows, total, samples, spent, k = [], None, 0, 0.0, 0
     while samples < MAX_SAMPLES and left(sec) > 0:

@@ -296,6 +296,22 @@ def test_a_suns_lists_are_coarse_for_few_rays_and_fine_once_the_rays_pay_for_the
     assert np.abs(grid - kept).max() <= 1e-6
 
 
+def test_a_render_that_says_the_samples_to_come_gets_a_suns_fine_lists_at_once(pair):
+    """A first image followed by refinement passes (the preview's) says so
+    (RenderSettings.samples_to_come): the sun's fine lists are built for it at once, not
+    coarse ones and the fine ones later. The image is the grid's; a negative count is refused."""
+    from hairio import InputError
+    strands = dense_tuft()
+    settings = RenderSettings(samples_to_come=1024)
+    grid, first = _render_both(pair, strands, DENSE_CAM, settings)
+    assert np.abs(grid - first).max() <= 1e-6
+    _, beams, later = pair[1].beam_state.suns[0]
+    assert beams is not None and later is None
+    assert pair[1].beam_state.traced == pair[1].stats.traversed_pixels   # only the rays traced count
+    with pytest.raises(InputError, match="samples_to_come"):
+        RenderSettings(samples_to_come=-1).check()
+
+
 def test_a_sun_of_too_many_cylinders_for_fine_bins_walks_the_grid(pair, monkeypatch):
     """Where the budget leaves a sun under SUN_MIN_REFS_PER_CYLINDER references a cylinder its
     bins would hand a shadow ray more entries than the grid's cells: its rays walk the grid."""
