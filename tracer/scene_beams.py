@@ -265,7 +265,13 @@ def sun_beams(state, scene, buffers, light, slot, rays=None, traced=0, to_come=0
     if kept is not None and kept[0] == key:
         if kept[2] is None or traced < SUN_FINE_RAYS_PER_BIN * kept[2].num_bins:
             return kept[1], 0.0
-        return _sun_build(state, scene, buffers, slot, key, kept[2], None)
+        beams, seconds = _sun_build(state, scene, buffers, slot, key, kept[2], None)
+        if beams is None:
+            # The fine lists do not fit (refused before anything was written over): the
+            # coarse ones stay, and are not built again.
+            state.suns[slot] = (key, kept[1], None)
+            return kept[1], seconds
+        return beams, seconds
     budget = min(layout.BEAM_MAX_REFS, buffers.max_texels)
     most = min(0.5 * budget / max(scene.num_cylinders, 1), SUN_REFS_PER_CYLINDER)
     if most < SUN_MIN_REFS_PER_CYLINDER:

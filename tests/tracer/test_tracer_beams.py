@@ -296,6 +296,25 @@ def test_a_suns_lists_are_coarse_for_few_rays_and_fine_once_the_rays_pay_for_the
     assert np.abs(grid - kept).max() <= 1e-6
 
 
+def test_fine_lists_that_do_not_fit_leave_the_coarse_ones(pair, monkeypatch):
+    """Where the sun's fine lists are refused (more bins than a family may have), the render
+    that would build them keeps the coarse ones, whose buffers the refusal left as they were,
+    and later renders do not try again. The images are the grid's."""
+    from tracer import scene_beams
+    strands = dense_tuft()
+    _render_both(pair, strands, DENSE_CAM, RenderSettings())
+    state = pair[1].beam_state
+    _, coarse, fine = state.suns[0]
+    assert fine is not None and fine.num_bins > coarse.frame.num_bins
+    monkeypatch.setattr(layout, "BEAM_MAX_BINS", fine.num_bins - 1)
+    spp = int(np.ceil(np.sqrt(scene_beams.SUN_FINE_RAYS_PER_BIN * fine.num_bins / state.traced))) ** 2
+    grid, kept = (r.render(DENSE_CAM, RenderSettings(spp=spp)) for r in pair)
+    assert state.suns[0][1] is coarse and state.suns[0][2] is None
+    assert np.abs(grid - kept).max() <= 1e-6
+    grid, again = (r.render(DENSE_CAM, RenderSettings(spp=spp)) for r in pair)
+    assert pair[1].stats.sun_beams_s == 0 and np.abs(grid - again).max() <= 1e-6
+
+
 def test_a_render_that_says_the_samples_to_come_gets_a_suns_fine_lists_at_once(pair):
     """A first image followed by refinement passes (the preview's) says so
     (RenderSettings.samples_to_come): the sun's fine lists are built for it at once, not
