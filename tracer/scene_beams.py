@@ -187,7 +187,7 @@ def camera_beams(state, scene, buffers, camera, box, pad, samples=1, pixel_n=0):
     lo, hi = scene.box
     rmax = float(scene.plan.radius.max())
     sample = _segments_sample(scene.plan)
-    budget = min(layout.BEAM_MAX_REFS, buffers.max_texels)
+    budget = _ref_budget(buffers)
     rays = samples * (box[2] - box[0]) * (box[3] - box[1])
     # The traced box in the bins' pixel grid, one pixel more on every side for the passes that
     # move this camera's.
@@ -265,15 +265,8 @@ def sun_beams(state, scene, buffers, light, slot, rays=None, traced=0, to_come=0
     if kept is not None and kept[0] == key:
         if kept[2] is None or traced < SUN_FINE_RAYS_PER_BIN * kept[2].num_bins:
             return kept[1], 0.0
-        beams, seconds = _sun_build(state, scene, buffers, slot, key, kept[2], None)
-        if beams is None:
-            # The fine lists do not fit (refused before anything was written over): the
-            # coarse ones stay, and are not built again.
-            state.suns[slot] = (key, kept[1], None)
-            return kept[1], seconds
-        return beams, seconds
-    budget = min(layout.BEAM_MAX_REFS, buffers.max_texels)
-    most = min(0.5 * budget / max(scene.num_cylinders, 1), SUN_REFS_PER_CYLINDER)
+        return _sun_build(state, scene, buffers, slot, key, kept[2], None, refused=kept[1])
+    most = min(0.5 * _ref_budget(buffers) / max(scene.num_cylinders, 1), SUN_REFS_PER_CYLINDER)
     if most < SUN_MIN_REFS_PER_CYLINDER:
         state.suns[slot] = (key, None, None)     # never: as many cylinders next time
         return None, 0.0
@@ -290,16 +283,24 @@ def sun_beams(state, scene, buffers, light, slot, rays=None, traced=0, to_come=0
     return beams, time.perf_counter() - t0
 
 
-def _sun_build(state, scene, buffers, slot, key, frame, later):
+def _sun_build(state, scene, buffers, slot, key, frame, later, refused=None):
     """sun_beams's build of `frame` into slot `slot`, kept with `later` (the fine frame to
-    build again for once the rays pay, or None): (beams or None, seconds)."""
+    build again for once the rays pay, or None): (beams, seconds). Where the build is
+    refused, `refused` is kept instead, not to be built again: the coarse lists when the
+    fine ones do not fit (the refusal comes before anything is written over), else None."""
     t0 = time.perf_counter()
     try:
-        beams = _build(scene, buffers, frame, 1.0, SUN_BUFFERS[slot], min(layout.BEAM_MAX_REFS, buffers.max_texels))
+        beams = _build(scene, buffers, frame, 1.0, SUN_BUFFERS[slot], _ref_budget(buffers))
+        state.suns[slot] = (key, beams, later)
     except BeamsUnfit:
-        beams = None
-    state.suns[slot] = (key, beams, later if beams is not None else None)
+        beams = refused
+        state.suns[slot] = (key, beams, None)
     return beams, time.perf_counter() - t0
+
+
+def _ref_budget(buffers):
+    """The references one family's lists may hold: layout.BEAM_MAX_REFS, within one buffer."""
+    return min(layout.BEAM_MAX_REFS, buffers.max_texels)
 
 
 def _sun_frame(scene, towards, spread, target):

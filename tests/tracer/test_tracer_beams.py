@@ -268,6 +268,14 @@ def test_a_suns_beams_wait_for_a_second_render_when_the_grid_is_built_anyway(pai
     assert np.abs(pair[0].render(moved, RenderSettings()) - again).max() <= 1e-6
 
 
+def _samples_for_fine_lists(state, fine):
+    """Samples a pixel (a square number) that bring the rays traced to the fine lists' share
+    (scene_beams.SUN_FINE_RAYS_PER_BIN of `fine`'s bins), after one render of one sample
+    that traced state.traced rays."""
+    from tracer import scene_beams
+    return int(np.ceil(np.sqrt(scene_beams.SUN_FINE_RAYS_PER_BIN * fine.num_bins / state.traced))) ** 2
+
+
 def test_a_suns_lists_are_coarse_for_few_rays_and_fine_once_the_rays_pay_for_them(pair):
     """A render of few rays gets a sun's coarse lists (SUN_MIN_REFS_PER_CYLINDER references a
     cylinder: half the build), kept with the fine frame; the render that brings the rays
@@ -282,9 +290,7 @@ def test_a_suns_lists_are_coarse_for_few_rays_and_fine_once_the_rays_pay_for_the
     assert coarse is not None and fine is not None
     assert coarse.refs <= 0.75 * scene_beams.SUN_REFS_PER_CYLINDER * pair[1].num_cylinders
     assert state.traced < scene_beams.SUN_FINE_RAYS_PER_BIN * fine.num_bins
-    # Samples enough (a square number) that the rays so far reach the fine lists' share: the
-    # first render traced state.traced rays at one sample.
-    spp = int(np.ceil(np.sqrt(scene_beams.SUN_FINE_RAYS_PER_BIN * fine.num_bins / state.traced))) ** 2
+    spp = _samples_for_fine_lists(state, fine)
     grid, again = (r.render(DENSE_CAM, RenderSettings(spp=spp)) for r in pair)
     assert np.abs(grid - again).max() <= 1e-6
     _, rebuilt, later = state.suns[0]
@@ -300,14 +306,13 @@ def test_fine_lists_that_do_not_fit_leave_the_coarse_ones(pair, monkeypatch):
     """Where the sun's fine lists are refused (more bins than a family may have), the render
     that would build them keeps the coarse ones, whose buffers the refusal left as they were,
     and later renders do not try again. The images are the grid's."""
-    from tracer import scene_beams
     strands = dense_tuft()
     _render_both(pair, strands, DENSE_CAM, RenderSettings())
     state = pair[1].beam_state
     _, coarse, fine = state.suns[0]
     assert fine is not None and fine.num_bins > coarse.frame.num_bins
     monkeypatch.setattr(layout, "BEAM_MAX_BINS", fine.num_bins - 1)
-    spp = int(np.ceil(np.sqrt(scene_beams.SUN_FINE_RAYS_PER_BIN * fine.num_bins / state.traced))) ** 2
+    spp = _samples_for_fine_lists(state, fine)
     grid, kept = (r.render(DENSE_CAM, RenderSettings(spp=spp)) for r in pair)
     assert state.suns[0][1] is coarse and state.suns[0][2] is None
     assert np.abs(grid - kept).max() <= 1e-6
