@@ -1,16 +1,17 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Beams built by compute passes (GL 4.3; shaders/beams_build.glsl), by tracer/beams.py's
 rules, straight into the buffer textures the trace shader reads: count the references of
-every bin, scan the counts into starts on the GPU, bucket the cylinders by the finest slice
-of their key, then fill the lists fine slice after fine slice (tracer/beams.py, fine_bits).
-Nothing goes up from the host but uniforms and the fine slices' first places (the scratch
-buffers are zeroed by a pass), so a camera move uploads next to nothing; what comes back is
-the total, the fine slices' sizes and two flags.
+every bin, scan the counts into starts on the GPU, then either bucket the cylinders by the
+finest slice of their key and fill the lists fine slice after fine slice, or fill them in
+one dispatch in id order into a scratch buffer and sort each bin's entries by fine slice
+into the lists (tracer/beams.py, fill_plan). Nothing goes up from the host but uniforms and
+the fine slices' first places (the scratch buffers are zeroed by a pass), so a camera move
+uploads next to nothing; what comes back is the total, the fine slices' sizes and two flags.
 """
 import numpy as np
 
 from . import layout
-from .beams import Beams, BeamsUnfit, TooManyRefs, fine_bits
+from .beams import Beams, BeamsUnfit, TooManyRefs, fill_plan
 from .gpu_build import _groups, set_uniforms
 from .shader_source import shader_source
 
@@ -32,12 +33,15 @@ class BeamBuilder:
         self._passes = {}
         self._scratch = {}
 
-    def _program(self, pass_, cyl_parts, centres=False):
-        key = (layout.glsl_header(), pass_, cyl_parts, bool(centres))
+    def _program(self, pass_, cyl_parts, centres=False, sort_keys=0):
+        """Pass `pass_`; sort_keys: 0 the fill a fine slice a dispatch, else the sorted fill
+        (PASS 6 in id order, PASS 7 sorting by that many fine slices)."""
+        key = (layout.glsl_header(), pass_, cyl_parts, bool(centres), sort_keys)
         prog = self._passes.get(key)
         if prog is None:
             prog = self._passes[key] = self.ctx.compute_shader(
-                shader_source(430, BUILD_FILES, {"PASS": pass_, "CYL_PARTS": cyl_parts, "CENTRES": int(centres)}))
+                shader_source(430, BUILD_FILES, {"PASS": pass_, "CYL_PARTS": cyl_parts, "CENTRES": int(centres),
+                                                 "SORTED": int(sort_keys > 0), "SORT_KEYS": max(sort_keys, 1)}))
         return prog
 
     def _buffer(self, name, words):
@@ -134,8 +138,12 @@ class BeamBuilder:
         sums.bind_to_storage_buffer(3)
         table.buffer.bind_to_storage_buffer(6)
         prog.run(*_groups(chunks))
-        # The cylinders bucketed by fine slice: every fine slice's first place from its count.
         sizes = np.frombuffer(slices.read(size=4 * fines), np.int32).astype(np.int64)
+        sort, sub = fill_plan(sizes, total, n, nbins)
+        if sort:
+            self._sorted_fill(frame, n, tex_cyl, pad_factor, sub, total, (counts, filed), table, lists)
+            return Beams(frame, total, sub)
+        # The cylinders bucketed by fine slice: every fine slice's first place from its count.
         first = np.cumsum(sizes) - sizes
         slices.write(first.astype(np.int32).tobytes())
         ctx.memory_barrier()
@@ -145,9 +153,8 @@ class BeamBuilder:
             buf.bind_to_storage_buffer(binding)
         prog.run(*_groups(n))
         ctx.memory_barrier()
-        # The lists, a fine slice of `sub` bits (tracer/beams.py, fine_bits) a dispatch in
-        # order, so each bin's entries come fine slice by fine slice.
-        sub = fine_bits(sizes, total)
+        # The lists, a fine slice of `sub` bits a dispatch in order, so each bin's entries
+        # come fine slice by fine slice.
         group = 1 << (top - sub)
         filled = sizes.reshape(-1, group).sum(axis=1)
         prog = self._program(6, parts, frame.centres)
@@ -159,3 +166,26 @@ class BeamBuilder:
             ctx.memory_barrier()
         return Beams(frame, total, sub)
 
+    def _sorted_fill(self, frame, n, tex_cyl, pad_factor, sub, total, scratch, table, lists):
+        """fill_plan's other fill (PASS 6 SORTED, PASS 7): every listed cylinder in id order in
+        one dispatch into scratch lists at the bins' cursors, then each bin's entries into
+        `lists` sorted by fine slice of `sub` bits. scratch: the build's (cursors, filed);
+        table: the bins' starts and counts."""
+        ctx = self.ctx
+        ctx.memory_barrier()
+        keys = layout.BEAM_SLICES << sub
+        unsorted = self._buffer("unsorted", max(total, 1))
+        prog = self._program(6, len(tex_cyl.parts), frame.centres, keys)
+        self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n, sub)
+        scratch[0].bind_to_storage_buffer(0)
+        scratch[1].bind_to_storage_buffer(5)
+        unsorted.bind_to_storage_buffer(6)
+        prog.run(*_groups(n))
+        ctx.memory_barrier()
+        prog = self._program(7, 1, sort_keys=keys)
+        set_uniforms(prog, n_items=int(frame.num_bins), sub_bits=int(sub))
+        table.buffer.bind_to_storage_buffer(6)
+        unsorted.bind_to_storage_buffer(7)
+        lists.buffer.bind_to_storage_buffer(8)
+        prog.run(*_groups(int(frame.num_bins)))
+        ctx.memory_barrier()

@@ -90,6 +90,16 @@ BEAM_ID_BITS = 26
 BEAM_SLICES = 64
 BEAM_SUB_BITS_MAX = 6
 BEAM_REFS_PER_FILL = 65536
+# The other way to fill (tracer/beams.py, fill_plan): the cylinders in id order in one
+# dispatch, then each bin's entries sorted by fine slice. It reads the cylinders in their own
+# order (the fill by fine slice reads them scattered, a cache miss each) and costs a sort of
+# every entry: it pays where most cylinders are listed (the fill goes over them all) in at
+# most BEAM_SORT_REFS_PER_CYLINDER references each. Its fine slices: no more of them than
+# BEAM_SORT_SLICES_PER_ENTRY times the lists' entries a bin (the sort's work per bin goes over
+# them all), at most BEAM_SLICES << BEAM_SORT_SUB_BITS_MAX (a sort's counters, 2 KB).
+BEAM_SORT_REFS_PER_CYLINDER = 5.0
+BEAM_SORT_SLICES_PER_ENTRY = 1.0
+BEAM_SORT_SUB_BITS_MAX = 3
 # References one family's lists may hold (one buffer texture's worth and then some room).
 BEAM_MAX_REFS = 96_000_000
 # Bins one family may have (its bin table is one ivec2 texel a bin).

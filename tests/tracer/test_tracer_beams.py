@@ -46,18 +46,45 @@ def test_beams_give_the_grids_image(pair, case):
     assert np.abs(grid - beams).max() <= 1e-6
 
 
+def _fill(monkeypatch, how):
+    """Makes the compute passes fill every family's lists `how` ("by fine slice": a dispatch
+    each, "sorted": in id order, then sorted; tracer/beams.py, fill_plan) in their finest
+    order; returns the list of the sorted fills' sub bits, one a sorted fill."""
+    from tracer.gpu_beams import BeamBuilder
+    if how == "sorted":
+        monkeypatch.setattr(layout, "BEAM_SORT_REFS_PER_CYLINDER", 1e9)
+        monkeypatch.setattr(layout, "BEAM_SORT_SLICES_PER_ENTRY", 1e9)
+    else:
+        monkeypatch.setattr(layout, "BEAM_SORT_REFS_PER_CYLINDER", 0.0)
+        monkeypatch.setattr(layout, "BEAM_REFS_PER_FILL", 1)
+    sorted_subs = []
+    real = BeamBuilder._sorted_fill
+
+    def spy(self, frame, n, tex_cyl, pad_factor, sub, *rest):
+        sorted_subs.append(sub)
+        return real(self, frame, n, tex_cyl, pad_factor, sub, *rest)
+    monkeypatch.setattr(BeamBuilder, "_sorted_fill", spy)
+    return sorted_subs
+
+
+@pytest.mark.parametrize("how", ["by fine slice", "sorted"])
 @pytest.mark.parametrize("case", ["alpha layers, transmittance", "two suns, one with an angle, chiang"])
-def test_fine_slices_give_the_grids_image(pair, case, monkeypatch):
+def test_fine_slices_give_the_grids_image(pair, case, how, monkeypatch):
     """Lists in their finest order (a fill dispatch for every fine slice however few the
-    references) stop their walks sooner and find the same."""
-    monkeypatch.setattr(layout, "BEAM_REFS_PER_FILL", 1)
+    references, or as many fine slices as a sort takes) stop their walks sooner and find the
+    same."""
+    sorted_subs = _fill(monkeypatch, how)
     strands, settings = CASES[case]
     grid, beams = _render_both(pair, strands, CAM, settings)
     state = pair[1].beam_state
     top = layout.beam_sub_bits(pair[1].num_cylinders)
-    assert top == layout.BEAM_SUB_BITS_MAX and state.camera.sub == top
+    assert top == layout.BEAM_SUB_BITS_MAX
+    finest = top if how == "by fine slice" else layout.BEAM_SORT_SUB_BITS_MAX
     suns = [s[1] for s in state.suns if s is not None and s[1] is not None]
-    assert suns and all(b.sub == top for b in suns)
+    assert suns and all(b.sub == finest for b in suns + [state.camera])
+    # Every family filled the way asked: the sorted fill takes the camera's whole bins and
+    # the suns' lists (most cylinders listed), never the pixel centres' few.
+    assert len(sorted_subs) == (0 if how == "by fine slice" else len(suns) + 1)
     assert (grid[..., 3] > 0).mean() > 0.05
     assert np.abs(grid - beams).max() <= 1e-6
 
@@ -436,10 +463,35 @@ def test_the_compute_passes_list_what_numpy_lists(family):
     assert _compute_vs_numpy(family) == 0       # references too few to pay for a fine slice
 
 
+@pytest.mark.parametrize("how", ["by fine slice", "sorted"])
 @pytest.mark.parametrize("family", ["perspective", "sun"])
-def test_the_compute_passes_list_in_fine_slices_what_numpy_lists(family, monkeypatch):
-    monkeypatch.setattr(layout, "BEAM_REFS_PER_FILL", 1)
-    assert _compute_vs_numpy(family) == layout.BEAM_SUB_BITS_MAX
+def test_the_compute_passes_list_in_fine_slices_what_numpy_lists(family, how, monkeypatch):
+    sorted_subs = _fill(monkeypatch, how)
+    finest = layout.BEAM_SUB_BITS_MAX if how == "by fine slice" else layout.BEAM_SORT_SUB_BITS_MAX
+    assert _compute_vs_numpy(family) == finest
+    assert sorted_subs == ([] if how == "by fine slice" else [finest])
+
+
+def test_the_fill_sorts_where_most_cylinders_are_listed_in_few_references():
+    """fill_plan: the sorted fill for lists of most cylinders in few references each, with no
+    more fine slices than a bin's entries; the fill a fine slice a dispatch otherwise."""
+    from tracer.beams import fill_plan
+    top = 3
+    sizes = np.zeros(layout.BEAM_SLICES << top, np.int64)
+    sizes[::3] = 10                                   # 1,710 cylinders listed
+    listed = int(sizes.sum())
+    per = layout.BEAM_SORT_REFS_PER_CYLINDER
+    # Of 2,000 cylinders, 3.7 references a listed one: sorted; bins of 128 entries on
+    # average take 128 fine slices (one bit), of fewer 64, of 512 or more the most the sort
+    # keeps.
+    refs = 128 * 50
+    assert fill_plan(sizes, refs, 2000, 50) == (True, 1)
+    assert fill_plan(sizes, refs, 2000, 51) == (True, 0)
+    assert fill_plan(sizes, refs, 2000, 1) == (True, min(top, layout.BEAM_SORT_SUB_BITS_MAX))
+    # More references a cylinder, or few of the cylinders listed: a fine slice a dispatch.
+    assert fill_plan(sizes, int(per * listed) + 1, 2000, 1) == (False, fine_bits(sizes, int(per * listed) + 1))
+    assert fill_plan(sizes, refs, 2 * listed + 1, 1) == (False, fine_bits(sizes, refs))
+    assert not fill_plan(np.zeros_like(sizes), 0, 2000, 1)[0]      # nothing listed
 
 
 def _compute_vs_numpy(family):

@@ -17,11 +17,15 @@
 //   PASS 5  bucket: perm[slices[fine slice]++] = cylinder, by filed (slices hold the fine
 //                   slices' first places, written by the host from their counts)
 //   PASS 6  fill:   for the cylinders perm[first_item ..] of one fine slice of sub_bits (the
-//                   host's choice, tracer/beams.py fine_bits; PASS 1 files them at the most
+//                   host's choice, tracer/beams.py fill_plan; PASS 1 files them at the most
 //                   bits), one dispatch a fine slice in order: slot = cursors[bin]++,
-//                   lists[slot] = id | fine slice << (BEAM_ID_BITS - sub_bits)
-// The fine slices are dispatched one after another, so a bin's entries come fine slice by fine
-// slice; within one their order depends on the atomics, which no walk depends on
+//                   lists[slot] = id | fine slice << (BEAM_ID_BITS - sub_bits);
+//                   SORTED: every cylinder filed somewhere, in id order in one dispatch (no
+//                   PASS 5), into `lists` = a scratch buffer of the same layout, for PASS 7
+//   PASS 7  sort:   one bin an invocation (SORTED): its entries from the scratch buffer into
+//                   the lists by fine slice, a counting sort of SORT_KEYS keys (stable)
+// The fine slices are dispatched one after another (or sorted), so a bin's entries come fine
+// slice by fine slice; within one their order depends on the atomics, which no walk depends on
 // (tracer/beams.py; the pixel sampler's list ends the same whatever the order:
 // sampler_pixel.glsl, pixel_offer).
 // A cylinder that reaches the camera's plane, or whose listing could take more than
@@ -57,6 +61,11 @@ layout(std430, binding = 6) writeonly buffer Table { ivec2 table[]; };
 #endif
 #if PASS == 6
 layout(std430, binding = 6) writeonly buffer Lists { uint lists[]; };
+#endif
+#if PASS == 7
+layout(std430, binding = 6) readonly buffer TableIn { ivec2 table_in[]; };
+layout(std430, binding = 7) readonly buffer Unsorted { uint unsorted[]; };
+layout(std430, binding = 8) writeonly buffer Lists { uint lists[]; };
 #endif
 // A point in the frame: (X, Y, Z) = axes·(p - origin).
 vec3 to_frame(vec3 p) {
@@ -248,10 +257,41 @@ void main() {
     perm[atomicAdd(slices[slice], 1)] = i;
 #elif PASS == 6
     if (i >= n_items) return;
+#if SORTED
+    int id = i;
+    if (filed[id] < 0) return;
+#else
     int id = perm[first_item + i];
+#endif
     vec2 g0, g1; float rho; int slice;
     project_cylinder(id, g0, g1, rho, slice);
     int listed = 0;
     list_cylinder(id, g0, g1, rho, slice, listed);
+#elif PASS == 7
+    // Bin i's entries (filled in id order) into its run of the lists by fine slice: each
+    // fine slice's first place from the counts of those before it, then each entry to its
+    // fine slice's next place, in the order filled.
+    if (i >= n_items) return;
+    ivec2 sc = table_in[i];
+    if (sc.y < 2) {
+        if (sc.y == 1) lists[sc.x] = unsorted[sc.x];
+        return;
+    }
+    uint shift = uint(BEAM_ID_BITS - sub_bits);
+    int place[SORT_KEYS];
+    for (int k = 0; k < SORT_KEYS; ++k) place[k] = 0;
+    for (int k = 0; k < sc.y; ++k) place[int(unsorted[sc.x + k] >> shift)]++;
+    int at = sc.x;
+    for (int k = 0; k < SORT_KEYS; ++k) {
+        int c = place[k];
+        place[k] = at;
+        at += c;
+    }
+    for (int k = 0; k < sc.y; ++k) {
+        uint e = unsorted[sc.x + k];
+        int key = int(e >> shift);
+        lists[place[key]] = e;
+        place[key]++;
+    }
 #endif
 }
