@@ -50,6 +50,7 @@ class Entries:
         self.tex_buffer = fn("glTexBuffer", None, u, u, u)
         self.use_program = fn("glUseProgram", None, u)
         self.uniform1i = fn("glUniform1i", None, i, i)
+        self.get_integerv = fn("glGetIntegerv", None, u, ctypes.POINTER(i))
         # GL 4.2, for the compute passes only; macOS (4.1) has none. Asked by version, not by
         # a null pointer: Linux's dispatch libraries hand out a stub for any name.
         self.bind_image_texture = None
@@ -126,3 +127,15 @@ def set_samplers(prog, **units):
         if name in prog:
             g.uniform1i(prog[name].location, int(unit))
     g.use_program(0)
+
+
+GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT = 0x90DF
+
+
+def storage_limits(ctx):
+    """(the largest storage buffer range a shader may bind, the alignment of a bound range's
+    offset), in bytes: GL_MAX_SHADER_STORAGE_BLOCK_SIZE (128 MB on llvmpipe; a buffer bound
+    whole past it may be cut short) and GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT."""
+    align = ctypes.c_int(0)
+    gl(ctx).get_integerv(GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT, ctypes.byref(align))
+    return int(ctx.info["GL_MAX_SHADER_STORAGE_BLOCK_SIZE"]), max(int(align.value), 4)

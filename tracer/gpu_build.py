@@ -12,9 +12,12 @@ order of a cell's list (atomics), which the trace shader makes irrelevant by ord
 of equal distance by cylinder id. Drivers without compute shaders (macOS stops at GL 4.1)
 use the numpy builds.
 """
+import math
+
 import numpy as np
 
 from . import layout
+from .gl_buffers import storage_limits
 from .shader_source import shader_source
 
 MAX_GROUPS = 65535          # per dispatch dimension, the minimum GL guarantees
@@ -80,17 +83,24 @@ class GpuBuilder:
         repeats = self.ctx.buffer(reserve=4 * (layout.MAX_REPEATS + 1))
         repeats.clear()
         repeats.bind_to_storage_buffer(1)
-        # One dispatch per part of the cylinder buffer the range reaches (one below the
-        # driver's limit, tracer/scene_buffers.py).
+        # A dispatch per range of the cylinder buffer bound as a storage buffer: within one
+        # part (one below the driver's texel limit, tracer/scene_buffers.py) and within the
+        # driver's block size, from an offset it aligns.
         per = store.part_size("tex_cyl")
+        size = 16 * layout.TEXELS_PER_CYL
+        most, align = storage_limits(self.ctx)
+        step = math.lcm(size, align) // size            # cylinders between aligned offsets
+        span = max(most // size // step * step, step)   # cylinders one binding holds
         for k, part in enumerate(store["tex_cyl"].parts):
-            a, b = max(first, k * per), min(first + count, (k + 1) * per)
-            if a >= b:
-                continue
-            set_uniforms(prog, n_items=int(b - a), first_item=int(a), n_cyl=int(n_cyl), part_first=int(k * per),
-                         repeat2=float(repeat_distance) ** 2 if repeat_distance > 0 else -1.0)
-            part.bind_to_image(0, write=True)
-            prog.run(*_groups(b - a))
+            a, end = max(first, k * per), min(first + count, (k + 1) * per)
+            while a < end:
+                start = k * per + (a - k * per) // step * step
+                b = min(end, start + span)
+                set_uniforms(prog, n_items=int(b - a), first_item=int(a), n_cyl=int(n_cyl), out_first=int(start),
+                             repeat2=float(repeat_distance) ** 2 if repeat_distance > 0 else -1.0)
+                part.buffer.bind_to_storage_buffer(0, offset=(start - k * per) * size, size=(b - start) * size)
+                prog.run(*_groups(b - a))
+                a = b
         self.ctx.memory_barrier()
         n_found = int(np.frombuffer(repeats.read(size=4), np.int32)[0])
         found = None

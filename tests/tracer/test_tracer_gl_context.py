@@ -25,6 +25,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 ENTRY_POINTS = {"gen_textures": "glGenTextures", "delete_textures": "glDeleteTextures",
                 "active_texture": "glActiveTexture", "bind_texture": "glBindTexture",
                 "tex_buffer": "glTexBuffer", "use_program": "glUseProgram", "uniform1i": "glUniform1i",
+                "get_integerv": "glGetIntegerv",
                 "bind_image_texture": "glBindImageTexture"}
 
 

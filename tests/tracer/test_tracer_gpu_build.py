@@ -137,6 +137,44 @@ def test_update_on_the_gpu_equals_a_fresh_upload(gpu):
     assert sent < before            # only the changed strands' points went up
 
 
+def test_cylinders_made_a_range_of_the_drivers_block_size_at_a_time_are_the_whole_ones(monkeypatch):
+    """The cylinder pass binds the cylinder buffer as a storage buffer a range at a time, no
+    longer than the driver's block size and from offsets it aligns: ranges of a few dozen
+    cylinders (a block of 37 cylinders' bytes and some, offsets of 256 bytes: 4 cylinders)
+    make the same buffer as one range, and so does an update that starts between two
+    aligned offsets."""
+    from tracer import gpu_build
+    size = 16 * TEXELS_PER_CYL
+    monkeypatch.setattr(gpu_build, "storage_limits", lambda ctx: (37 * size + 5, 256))
+    ranges = []
+    real = gpu_build.set_uniforms
+
+    def spy(prog, **values):
+        if "out_first" in values:
+            ranges.append((values["out_first"], values["first_item"], values["n_items"]))
+        return real(prog, **values)
+    monkeypatch.setattr(gpu_build, "set_uniforms", spy)
+    s = curls(30, 10)
+    r = Renderer(build="gpu", accel="grid")
+    r.set_strands(s)
+    n = r.num_cylinders
+    assert len(ranges) == -(-n // 36) > 5
+    for start, first, count in ranges:
+        assert start % 4 == 0 and start <= first and first + count - start <= 36
+    np.testing.assert_array_equal(_gpu_cylinder_texels(r), _numpy_cylinder_texels(strands_to_cylinders(s)))
+    pts = s.points.copy()
+    changed = np.array([5, 6])
+    for i in changed:
+        pts[s.offsets[i]:s.offsets[i] + s.counts[i]] += np.array([0.0, 0.01, 0.02], np.float32)
+    s2 = type(s).from_arrays(pts, s.counts, radius=s.radius, color=s.color, alpha=s.alpha)
+    del ranges[:]
+    r.update_strands(changed, s2)
+    assert ranges and ranges[0][1] % 4 != 0        # the update starts between aligned offsets
+    fresh = Renderer(build="gpu", accel="grid")
+    fresh.set_strands(s2)
+    np.testing.assert_array_equal(_gpu_cylinder_texels(r), _gpu_cylinder_texels(fresh))
+
+
 def test_a_cylinder_too_big_for_one_invocation_falls_back_to_the_numpy_grid(monkeypatch):
     # The limit is compiled into the shaders; a small one makes an ordinary fat strand
     # too big without a scene of millions of cells.

@@ -12,9 +12,9 @@ layout(local_size_x = GROUP) in;
 uniform int n_items;        // cylinders to make in this dispatch
 uniform int first_item;     // index of the first of them
 uniform int n_cyl;          // cylinders in the scene
-uniform int part_first;     // first cylinder of the part of the buffer bound to cyl_img
-                            // (tracer/scene_buffers.py: past the driver's limit the host
-                            // runs one dispatch per part)
+uniform int out_first;      // the cylinder whose texels start the range bound to Cylinders
+                            // (the host binds ranges within the driver's block size, within
+                            // one part of the buffer: tracer/scene_buffers.py)
 uniform float repeat2;      // squared distance below which a point repeats its predecessor
                             // (0: the host dropped repeats already)
 
@@ -24,7 +24,9 @@ layout(binding = 1) uniform samplerBuffer tex_rad;      // radius
 layout(binding = 2) uniform samplerBuffer tex_col;      // rgb
 layout(binding = 3) uniform samplerBuffer tex_alpha;    // alpha
 layout(binding = 4) uniform isamplerBuffer tex_cp;      // per cylinder: index of its top point
-layout(rgba32f, binding = 0) uniform writeonly imageBuffer cyl_img;   // TEXELS_PER_CYL per cylinder
+// TEXELS_PER_CYL per cylinder, the buffer texture's storage bound as a storage buffer: on
+// llvmpipe a store there costs a third of an imageStore to the same texels (docs/DECISIONS.md).
+layout(std430, binding = 0) writeonly buffer Cylinders { vec4 cyl_out[]; };
 // Segments no longer than the repeat distance (the host passes twice the numpy build's, so
 // float32 rounding cannot hide one): repeats[0] counts them, repeats[1..] list the first
 // MAX_REPEATS of their top points. The host checks each by the numpy rule, drops the repeated
@@ -64,11 +66,11 @@ void main() {
         cap1 = u0.x * u1.x + u0.y * u1.y + u0.z * u1.z < COS_SHARP;
     }
     int flags = (cap1 ? CAP_PLANE1 : 0) | (!has_next || sharp ? CAP_PLANE2 : 0);
-    int base = TEXELS_PER_CYL * (k - part_first);
+    int base = TEXELS_PER_CYL * (k - out_first);
     // The mean of the two points' radii, as tracer/cylinders.py's segment_radius: (a + b)·0.5.
     float r = (texelFetch(tex_rad, p).x + texelFetch(tex_rad, p + 1).x) * 0.5;
-    imageStore(cyl_img, base + CYL_TOP, vec4(A, r));
-    imageStore(cyl_img, base + CYL_TIP, vec4(B, texelFetch(tex_alpha, p).x));
-    imageStore(cyl_img, base + CYL_N2, vec4(u2, float(flags)));
-    imageStore(cyl_img, base + CYL_COL, vec4(texelFetch(tex_col, p).rgb, 0.0));
+    cyl_out[base + CYL_TOP] = vec4(A, r);
+    cyl_out[base + CYL_TIP] = vec4(B, texelFetch(tex_alpha, p).x);
+    cyl_out[base + CYL_N2] = vec4(u2, float(flags));
+    cyl_out[base + CYL_COL] = vec4(texelFetch(tex_col, p).rgb, 0.0);
 }
