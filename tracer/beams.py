@@ -394,10 +394,11 @@ def fill_plan(sizes, refs, n, bins):
     Sorted (the cylinders in id order, then each bin's entries sorted; layout.py) where most
     cylinders are listed in at most BEAM_SORT_REFS_PER_CYLINDER references each, with the
     most bits (up to BEAM_SORT_SUB_BITS_MAX) whose fine slices number no more than
-    BEAM_SORT_SLICES_PER_ENTRY times the entries of a bin on average; else a fine slice a dispatch, fine_bits' bits. Measured on
-    llvmpipe: 100,000 wavy strands' coarse sun lists (3.7 references a listed cylinder) took
-    0.93-1.02 s against 1.06-1.22; their fine lists and the camera's of 1-pixel bins (7.5 and
-    6.9) took 1.9-2.1 and 1.7-1.9 s sorted against 1.8-1.9 and 1.6-1.75 (docs/DECISIONS.md)."""
+    BEAM_SORT_SLICES_PER_ENTRY times the entries of a bin on average; else a fine slice a
+    dispatch, fine_bits' bits. Measured on llvmpipe: 100,000 wavy strands' coarse sun lists
+    (3.7 references a listed cylinder) took 0.87-1.0 s against 1.06-1.22; their fine lists
+    and the camera's of 1-pixel bins (7.5 and 6.9) took 1.9-2.1 and 1.7-1.9 s sorted against
+    1.8-1.9 and 1.6-1.75 (docs/DECISIONS.md)."""
     sizes = np.asarray(sizes)
     top = (len(sizes) // layout.BEAM_SLICES).bit_length() - 1
     listed = int(sizes.sum())
