@@ -443,9 +443,10 @@ def _shared_state(obj):
     The tables an object names in shared_arrays() (attributes holding an array or a dict of
     arrays) are moved into memory files once: this process's object then reads the files'
     pages too, so a worker's look-ups and this process's read the same memory. With a copy
-    each, the two processes' random look-ups into some 50 MB of a collider's grids outgrew
-    the cache they share: the collision took 1.3-1.6 times its time alone while both ran
-    (2 cores, 100,000 strands of wavy); with one copy, 1.0-1.1."""
+    each, the two processes' random look-ups into a collider's four 8 MB grids outgrew the
+    cache they share: two processes colliding 100,000 strands of wavy at once took 1.3-1.7
+    times the time of one alone (2 cores); with one copy of the grids, 0.9-1.1
+    (docs/DECISIONS.md)."""
     names = getattr(obj, "shared_arrays", None)
     if names is None:
         return None
