@@ -571,12 +571,6 @@ class Collider:
                 np.copyto(idx, col, casting="unsafe")
         return idx
 
-    def shared_arrays(self):
-        """The names of the tables every look-up reads (groom.processes shares them with the
-        worker processes instead of copying them), the lazily made ones made now."""
-        self.lower_within(_REACH)
-        return ("phi", "cell_error", "cell_lower", "_lower_within")
-
     def lower_within(self, reach):
         """Per cell (at clear_of's index) the least lower bound of the cells within `reach`
         cells of it along each axis: a point whose cell's value here clears it has every

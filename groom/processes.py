@@ -43,7 +43,7 @@ _BOOT = ("import os, sys\n"
          "        sys.path.append(p)\n"
          "from groom.processes import serve\n"
          "serve()\n")
-# Objects a worker keeps between jobs (keep / kept), sent once (a collider's tables shared, not sent).
+# Objects a worker keeps between jobs (keep / kept): a collider is some 25 MB, sent once.
 _KEPT_MOST = 2
 
 # The workers of this process, by pid (a forked child inherits the list, not the processes).
@@ -144,15 +144,9 @@ class Worker:
         self.pending += 1
 
     def keep(self, token, obj):
-        """Have the worker keep obj under token for later jobs (sent once per worker). The
-        large tables an object names in `shared_arrays()` (a collider's look-up grids) go
-        into memory files this process and the workers map alike (_shared_state)."""
+        """Have the worker keep obj under token for later jobs (sent once per worker)."""
         if token not in self.known:
-            shared = _shared_state(obj)
-            if shared is None:
-                self.send(_keep, token, obj)
-            else:
-                self.send(_keep_shared, token, type(obj), *shared)
+            self.send(_keep, token, obj)
             # The worker keeps the _KEPT_MOST sent last, as this list does.
             self.known = (self.known + [token])[-_KEPT_MOST:]
 
@@ -220,7 +214,7 @@ def discard(found):
 def prepare(n, objects=()):
     """Start n workers and have each keep `objects` (Worker.keep), waiting until they have:
     what a run's first jobs would otherwise wait for (a worker's start and imports, some
-    0.15 s, then the objects, the bundled head's collider's tables 32 MB). Nothing where
+    0.15 s, then the objects, the bundled head's collider being 25 MB). Nothing where
     workers are off or another thread's run has them; off for the rest of the process
     when one cannot start."""
     if n < 1 or not available() or not _LOCK.acquire(blocking=False):
@@ -287,13 +281,12 @@ class Shared:
     or a view of it lives; then it goes, or, inside recycling(), waits for the next
     shared_empty)."""
 
-    def __init__(self, shape, dtype, spare=True):
+    def __init__(self, shape, dtype):
         dtype = np.dtype(dtype)
         shape = tuple(int(s) for s in np.atleast_1d(shape))
         size = int(np.prod(shape))
         nbytes = max(size * dtype.itemsize, 1)
-        # spare False: new memory, never a recycled result's (a table kept for long).
-        buf, self.fd = _take_spare(nbytes) if spare else (None, -1)
+        buf, self.fd = _take_spare(nbytes)
         if buf is None:
             self.fd = os.memfd_create("keystrand-groom", os.MFD_CLOEXEC)
             try:
@@ -431,74 +424,6 @@ def shared_empty(shape, dtype=np.float32):
     return Shared(shape, dtype)
 
 
-# The memory files of kept objects' tables (_shared_state), by object: {name: Shared or {key:
-# Shared}}, their descriptors open while the object lives (a worker started later maps them).
-_TABLES = weakref.WeakKeyDictionary()
-
-
-def _shared_state(obj):
-    """(obj's __dict__ less its tables, {name: handle or {key: handle}}) for _keep_shared, or
-    None for an object without tables (or no room for them: it is sent whole).
-
-    The tables an object names in shared_arrays() (attributes holding an array or a dict of
-    arrays) are moved into memory files once: this process's object then reads the files'
-    pages too, so a worker's look-ups and this process's read the same memory. With a copy
-    each, the two processes' random look-ups into a collider's four 8 MB grids outgrew the
-    cache they share: two processes colliding 100,000 strands of wavy at once took 1.3-1.7
-    times the time of one alone (2 cores); with one copy of the grids, 0.9-1.1
-    (docs/DECISIONS.md)."""
-    names = getattr(obj, "shared_arrays", None)
-    if names is None:
-        return None
-    try:
-        tables = _TABLES.get(obj)
-    except TypeError:       # not weakly referable: sent whole
-        return None
-    names = names()     # made before the copy of __dict__: it may make a table
-    state, handles = dict(obj.__dict__), {}
-    try:
-        for name in names:
-            held = state.pop(name)
-            if tables is None:
-                tables = _TABLES[obj] = {}
-                weakref.finalize(obj, _close_tables, tables)
-            share = tables.get(name)
-            if isinstance(held, dict):
-                if not isinstance(share, dict) or share.keys() != held.keys():
-                    share = {k: _table(a) for k, a in held.items()}
-                    setattr(obj, name, {k: sh.array for k, sh in share.items()})
-                handles[name] = {k: sh.handle for k, sh in share.items()}
-            else:
-                if share is None or share.array is not held:
-                    share = _table(held)
-                    setattr(obj, name, share.array)
-                handles[name] = share.handle
-            tables[name] = share
-    except MemoryError:
-        return None
-    return state, handles
-
-
-def _table(a):
-    """A Shared copy of array a, its pages made first (MemoryError where there is no room,
-    rather than a fault on writing a page that cannot be made)."""
-    a = np.asarray(a)
-    share = Shared(a.shape, a.dtype, spare=False)
-    try:
-        _reserve(share.fd, 0, a.nbytes)
-    except MemoryError:
-        share.close()
-        raise
-    share.array[...] = a
-    return share
-
-
-def _close_tables(tables):
-    for share in tables.values():
-        for sh in (share.values() if isinstance(share, dict) else (share,)):
-            sh.close()
-
-
 def open_shared(handle, rows=None):
     """The array of a Shared made by the parent process (its handle), mapped here; rows:
     None (all of it, mapped page by page as it is touched) or (lo, hi), rows lo..hi only,
@@ -531,16 +456,6 @@ def _keep(token_, obj):
     _KEPT.move_to_end(token_)
     while len(_KEPT) > _KEPT_MOST:
         _KEPT.popitem(last=False)
-
-
-def _keep_shared(token_, cls, state, handles):
-    """_keep of an object sent as _shared_state made it: its tables mapped from the parent's
-    memory files."""
-    obj = cls.__new__(cls)
-    obj.__dict__.update(state)
-    for name, h in handles.items():
-        obj.__dict__[name] = {k: open_shared(v) for k, v in h.items()} if isinstance(h, dict) else open_shared(h)
-    _keep(token_, obj)
 
 
 def kept(token_):

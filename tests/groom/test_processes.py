@@ -236,7 +236,7 @@ def test_a_groom_grown_in_the_memory_of_the_one_it_replaces_is_the_same(scalp, m
 def test_workers_prepared_with_the_collider_are_sent_neither_again_by_the_first_run(scalp, monkeypatch):
     """generate.prepare_workers (Blender's Add Head runs it once the head's collider is
     built): the workers are started and keep the collider, so the run that follows sends
-    it nothing (its tables are shared, not sent) and starts no worker; its blocks grow in them."""
+    it none (25 MB on the bundled head) and starts no worker; its blocks grow in them."""
     from groom import default_collider
     from groom.generate import prepare_workers
     made = default_collider()
@@ -259,34 +259,7 @@ def test_workers_prepared_with_the_collider_are_sent_neither_again_by_the_first_
     monkeypatch.setattr(processes.Worker, "send", noted)
     monkeypatch.setattr(processes.Worker, "__init__", starting)
     grow()
-    assert "_worker_grow" in sent and not {"_keep", "_keep_shared"} & set(sent) and not started
-
-
-def test_a_worker_reads_the_colliders_tables_from_this_process_memory_not_a_copy(worker):
-    """The look-up grids of a collider a worker keeps are the parent's pages (one copy in
-    the cache both processes share, none sent down the pipe); its look-ups answer alike."""
-    from groom import collide, default_collider
-    made = default_collider()
-    collider = object.__new__(type(made))
-    collider.__dict__.update({k: v for k, v in made.__dict__.items() if k not in ("_worker_token", "_lower_within")})
-    names = ("phi", "cell_error", "cell_lower")
-    before = {name: np.array(getattr(collider, name)) for name in names}
-    worker.keep("head", collider)
-    assert worker.receive() is None     # kept
-    worker.send(processes.kept, "head")
-    theirs = worker.receive()
-    for name, a in before.items():
-        assert getattr(collider, name) is not getattr(made, name)     # ours moved into a memory file
-        np.testing.assert_array_equal(getattr(collider, name), a)
-        np.testing.assert_array_equal(getattr(theirs, name), a)
-    np.testing.assert_array_equal(theirs.lower_within(collide._REACH), made.lower_within(collide._REACH))
-    rng = np.random.default_rng(3)
-    near = made.vertices[rng.integers(0, len(made.vertices), 500)] + rng.normal(0.0, 0.003, (500, 3))
-    np.testing.assert_array_equal(theirs.value(near), made.value(near))
-    node = int(np.argmax(before["phi"]))
-    collider.phi[node] = -7.0           # written here, read there
-    worker.send(processes.kept, "head")
-    assert worker.receive().phi[node] == -7.0
+    assert "_worker_grow" in sent and "_keep" not in sent and not started
 
 
 def test_a_run_waits_for_the_workers_being_prepared_but_not_for_another_run():
