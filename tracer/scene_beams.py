@@ -83,19 +83,28 @@ SAMPLE = 20_000              # cylinders whose projections decide a resolution
 class BeamState:
     """What a renderer keeps of its beams between renders: the camera's view they were built
     for (position, rotation, pixel size, capsule pad, scene) and the Beams (None: none, with
-    `camera_why`), and per sun slot (key, Beams or None)."""
+    `camera_why`), per sun slot (key, Beams or None), and the even sample of the scene's
+    cylinders that sizes every family's bins (kept with its plan: _segments_sample)."""
     camera_view: object = None
     camera: Optional[Beams] = None
     camera_why: str = ""
     suns: list = field(default_factory=lambda: [None] * MAX_SUN_BEAMS)
     renders: int = 0            # renders of these strands so far
     traced: int = 0             # rays those renders traced (samples times pixels)
+    kept_sample: tuple = (None, None)     # (the plan, its _segments_sample)
 
     def forget(self):
         self.camera_view = self.camera = None
         self.camera_why = ""
         self.suns = [None] * MAX_SUN_BEAMS
         self.renders = self.traced = 0
+        self.kept_sample = (None, None)
+
+    def sample(self, plan):
+        """_segments_sample of `plan`, made once for the renders of these strands."""
+        if self.kept_sample[0] is not plan:
+            self.kept_sample = (plan, _segments_sample(plan))
+        return self.kept_sample[1]
 
 
 @dataclass
@@ -186,7 +195,7 @@ def camera_beams(state, scene, buffers, camera, box, pad, samples=1, pixel_n=0):
     state.camera_view, state.camera, state.camera_why = view, None, ""
     lo, hi = scene.box
     rmax = float(scene.plan.radius.max())
-    sample = _segments_sample(scene.plan)
+    sample = state.sample(scene.plan)
     budget = _ref_budget(buffers)
     rays = samples * (box[2] - box[0]) * (box[3] - box[1])
     # The traced box in the bins' pixel grid, one pixel more on every side for the passes that
@@ -274,9 +283,10 @@ def sun_beams(state, scene, buffers, light, slot, rays=None, traced=0, to_come=0
             SUN_REFS_PER_RAY * rays):
         return None, 0.0                     # not kept: the next render of these strands asks again
     t0 = time.perf_counter()
-    fine = _sun_frame(scene, towards, spread, most)
+    frame_for = _sun_frames(scene, towards, spread, state.sample(scene.plan))
+    fine = frame_for(most)
     if most > SUN_MIN_REFS_PER_CYLINDER and traced < SUN_FINE_RAYS_PER_BIN * fine.num_bins:
-        frame = _sun_frame(scene, towards, spread, SUN_MIN_REFS_PER_CYLINDER)
+        frame = frame_for(SUN_MIN_REFS_PER_CYLINDER)
     else:
         frame, fine = fine, None
     beams, _ = _sun_build(state, scene, buffers, slot, key, frame, fine)
@@ -303,18 +313,18 @@ def _ref_budget(buffers):
     return min(layout.BEAM_MAX_REFS, buffers.max_texels)
 
 
-def _sun_frame(scene, towards, spread, target):
-    """A sun's frame with bins sized for about `target` references a cylinder, within
-    SUN_MAX_SIDE bins a side: the bins' side by bisection of _estimated_refs's count, which
-    for a sun's bins of side h is the sample's extents across the sun (scene units, from one
-    projection) over h."""
+def _sun_frames(scene, towards, spread, sample):
+    """A function of `target` giving a sun's frame with bins sized for about `target`
+    references a cylinder, within SUN_MAX_SIDE bins a side: the bins' side by bisection of
+    _estimated_refs's count, which for a sun's bins of side h is the extents of `sample`
+    (_segments_sample) across the sun (scene units, one projection for every target) over h."""
     lo, hi = scene.box
     rmax = float(scene.plan.radius.max())
     u, v, _ = sun_basis(towards)
     corners = box_corners(lo, hi)
     span = max(float(np.ptp(corners @ u)), float(np.ptp(corners @ v)), 1e-30)
     unit = sun_frame(towards, spread, lo, hi, rmax, 1.0, 1.0)      # bins of one scene unit
-    top, tip, r = _segments_sample(scene.plan)
+    top, tip, r = sample
     gx0, gy0, _ = project(unit, top)
     gx1, gy1, _ = project(unit, tip)
     du, dv = np.abs(gx1 - gx0), np.abs(gy1 - gy0)
@@ -324,16 +334,19 @@ def _sun_frame(scene, towards, spread, target):
     def refs(h):
         """_estimated_refs of the bins of side h (a cylinder's columns times its rows)."""
         return float(np.mean(((major + reach) / h + 1.0) * (minor / np.maximum(major, h) + reach / h + 1.0)))
-    h_lo, h_hi = span / SUN_MAX_SIDE, span
-    if refs(h_lo) <= target:
-        return sun_frame(towards, spread, lo, hi, rmax, 1.0, h_lo)
-    for _ in range(20):      # bisection: references fall as bins grow
-        h = 0.5 * (h_lo + h_hi)
-        if refs(h) > target:
-            h_lo = h
-        else:
-            h_hi = h
-    return sun_frame(towards, spread, lo, hi, rmax, 1.0, h_hi)
+
+    def frame_for(target):
+        h_lo, h_hi = span / SUN_MAX_SIDE, span
+        if refs(h_lo) <= target:
+            return sun_frame(towards, spread, lo, hi, rmax, 1.0, h_lo)
+        for _ in range(20):      # bisection: references fall as bins grow
+            h = 0.5 * (h_lo + h_hi)
+            if refs(h) > target:
+                h_lo = h
+            else:
+                h_hi = h
+        return sun_frame(towards, spread, lo, hi, rmax, 1.0, h_hi)
+    return frame_for
 
 
 def _build(scene, buffers, frame, pad, names, budget):

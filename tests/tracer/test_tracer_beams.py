@@ -221,6 +221,36 @@ def test_an_edit_rebuilds_the_beams(pair):
     np.testing.assert_array_equal(r.render(CAM), fresh.render(CAM))
 
 
+def test_the_sample_that_sizes_the_bins_is_made_once_for_the_renders_of_the_same_strands(pair, monkeypatch):
+    """The camera's and the suns' bins are sized from an even sample of the cylinders
+    (scene_beams._segments_sample): made once for the renders of the same strands (camera
+    moves, a sun's fine lists after its coarse ones), again for new strands, and the images
+    are a fresh renderer's."""
+    from tracer import scene_beams
+    made = []
+    real = scene_beams._segments_sample
+
+    def spy(plan, *a):
+        made.append(plan)
+        return real(plan, *a)
+    monkeypatch.setattr(scene_beams, "_segments_sample", spy)
+    r = pair[1]
+    moved = Camera.look_at((-1.5, -1.9, 0.4), (0, 0, 0.4), fov_deg=50, size=(64, 64))
+    plans = []
+    for seed in (6, 7):
+        strands = curls(60, 10, seed=seed)
+        r.set_strands(strands)
+        plans.append(r.scene.plan)
+        images = [r.render(cam, RenderSettings(spp=spp)) for cam, spp in ((CAM, 1), (moved, 1), (CAM, 16))]
+        assert r.stats.camera_beams == "1 px bins"          # the camera built three times
+        assert [p for p in made if p is plans[-1]] == [plans[-1]]
+        fresh = Renderer(build="gpu", accel="beams")
+        fresh.set_strands(strands)
+        np.testing.assert_array_equal(images[1], fresh.render(moved, RenderSettings(spp=1)))
+        np.testing.assert_array_equal(images[2], fresh.render(CAM, RenderSettings(spp=16)))
+    assert plans[0] is not plans[1]
+
+
 def test_split_cylinder_buffers_render_as_one(pair):
     """Past the driver's limit the cylinders continue in further buffers (tracer/scene_buffers.py):
     the beams' passes and walks find them there. (A beam list itself lives in one buffer.)"""
