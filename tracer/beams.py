@@ -107,14 +107,18 @@ class Beams:
     """A family's bins: the frame, how many entries they hold, the bits of its fine slices
     (`sub`, module text), and (numpy build) per bin its first entry and entry count (int32,
     bin id x + nx·y) and the entries (uint32 id | fine slice << id_bits, sorted within a
-    bin). The compute passes leave the last three None: their lists exist only on the GPU
-    (tracer.scene_beams.read_beams brings them back)."""
+    bin). The compute passes leave those three None: their lists exist only on the GPU
+    (tracer.scene_beams.read_beams brings them back). `reach` (a sun's, built on the GPU): the
+    widest capsule's radius in bins, with the drift and the listing's margin, which a shadow
+    ray's point must lie within of a cylinder's projected axis for the full test
+    (tracer/scene_beams.py, SUN_AXES)."""
     frame: BeamFrame
     refs: int
     sub: int = 0
     start: np.ndarray = None
     count: np.ndarray = None
     entries: np.ndarray = None
+    reach: float = None
 
     @property
     def id_bits(self):

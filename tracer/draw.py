@@ -15,7 +15,7 @@ from .gpu_build import set_uniforms
 from .grid import Grid
 from .mesh_upload import MESH_BUFFERS
 from .scene_buffers import split_part_names
-from .scene_beams import CAMERA_BUFFERS, SUN_BUFFERS
+from .scene_beams import CAMERA_BUFFERS, SUN_AXES, SUN_BUFFERS
 from .scene_grid import WIDE
 from .shader_source import shader_source
 from .settings import pixel_group
@@ -34,7 +34,7 @@ SPLIT_PARTS = split_part_names()
 # one beside the scene's grid.
 WIDE_BUFFERS = WIDE
 # Then the beams (tracer/scene_beams.py): the camera's, then each sun slot's.
-BEAM_BUFFERS = CAMERA_BUFFERS + tuple(n for pair in SUN_BUFFERS for n in pair)
+BEAM_BUFFERS = CAMERA_BUFFERS + tuple(n for pair in SUN_BUFFERS for n in pair) + SUN_AXES
 
 _VERTEX = """#version 330 core
 void main() {   // one triangle that covers the screen; the scissor picks the pixels
@@ -295,7 +295,8 @@ def _set_beam_uniforms(prog, beams):
                 ("sun_frame", lambda b: (b.frame.offset[0], b.frame.offset[1], b.frame.key0, b.fine_step) if b
                  else (0.0,) * 4, np.float32),
                 ("sun_dims", lambda b: tuple(int(d) for d in b.frame.dims) if b else (0, 0), np.int32),
-                ("sun_sub", lambda b: int(b.sub) if b else 0, np.int32)):
+                ("sun_sub", lambda b: int(b.sub) if b else 0, np.int32),
+                ("sun_reach", lambda b: float(b.reach) if b else 0.0, np.float32)):
             if name in prog:
                 prog[name].write(pick(fn, dtype).tobytes())
     if "light_sun" in prog:

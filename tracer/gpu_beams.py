@@ -33,15 +33,16 @@ class BeamBuilder:
         self._passes = {}
         self._scratch = {}
 
-    def _program(self, pass_, cyl_parts, centres=False, sort_keys=0):
+    def _program(self, pass_, cyl_parts, centres=False, sort_keys=0, axes=False):
         """Pass `pass_`; sort_keys: 0 the fill a fine slice a dispatch, else the sorted fill
         (PASS 6 in id order, PASS 7 sorting by that many fine slices)."""
-        key = (layout.glsl_header(), pass_, cyl_parts, bool(centres), sort_keys)
+        key = (layout.glsl_header(), pass_, cyl_parts, bool(centres), sort_keys, bool(axes))
         prog = self._passes.get(key)
         if prog is None:
             prog = self._passes[key] = self.ctx.compute_shader(
                 shader_source(430, BUILD_FILES, {"PASS": pass_, "CYL_PARTS": cyl_parts, "CENTRES": int(centres),
-                                                 "SORTED": int(sort_keys > 0), "SORT_KEYS": max(sort_keys, 1)}))
+                                                 "SORTED": int(sort_keys > 0), "SORT_KEYS": max(sort_keys, 1),
+                                                 "AXES": int(bool(axes))}))
         return prog
 
     def _buffer(self, name, words):
@@ -77,17 +78,17 @@ class BeamBuilder:
         for unit, part in enumerate(tex_cyl.parts):
             part.use(unit)
 
-    def build(self, frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs):
+    def build(self, frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs, axes_name=None):
         """Beams of `frame` over the `n` cylinders of `tex_cyl` (a SplitBuffer), their lists
         into buffer `list_name` and bin table into `table_name` of `store` (SceneBuffers).
         Returns Beams without host arrays; BeamsUnfit where the numpy build would raise it."""
         try:
-            return self._build(frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs)
+            return self._build(frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs, axes_name)
         finally:
             for name in [k for k, buf in self._scratch.items() if buf.size > 4 * KEEP_WORDS]:
                 self._scratch.pop(name).release()
 
-    def _build(self, frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs):
+    def _build(self, frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs, axes_name=None):
         ctx = self.ctx
         nbins = frame.num_bins
         chunks = -(-nbins // layout.BEAM_SCAN_CHUNK)
@@ -104,10 +105,14 @@ class BeamBuilder:
         self._zero(slices, fines)
         self._zero(flags, 2)
         ctx.memory_barrier()
-        prog = self._program(1, parts, frame.centres)
+        # (Made before the cylinders' textures are bound: making a texture binds it.)
+        axes = None if axes_name is None else store.store(axes_name, max(n, 1), 4, "f4")
+        prog = self._program(1, parts, frame.centres, axes=axes is not None)
         self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n, top)
         for binding, buf in enumerate((counts, slices, perm, sums, flags, filed)):
             buf.bind_to_storage_buffer(binding)
+        if axes is not None:
+            axes.buffer.bind_to_storage_buffer(6)
         prog.run(*_groups(n))
         ctx.memory_barrier()
         near, wide = np.frombuffer(flags.read(size=8), np.int32)

@@ -13,6 +13,7 @@ SUN_REFS_PER_CYLINDER bins (fewer for large scenes, within the same budget), or 
 until the renders have traced rays enough to pay for those (SUN_FINE_RAYS_PER_BIN). Smaller bins list
 each cylinder more often but hand a ray fewer cylinders to test: docs/DECISIONS.md, "Beams".
 """
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Optional
@@ -26,6 +27,10 @@ from .gl_state import beam_builder
 
 CAMERA_BUFFERS = ("tex_beam", "tex_beam_cell")
 SUN_BUFFERS = (("tex_sun0", "tex_sun_cell0"), ("tex_sun1", "tex_sun_cell1"))
+# Per sun slot, each cylinder's capsule axis in the slot's bins (written by the count pass):
+# a shadow ray tests a listed cylinder fully only where its point lies in that capsule's
+# shadow (shaders/accel_beams.glsl, sun_transmittance).
+SUN_AXES = ("tex_sun_axis0", "tex_sun_axis1")
 MAX_SUN_BEAMS = len(SUN_BUFFERS)
 CAMERA_BIN_PX = (1, 2, 4)
 # A render of one sample a pixel starts at 2-pixel bins, which build in about half the time;
@@ -300,7 +305,7 @@ def _sun_build(state, scene, buffers, slot, key, frame, later, refused=None):
     fine ones do not fit (the refusal comes before anything is written over), else None."""
     t0 = time.perf_counter()
     try:
-        beams = _build(scene, buffers, frame, 1.0, SUN_BUFFERS[slot], _ref_budget(buffers))
+        beams = _build(scene, buffers, frame, 1.0, SUN_BUFFERS[slot], _ref_budget(buffers), SUN_AXES[slot])
         state.suns[slot] = (key, beams, later)
     except BeamsUnfit:
         beams = refused
@@ -349,12 +354,19 @@ def _sun_frames(scene, towards, spread, sample):
     return frame_for
 
 
-def _build(scene, buffers, frame, pad, names, budget):
-    """Beams of `frame` built by the compute passes into buffers `names` (lists, bin table)."""
+def _build(scene, buffers, frame, pad, names, budget, axes=None):
+    """Beams of `frame` built by the compute passes into buffers `names` (lists, bin table),
+    and with `axes` (a sun's) every cylinder's capsule axis in its bins into that buffer, with
+    the widest capsule's radius in bins (Beams.reach)."""
     if frame.num_bins > layout.BEAM_MAX_BINS:
         raise TooManyRefs(f"{frame.num_bins:,} bins")
-    return beam_builder().build(frame, scene.num_cylinders, buffers["tex_cyl"], pad, buffers, names[0], names[1],
-                                budget)
+    beams = beam_builder().build(frame, scene.num_cylinders, buffers["tex_cyl"], pad, buffers, names[0], names[1],
+                                 budget, axes)
+    if axes is None:
+        return beams
+    # The listing's own radius in bins (tracer/beams.py), for the widest cylinder.
+    rmax = float(scene.plan.radius.max()) * pad
+    return dataclasses.replace(beams, reach=rmax * frame.radius_scale + frame.drift + layout.BEAM_BIN_EPS)
 
 
 def read_beams(beams, buffers, names):

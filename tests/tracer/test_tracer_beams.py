@@ -12,7 +12,7 @@ from tracer import layout
 from tracer.beams import BeamsUnfit, build_beams, camera_frame, fine_bits, project, sun_frame
 from tracer.gpu_build import compute_available
 from tracer.gl_state import shared_context
-from tracer.scene_beams import CAMERA_BUFFERS, SUN_BUFFERS, beam_scene_box, read_beams
+from tracer.scene_beams import CAMERA_BUFFERS, SUN_AXES, SUN_BUFFERS, beam_scene_box, read_beams
 
 from test_tracer_accel import CAM, CASES as ACCEL_CASES, _render_both
 from test_tracer_grid import _surface_samples
@@ -86,6 +86,32 @@ def test_fine_slices_give_the_grids_image(pair, case, how, monkeypatch):
     # the suns' lists (most cylinders listed), never the pixel centres' few.
     assert len(sorted_subs) == (0 if how == "by fine slice" else len(suns) + 1)
     assert (grid[..., 3] > 0).mean() > 0.05
+    assert np.abs(grid - beams).max() <= 1e-6
+
+
+def test_shadow_rays_test_fully_only_the_cylinders_whose_capsule_holds_their_point(pair, monkeypatch):
+    """A shadow ray toward a sun tests a listed cylinder fully only where its point lies within
+    the cylinder's capsule across the sun (scene_beams.SUN_AXES, Beams.reach): a small share of
+    the full tests it makes when every entry passes (a reach past the scene), and the same
+    image, the grid's."""
+    import dataclasses
+    from tracer import scene_beams
+    strands, settings = dense_tuft(), RenderSettings(layers=3, count=True)
+    grid, beams = _render_both(pair, strands, DENSE_CAM, settings)
+    assert (grid[..., 3] > 0).mean() > 0.2 and pair[1].stats.shadow_rays > 500
+    assert pair[1].beam_state.suns[0][1] is not None        # the sun's rays walked its beams
+    tests = pair[1].stats.cylinder_tests
+    real = scene_beams._build
+
+    def every_entry(*args):
+        built = real(*args)
+        return built if built.reach is None else dataclasses.replace(built, reach=1e30)
+    monkeypatch.setattr(scene_beams, "_build", every_entry)
+    r = Renderer(build="gpu", accel="beams")
+    r.set_strands(strands)
+    every = r.render(DENSE_CAM, settings)
+    assert tests < 0.5 * r.stats.cylinder_tests
+    np.testing.assert_array_equal(every, beams)
     assert np.abs(grid - beams).max() <= 1e-6
 
 
@@ -535,9 +561,19 @@ def _compute_vs_numpy(family):
     want = build_beams(frame, c)
     from tracer.gl_state import beam_builder
     names = CAMERA_BUFFERS if family != "sun" else SUN_BUFFERS[1]
+    axes = SUN_AXES[1] if family == "sun" else None
     built = beam_builder().build(frame, r.num_cylinders, r.buffers["tex_cyl"], 1.0, r.buffers, *names,
-                                 layout.BEAM_MAX_REFS)
+                                 layout.BEAM_MAX_REFS, axes)
     assert built.refs == want.refs
+    if axes is not None:
+        # Each cylinder's capsule axis (top to far end) in the sun's bins, as numpy projects it.
+        axis = c.tip.astype(np.float64) - c.top
+        length = np.sqrt(np.einsum("ij,ij->i", axis, axis))
+        far = c.tip + axis * (c.extension / np.maximum(length, 1e-30))[:, None]
+        got = np.frombuffer(r.buffers[axes].read(len(c)), np.float32).reshape(-1, 4)
+        want_axes = np.stack(project(frame, c.top)[:2] + project(frame, far)[:2], axis=1)
+        assert np.ptp(want_axes) > 10.0
+        np.testing.assert_allclose(got, want_axes, atol=layout.BEAM_BIN_EPS)
     start, count, entries = read_beams(built, r.buffers, names)
     np.testing.assert_array_equal(count, want.count)
     np.testing.assert_array_equal(start, want.start)

@@ -62,6 +62,9 @@ layout(std430, binding = 6) writeonly buffer Table { ivec2 table[]; };
 #if PASS == 6
 layout(std430, binding = 6) writeonly buffer Lists { uint lists[]; };
 #endif
+#if PASS == 1 && AXES
+layout(std430, binding = 6) writeonly buffer Axes { vec4 axes[]; };  // per cylinder: its capsule's axis in bins
+#endif
 #if PASS == 7
 layout(std430, binding = 6) readonly buffer TableIn { ivec2 table_in[]; };
 layout(std430, binding = 7) readonly buffer Unsorted { uint unsorted[]; };
@@ -215,6 +218,9 @@ void main() {
     if (i >= n_items) return;
     vec2 g0, g1; float rho; int slice;
     int state = project_cylinder(i, g0, g1, rho, slice);
+#if AXES
+    axes[i] = vec4(g0, g1);
+#endif
     filed[i] = -1;
     if (state == 2) { atomicAdd(flags[0], 1); return; }
     if (state == 1) return;
