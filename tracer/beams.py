@@ -108,10 +108,11 @@ class Beams:
     (`sub`, module text), and (numpy build) per bin its first entry and entry count (int32,
     bin id x + nx·y) and the entries (uint32 id | fine slice << id_bits, sorted within a
     bin). The compute passes leave those three None: their lists exist only on the GPU
-    (tracer.scene_beams.read_beams brings them back). `reach` (a sun's, built on the GPU): the
-    widest capsule's radius in bins, with the drift and the listing's margin, which a shadow
-    ray's point must lie within of a cylinder's projected axis for the full test
-    (tracer/scene_beams.py, SUN_AXES)."""
+    (tracer.scene_beams.read_beams brings them back). `reach` (built on the GPU with each
+    cylinder's projected axis: a sun's, a camera's whole bins for independent samples; else
+    None): the largest listing radius in bins (frame_reach), which a ray's point must lie
+    within of a cylinder's projected axis for its full test (tracer/scene_beams.py,
+    SUN_AXES, CAMERA_AXES)."""
     frame: BeamFrame
     refs: int
     sub: int = 0
@@ -226,6 +227,19 @@ def sun_frame(towards, spread, scene_lo, scene_hi, rmax, pad, bin_size):
     key0, step = _slices(-float(height.max()), -float(height.min()), reach)
     return BeamFrame("sun", np.zeros(3), np.stack([u / h, v / h, w]), np.array([-lo_u / h, -lo_v / h]),
                      1.0 / h, drift_units / h, key0, step, dims)
+
+
+def frame_reach(frame, scene_lo, scene_hi, rmax, pad):
+    """The largest listing radius (bins) of any capsule of a scene within scene_lo..scene_hi
+    whose widest radius is `rmax`, widened `pad` times, in `frame`: what bins_touched widens
+    a capsule's projected axis by (tracer/beams.py's rule; a perspective camera's at the
+    scene box's nearest depth, which bounds every capsule's), so a ray of the family meets a
+    cylinder only where its point lies within this of the cylinder's projected axis."""
+    r = float(rmax) * float(pad) * frame.radius_scale
+    if frame.kind == "persp":
+        depth = (box_corners(scene_lo, scene_hi) - frame.origin) @ frame.axes[2]
+        r /= float(depth.min())
+    return r + frame.drift + layout.BEAM_BIN_EPS
 
 
 # --- listing -----------------------------------------------------------------------------

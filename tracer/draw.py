@@ -15,7 +15,7 @@ from .gpu_build import set_uniforms
 from .grid import Grid
 from .mesh_upload import MESH_BUFFERS
 from .scene_buffers import split_part_names
-from .scene_beams import CAMERA_BUFFERS, SUN_AXES, SUN_BUFFERS
+from .scene_beams import CAMERA_AXES, CAMERA_BUFFERS, SUN_AXES, SUN_BUFFERS
 from .scene_grid import WIDE
 from .shader_source import shader_source
 from .settings import pixel_group
@@ -34,7 +34,7 @@ SPLIT_PARTS = split_part_names()
 # one beside the scene's grid.
 WIDE_BUFFERS = WIDE
 # Then the beams (tracer/scene_beams.py): the camera's, then each sun slot's.
-BEAM_BUFFERS = CAMERA_BUFFERS + tuple(n for pair in SUN_BUFFERS for n in pair) + SUN_AXES
+BEAM_BUFFERS = CAMERA_BUFFERS + tuple(n for pair in SUN_BUFFERS for n in pair) + SUN_AXES + (CAMERA_AXES,)
 
 _VERTEX = """#version 330 core
 void main() {   // one triangle that covers the screen; the scissor picks the pixels
@@ -69,11 +69,12 @@ class Drawer:
         self._fbos = {}
 
     def program(self, settings, camera, layers, meshes=False, accel="grid", parts=(1, 1), wide=False, group=1,
-                beams=(False, 0, True)):
+                beams=(False, 0, True, False)):
         """`parts`: buffer textures holding the cylinders and the cell lists (tracer/scene_buffers.py);
         `wide`: the pixel sampler walks a grid of its own (WIDE_BUFFERS); `group`: the pixel
         sampler's samples a walk (settings.pixel_group); `beams` (accel "beams"): whether the
-        camera has beams, how many sun slots are used, whether some ray walks the grid."""
+        camera has beams, how many sun slots are used, whether some ray walks the grid, whether
+        the camera's lists come with the cylinders' axes (Beams.reach)."""
         key = (layers, settings.shadows and (1 if settings.shadow_mode == "hard" else 2),
                settings.shading, len(settings.lights), settings.spp_n, settings.min_pixel_width,
                camera.type, settings.count, bool(meshes), layout.glsl_header(), accel, settings.sampler,
@@ -97,6 +98,7 @@ class Drawer:
                 "CAMERA_BEAMS": int(beams[0]),
                 "SUN_BEAMS": int(beams[1]),
                 "WALK": int(beams[2]),
+                "CAMERA_AXES": int(beams[3]),
             }
             program = self.ctx.program(vertex_shader=_VERTEX,
                                        fragment_shader=shader_source(
@@ -166,7 +168,8 @@ class Drawer:
             walk = structure is not None
             accel = "beams" if beams is not None else ("grid" if isinstance(structure, Grid) else "bvh")
             suns = 0 if beams is None else max([k + 1 for k in beams.light_sun if k >= 0], default=0)
-            switches = (False, 0, True) if beams is None else (beams.camera is not None, suns, walk)
+            switches = ((False, 0, True, False) if beams is None else
+                        (beams.camera is not None, suns, walk, beams.camera is not None and beams.camera.reach is not None))
             parts = (buffers.parts("tex_cyl"), buffers.parts("tex_idx") if accel != "bvh" and walk else 1)
             pixel = settings.sampler == "pixel"
             own = pixel and wide is not None and wide is not structure
@@ -283,6 +286,8 @@ def _set_beam_uniforms(prog, beams):
                      beam_rows=int(f.dims[1]), beam_keys=(float(f.key0), float(cam.fine_step)),
                      beam_sub=int(cam.sub),
                      beam_shift=tuple(float(x) for x in beams.camera_shift))
+        if cam.reach is not None:
+            set_uniforms(prog, beam_axis_reach=float(cam.reach))
     used = max([k + 1 for k in beams.light_sun if k >= 0], default=0)
     if used:
         sets = list(beams.suns)[:used]

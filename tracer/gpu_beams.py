@@ -80,7 +80,9 @@ class BeamBuilder:
 
     def build(self, frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs, axes_name=None):
         """Beams of `frame` over the `n` cylinders of `tex_cyl` (a SplitBuffer), their lists
-        into buffer `list_name` and bin table into `table_name` of `store` (SceneBuffers).
+        into buffer `list_name` and bin table into `table_name` of `store` (SceneBuffers),
+        and with `axes_name` each cylinder's capsule axis in the bins (vec4: top, far end)
+        into that buffer, written by the count pass (tracer/scene_beams.py, SUN_AXES).
         Returns Beams without host arrays; BeamsUnfit where the numpy build would raise it."""
         try:
             return self._build(frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs, axes_name)

@@ -21,11 +21,15 @@ from typing import Optional
 import numpy as np
 
 from . import layout
-from .beams import Beams, BeamsUnfit, TooManyRefs, box_corners, camera_frame, project, sun_basis, sun_frame
+from .beams import (Beams, BeamsUnfit, TooManyRefs, box_corners, camera_frame, frame_reach, project, sun_basis,
+                    sun_frame)
 from .cylinders import column_bounds, segment_radius
 from .gl_state import beam_builder
 
 CAMERA_BUFFERS = ("tex_beam", "tex_beam_cell")
+# The camera's whole bins for independent samples: each cylinder's capsule axis in the bins
+# (as SUN_AXES; a 1-pixel bin lists cylinders a sample of the pixel may miss).
+CAMERA_AXES = "tex_beam_axis"
 SUN_BUFFERS = (("tex_sun0", "tex_sun_cell0"), ("tex_sun1", "tex_sun_cell1"))
 # Per sun slot, each cylinder's capsule axis in the slot's bins (written by the count pass):
 # a shadow ray tests a listed cylinder fully only where its point lies in that capsule's
@@ -233,7 +237,10 @@ def camera_beams(state, scene, buffers, camera, box, pad, samples=1, pixel_n=0):
             if estimate > 0.5 * budget and b != CAMERA_BIN_PX[-1]:
                 continue
             try:
-                state.camera = _build(scene, buffers, frame, pad, CAMERA_BUFFERS, budget)
+                # Independent samples test a cylinder's capsule first (the pixel sampler's
+                # walk takes every sample of a pixel at once).
+                state.camera = _build(scene, buffers, frame, pad, CAMERA_BUFFERS, budget,
+                                      None if pixel_n else CAMERA_AXES)
                 break
             except TooManyRefs:
                 continue
@@ -356,17 +363,16 @@ def _sun_frames(scene, towards, spread, sample):
 
 def _build(scene, buffers, frame, pad, names, budget, axes=None):
     """Beams of `frame` built by the compute passes into buffers `names` (lists, bin table),
-    and with `axes` (a sun's) every cylinder's capsule axis in its bins into that buffer, with
-    the widest capsule's radius in bins (Beams.reach)."""
+    and with `axes` every cylinder's capsule axis in its bins into that buffer, with the
+    widest listing radius in bins (Beams.reach, beams.frame_reach)."""
     if frame.num_bins > layout.BEAM_MAX_BINS:
         raise TooManyRefs(f"{frame.num_bins:,} bins")
     beams = beam_builder().build(frame, scene.num_cylinders, buffers["tex_cyl"], pad, buffers, names[0], names[1],
                                  budget, axes)
     if axes is None:
         return beams
-    # The listing's own radius in bins (tracer/beams.py), for the widest cylinder.
-    rmax = float(scene.plan.radius.max()) * pad
-    return dataclasses.replace(beams, reach=rmax * frame.radius_scale + frame.drift + layout.BEAM_BIN_EPS)
+    lo, hi = scene.box
+    return dataclasses.replace(beams, reach=frame_reach(frame, lo, hi, float(scene.plan.radius.max()), pad))
 
 
 def read_beams(beams, buffers, names):

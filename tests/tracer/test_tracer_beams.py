@@ -89,27 +89,41 @@ def test_fine_slices_give_the_grids_image(pair, case, how, monkeypatch):
     assert np.abs(grid - beams).max() <= 1e-6
 
 
-def test_shadow_rays_test_fully_only_the_cylinders_whose_capsule_holds_their_point(pair, monkeypatch):
-    """A shadow ray toward a sun tests a listed cylinder fully only where its point lies within
-    the cylinder's capsule across the sun (scene_beams.SUN_AXES, Beams.reach): a small share of
-    the full tests it makes when every entry passes (a reach past the scene), and the same
-    image, the grid's."""
+@pytest.mark.parametrize("family", ["sun", "camera"])
+def test_rays_test_fully_only_the_cylinders_whose_capsule_holds_their_point(pair, family, monkeypatch):
+    """A shadow ray toward a sun, and an independent sample's camera ray in a bin of whole
+    pixels, test a listed cylinder fully only where the ray's point lies within the
+    cylinder's capsule across the family's bins (scene_beams.SUN_AXES, CAMERA_AXES;
+    Beams.reach): a share of the full tests they make when every entry passes (a reach past
+    the scene), and the same image, the grid's."""
     import dataclasses
     from tracer import scene_beams
-    strands, settings = dense_tuft(), RenderSettings(layers=3, count=True)
-    grid, beams = _render_both(pair, strands, DENSE_CAM, settings)
-    assert (grid[..., 3] > 0).mean() > 0.2 and pair[1].stats.shadow_rays > 500
-    assert pair[1].beam_state.suns[0][1] is not None        # the sun's rays walked its beams
+    # The sun's at one sample (the camera's lists then for the pixels' centres: few tests),
+    # the camera's at four with shadows off (and hair its beams serve at four samples), so
+    # that the family's rays make most tests.
+    if family == "sun":
+        strands, cam, settings = dense_tuft(), DENSE_CAM, RenderSettings(layers=3, count=True)
+    else:
+        strands, cam = curls(200, 10, radius=0.003, alpha=0.8, seed=4), CAM
+        settings = RenderSettings(layers=3, spp=4, count=True, shadows=False)
+    _render_both(pair, strands, cam, settings)     # (a sun's beams may wait for a second render)
+    grid, beams = (r.render(cam, settings) for r in pair)
+    assert (grid[..., 3] > 0).mean() > 0.1
+    state = pair[1].beam_state
+    kept = state.suns[0][1] if family == "sun" else state.camera
+    assert kept is not None and kept.reach is not None      # the family's rays walked its beams
+    assert family == "camera" or pair[1].stats.shadow_rays > 500
     tests = pair[1].stats.cylinder_tests
     real = scene_beams._build
 
-    def every_entry(*args):
-        built = real(*args)
-        return built if built.reach is None else dataclasses.replace(built, reach=1e30)
+    def every_entry(scene, buffers, frame, *args):
+        built = real(scene, buffers, frame, *args)
+        mine = (frame.kind == "sun") == (family == "sun")
+        return dataclasses.replace(built, reach=1e30) if mine and built.reach is not None else built
     monkeypatch.setattr(scene_beams, "_build", every_entry)
     r = Renderer(build="gpu", accel="beams")
     r.set_strands(strands)
-    every = r.render(DENSE_CAM, settings)
+    every = [r.render(cam, settings) for _ in range(2)][1]
     assert tests < 0.5 * r.stats.cylinder_tests
     np.testing.assert_array_equal(every, beams)
     assert np.abs(grid - beams).max() <= 1e-6

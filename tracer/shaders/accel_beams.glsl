@@ -20,6 +20,32 @@ int beam_entry_id(uint e, int sub) {
     return int(e & ((1u << uint(BEAM_ID_BITS - sub)) - 1u));
 }
 
+// Entries of a beam walk go in runs of BEAM_RUN (the bits of a uint) where the lists come with
+// each cylinder's capsule axis (CAMERA_AXES, SUN_AXES): each entry's capsule against the ray's
+// point first, a bit each, then the full test of those that pass, in list order. Runs of 32
+// against 8 and 16, interleaved on llvmpipe, shadow rays toward a sun: straight.hair's trace
+// 72 ms against 84 and 77, 10,000 wavy strands 36 against 37 and 38; without the capsule test
+// 95 and 47 (docs/DECISIONS.md, "Rays of a beam test a cylinder's capsule first"). Not the
+// full test behind a branch: llvmpipe would run it for every entry (hit_cylinder_ab); the bits
+// make a loop of the entries that pass.
+const int BEAM_RUN = 32;
+
+// Whether point g (bins) lies within `reach` of the capsule axis G.xy..G.zw (bins).
+bool beam_capsule_holds(vec2 g, vec4 G, float reach) {
+    vec2 ab = G.zw - G.xy, ga = g - G.xy;
+    float s = clamp(dot(ga, ab) / max(dot(ab, ab), 1e-30), 0.0, 1.0);
+    vec2 q = ga - s * ab;
+    return dot(q, q) <= reach * reach;
+}
+
+// The lowest set bit of `bits` (nonzero) as an index (GLSL 3.30 has no findLSB), and `bits`
+// without it.
+int beam_next_bit(inout uint bits) {
+    uint low = bits & (~bits + 1u);
+    bits ^= low;
+    return int(round(log2(float(low))));
+}
+
 #if CAMERA_BEAMS
 uniform usamplerBuffer tex_beam;        // the camera's lists
 uniform isamplerBuffer tex_beam_cell;   // per bin: first entry, count
@@ -46,13 +72,50 @@ float beam_reach(float t) {
     return t + abs(t) * 1e-5 + 1e-30;
 }
 
+#if CAMERA_AXES
+uniform samplerBuffer tex_beam_axis;    // per cylinder: its capsule's axis in the camera's bins
+uniform float beam_axis_reach;          // the widest listing radius in bins (Beams.reach)
+#endif
+
 // accel_nearest for the camera ray o + t·d of camera_pixel (accel.glsl's contract): entries in
 // key order until the next starts farther than the hit list's horizon (hits_horizon) or the
 // nearest mesh.
 void beam_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_const) {
     // The bin the ray crosses: its point of the image in the bins' pixel grid.
-    ivec2 sc = bin_at(ivec2(floor(camera_point + beam_shift)));
+    vec2 at = camera_point + beam_shift;
+    ivec2 sc = bin_at(ivec2(floor(at)));
     float reach = beam_reach(tmax);
+#if CAMERA_AXES
+    // The ray's point in bins (tracer/beams.py, camera_frame: bin (0, 0) at beam_box.xy).
+    vec2 g = (at - vec2(beam_box.xy)) / float(beam_box.z);
+    for (int k0 = 0; k0 < sc.y; k0 += BEAM_RUN) {
+        uint pass_ = 0u;
+        int k1 = min(sc.y, k0 + BEAM_RUN);
+        bool last = false;
+        for (int k = k0; k < k1; ++k) {
+            uint e = texelFetch(tex_beam, sc.x + k).x;
+            if (beam_entry_start(e, beam_sub, beam_keys.x, beam_keys.y) > reach) { last = true; break; }
+            if (beam_capsule_holds(g, texelFetch(tex_beam_axis, beam_entry_id(e, beam_sub)), beam_axis_reach))
+                pass_ |= 1u << uint(k - k0);
+        }
+        while (pass_ != 0u) {
+            uint e = texelFetch(tex_beam, sc.x + k0 + beam_next_bit(pass_)).x;
+            // The horizon may have come nearer since the run's first half.
+            if (beam_entry_start(e, beam_sub, beam_keys.x, beam_keys.y) > reach) { last = true; break; }
+            int id = beam_entry_id(e, beam_sub);
+#if COUNT
+            counter.w += 1.0;
+#endif
+            int surf; float asc, alpha;
+            float t = hit_cylinder_ab(id, cyl(id, CYL_TOP), cyl(id, CYL_TIP), o, d, widen_per_t, widen_const,
+                                      surf, asc, alpha);
+            bool ok = t > 0.0 && t < tmax;
+            hits_offer(ok ? t : BIG, ok ? id : NO_ID, surf, alpha * asc);
+            if (ok) reach = beam_reach(min(tmax, hits_horizon()));
+        }
+        if (last) break;
+    }
+#else
     for (int k = 0; k < sc.y; ++k) {
         uint e = texelFetch(tex_beam, sc.x + k).x;
         if (beam_entry_start(e, beam_sub, beam_keys.x, beam_keys.y) > reach) break;
@@ -67,6 +130,7 @@ void beam_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_con
         hits_offer(ok ? t : BIG, ok ? id : NO_ID, surf, alpha * asc);
         if (ok) reach = beam_reach(min(tmax, hits_horizon()));
     }
+#endif
 #if COUNT
     counter.z += 1.0;
 #endif
@@ -120,12 +184,6 @@ uniform samplerBuffer tex_sun_axis0;    // per cylinder: its capsule's axis in s
 #if SUN_BEAMS > 1
 uniform samplerBuffer tex_sun_axis1;
 #endif
-// A shadow walk takes its entries in runs of SUN_RUN (the bits of a uint): each entry's
-// capsule against the ray's point first, then the full test of those that pass. Runs of 32
-// against 8 and 16, interleaved on llvmpipe: straight.hair's trace 72 ms against 84 and 77,
-// 10,000 wavy strands 36 against 37 and 38; without the capsule test 95 and 47
-// (docs/DECISIONS.md, "Shadow rays toward a sun test a cylinder's capsule first").
-const int SUN_RUN = 32;
 
 vec4 sun_axis(int set, int id) {
 #if SUN_BEAMS > 1
@@ -164,32 +222,22 @@ float sun_transmittance(int set, vec3 p, vec3 d, float tmax, int own, float tmin
     counter.z += 1.0;
 #endif
     int sub = sun_sub[set];
-    float reach2 = sun_reach[set] * sun_reach[set];
-    // In runs of SUN_RUN entries: first each one's capsule (the listing's, its axis in bins
-    // widened to the widest cylinder's reach) against the ray's point g, a bit each; a ray
-    // outside it cannot meet the cylinder (its projection along the sun, drift included,
-    // stays within the capsule's listing radius: tracer/beams.py). Then the full test of
-    // those that pass, in list order. (Not the full test behind a branch: llvmpipe would run
-    // it for every entry, see hit_cylinder_ab; the bits make a loop of the passing ones.)
-    for (int k0 = 0; k0 < sc.y; k0 += SUN_RUN) {
+    float reach = sun_reach[set];
+    // In runs of BEAM_RUN entries, the capsule first (above): a ray whose point g lies
+    // farther from a cylinder's axis across the sun than its listing radius (the drift
+    // included: tracer/beams.py) cannot meet it.
+    for (int k0 = 0; k0 < sc.y; k0 += BEAM_RUN) {
         uint pass_ = 0u;
-        int k1 = min(sc.y, k0 + SUN_RUN);
+        int k1 = min(sc.y, k0 + BEAM_RUN);
         bool last = false;
         for (int k = k0; k < k1; ++k) {
             uint e = sun_entry(set, sc.x + k);
             if (beam_entry_start(e, sub, fr.z, fr.w) > below) { last = true; break; }
             int id = beam_entry_id(e, sub);
-            vec4 G = sun_axis(set, id);
-            vec2 ab = G.zw - G.xy, ga = g - G.xy;
-            float s = clamp(dot(ga, ab) / max(dot(ab, ab), 1e-30), 0.0, 1.0);
-            vec2 q = ga - s * ab;
-            if (dot(q, q) <= reach2 && id != own) pass_ |= 1u << uint(k - k0);
+            if (id != own && beam_capsule_holds(g, sun_axis(set, id), reach)) pass_ |= 1u << uint(k - k0);
         }
         while (pass_ != 0u) {
-            uint low = pass_ & (~pass_ + 1u);       // the lowest bit (GLSL 3.30 has no findLSB)
-            int j = int(round(log2(float(low))));
-            pass_ ^= low;
-            int id = beam_entry_id(sun_entry(set, sc.x + k0 + j), sub);
+            int id = beam_entry_id(sun_entry(set, sc.x + k0 + beam_next_bit(pass_)), sub);
 #if COUNT
             counter.w += 1.0;
 #endif

@@ -8,7 +8,9 @@
 //   PASS 0  zero:   counts[i] = 0 for i < n_items (the bins' counters, then the slices')
 //   PASS 1  count:  counts[bin] += 1 for every (cylinder, bin), slices[fine slice] += 1 per
 //                   cylinder listed somewhere, filed[cylinder] = its fine slice (-1: listed
-//                   nowhere), the fine slices of the most bits the ids leave
+//                   nowhere), the fine slices of the most bits the ids leave; AXES: also
+//                   axes[cylinder] = its capsule's axis in bins (top, far end), which the
+//                   walks test a ray's point against first (shaders/accel_beams.glsl)
 //   PASS 2  sums:   sums[c] = the counts of bins c·CHUNK .. (c+1)·CHUNK (counts is padded
 //                   with zeros to whole chunks)
 //   PASS 3  scan:   one invocation: sums become exclusive prefix sums, sums[n_items] the total
