@@ -8,8 +8,11 @@ Per scene: the structure's build time and size, the render time at 1 and 16 samp
 pixel (16 spp against 16 times 1 spp says how much of a pixel's work its samples share), and
 the work per ray from the tracer's own counters: boxes (BVH), cells (grid) or bins (beams)
 visited and cylinders tested per primary ray (a render without shadows) and per shadow ray
-(the rest of a render with the sun, over the shadow rays it cast). The images are compared
-pixel by pixel: the structures must find the same hits.
+(the rest of a render with the sun, over the shadow rays it cast). A test is a full
+intersection test: the beams' walks first test each listed cylinder's capsule in the bins
+(a 2-D distance, docs/DECISIONS.md "Rays of a beam test a cylinder's capsule first"), which
+the counters do not count. The images are compared pixel by pixel: the structures must find
+the same hits.
 
 Builds: the grid and the beams by the compute passes (the renderer's default build), the BVH
 in numpy (its only build). The grid and the BVH are built by set_strands; the beams by the
