@@ -72,6 +72,20 @@ float beam_reach(float t) {
     return t + abs(t) * 1e-5 + 1e-30;
 }
 
+// The full test of cylinder `id` for the camera ray o + t·d, its hit offered to the hit list;
+// returns how far later entries may start (`reach`, or nearer after a hit).
+float beam_offer(int id, vec3 o, vec3 d, float tmax, float widen_per_t, float widen_const, float reach) {
+#if COUNT
+    counter.w += 1.0;
+#endif
+    int surf; float asc, alpha;
+    float t = hit_cylinder_ab(id, cyl(id, CYL_TOP), cyl(id, CYL_TIP), o, d, widen_per_t, widen_const,
+                              surf, asc, alpha);
+    bool ok = t > 0.0 && t < tmax;
+    hits_offer(ok ? t : BIG, ok ? id : NO_ID, surf, alpha * asc);
+    return ok ? beam_reach(min(tmax, hits_horizon())) : reach;
+}
+
 #if CAMERA_AXES
 uniform samplerBuffer tex_beam_axis;    // per cylinder: its capsule's axis in the camera's bins
 uniform float beam_axis_reach;          // the widest listing radius in bins (Beams.reach)
@@ -102,16 +116,7 @@ void beam_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_con
             uint e = texelFetch(tex_beam, sc.x + k0 + beam_next_bit(pass_)).x;
             // The horizon may have come nearer since the run's first half.
             if (beam_entry_start(e, beam_sub, beam_keys.x, beam_keys.y) > reach) { last = true; break; }
-            int id = beam_entry_id(e, beam_sub);
-#if COUNT
-            counter.w += 1.0;
-#endif
-            int surf; float asc, alpha;
-            float t = hit_cylinder_ab(id, cyl(id, CYL_TOP), cyl(id, CYL_TIP), o, d, widen_per_t, widen_const,
-                                      surf, asc, alpha);
-            bool ok = t > 0.0 && t < tmax;
-            hits_offer(ok ? t : BIG, ok ? id : NO_ID, surf, alpha * asc);
-            if (ok) reach = beam_reach(min(tmax, hits_horizon()));
+            reach = beam_offer(beam_entry_id(e, beam_sub), o, d, tmax, widen_per_t, widen_const, reach);
         }
         if (last) break;
     }
@@ -119,16 +124,7 @@ void beam_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_con
     for (int k = 0; k < sc.y; ++k) {
         uint e = texelFetch(tex_beam, sc.x + k).x;
         if (beam_entry_start(e, beam_sub, beam_keys.x, beam_keys.y) > reach) break;
-        int id = beam_entry_id(e, beam_sub);
-#if COUNT
-        counter.w += 1.0;
-#endif
-        int surf; float asc, alpha;
-        float t = hit_cylinder_ab(id, cyl(id, CYL_TOP), cyl(id, CYL_TIP), o, d, widen_per_t, widen_const,
-                                  surf, asc, alpha);
-        bool ok = t > 0.0 && t < tmax;
-        hits_offer(ok ? t : BIG, ok ? id : NO_ID, surf, alpha * asc);
-        if (ok) reach = beam_reach(min(tmax, hits_horizon()));
+        reach = beam_offer(beam_entry_id(e, beam_sub), o, d, tmax, widen_per_t, widen_const, reach);
     }
 #endif
 #if COUNT
