@@ -12,7 +12,7 @@ from tracer import layout
 from tracer.beams import BeamsUnfit, build_beams, camera_frame, fine_bits, project, sun_frame
 from tracer.gpu_build import compute_available
 from tracer.gl_state import shared_context
-from tracer.scene_beams import CAMERA_BUFFERS, SUN_AXES, SUN_BUFFERS, beam_scene_box, read_beams
+from tracer.scene_beams import CAMERA_AXES, CAMERA_BUFFERS, SUN_AXES, SUN_BUFFERS, beam_scene_box, read_beams
 
 from test_tracer_accel import CAM, CASES as ACCEL_CASES, _render_both
 from test_tracer_grid import _surface_samples
@@ -282,7 +282,7 @@ def test_the_sample_that_sizes_the_bins_is_made_once_for_the_renders_of_the_same
         r.set_strands(strands)
         plans.append(r.scene.plan)
         images = [r.render(cam, RenderSettings(spp=spp)) for cam, spp in ((CAM, 1), (moved, 1), (CAM, 16))]
-        assert r.stats.camera_beams == "1 px bins"          # the camera built three times
+        assert r.stats.camera_beams == "1 px bins"          # (whole bins: the third camera build)
         assert [p for p in made if p is plans[-1]] == [plans[-1]]
         fresh = Renderer(build="gpu", accel="beams")
         fresh.set_strands(strands)
@@ -575,12 +575,12 @@ def _compute_vs_numpy(family):
     want = build_beams(frame, c)
     from tracer.gl_state import beam_builder
     names = CAMERA_BUFFERS if family != "sun" else SUN_BUFFERS[1]
-    axes = SUN_AXES[1] if family == "sun" else None
+    axes = SUN_AXES[1] if family == "sun" else CAMERA_AXES
     built = beam_builder().build(frame, r.num_cylinders, r.buffers["tex_cyl"], 1.0, r.buffers, *names,
                                  layout.BEAM_MAX_REFS, axes)
     assert built.refs == want.refs
-    if axes is not None:
-        # Each cylinder's capsule axis (top to far end) in the sun's bins, as numpy projects it.
+    if family != "pixel centres":       # (whose walk takes no axes)
+        # Each cylinder's capsule axis (top to far end) in the family's bins, as numpy projects it.
         axis = c.tip.astype(np.float64) - c.top
         length = np.sqrt(np.einsum("ij,ij->i", axis, axis))
         far = c.tip + axis * (c.extension / np.maximum(length, 1e-30))[:, None]
