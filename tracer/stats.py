@@ -21,8 +21,9 @@ class RenderStats:
     which camera_beam_refs and sun_beam_refs. Of the last render: render_s, layers_max (layers the shader was
     compiled for), screen_box and traversed_pixels (the projected bounds that were traced),
     and with RenderSettings(count=True) the counters shadow_rays, layers_traced,
-    cells_visited, cylinder_tests (summed over samples; full intersection tests: a shadow ray
-    toward a sun counts only the listed cylinders whose capsule holds its point). gl_backend: the shared context's
+    cells_visited, cylinder_tests (summed over samples; full intersection tests: a ray of
+    beams that come with the cylinders' axes, a sun's or a camera's whole bins, counts only
+    the listed cylinders whose capsule holds its point). gl_backend: the shared context's
     (egl, glx, wgl or cgl). None: not measured yet."""
     gl_backend: str = ""
     bytes_uploaded: int = 0

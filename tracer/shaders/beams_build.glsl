@@ -220,12 +220,12 @@ void main() {
     if (i >= n_items) return;
     vec2 g0, g1; float rho; int slice;
     int state = project_cylinder(i, g0, g1, rho, slice);
-#if AXES
-    axes[i] = vec4(g0, g1);
-#endif
     filed[i] = -1;
     if (state == 2) { atomicAdd(flags[0], 1); return; }
     if (state == 1) return;
+#if AXES
+    axes[i] = vec4(g0, g1);     // (a cylinder never seen is never looked up)
+#endif
     int listed = 0;
     if (!list_cylinder(i, g0, g1, rho, slice, listed)) atomicAdd(flags[1], 1);
     // Only a cylinder listed somewhere is filled: the fill goes over filed's cylinders alone
