@@ -405,22 +405,26 @@ def fine_bits(sizes, refs):
     return 0
 
 
-def fill_plan(sizes, refs, n, bins):
+def fill_plan(sizes, refs, n, bins, marks=False):
     """How the compute passes fill a family's lists, and the bits of their fine slices:
     (sorted, sub). `sizes` counts the listed cylinders by fine slice at the most bits (as for
-    fine_bits), `refs` the lists' references, `n` the scene's cylinders, `bins` the frame's.
+    fine_bits), `refs` the lists' references, `n` the scene's cylinders, `bins` the frame's,
+    `marks` whether the entries come with marks (two uint32 an entry, tracer/gpu_beams.py).
     Sorted (the cylinders in id order, then each bin's entries sorted; layout.py) where most
-    cylinders are listed in at most BEAM_SORT_REFS_PER_CYLINDER references each, with the
-    most bits (up to BEAM_SORT_SUB_BITS_MAX) whose fine slices number no more than
-    BEAM_SORT_SLICES_PER_ENTRY times the entries of a bin on average; else a fine slice a
-    dispatch, fine_bits' bits. Measured on llvmpipe: 100,000 wavy strands' coarse sun lists
-    (3.7 references a listed cylinder) took 0.87-1.0 s against 1.06-1.22; their fine lists
-    and the camera's of 1-pixel bins (7.5 and 6.9) took 1.9-2.1 and 1.7-1.9 s sorted against
-    1.8-1.9 and 1.6-1.75 (docs/DECISIONS.md)."""
+    cylinders are listed in at most BEAM_SORT_REFS_PER_CYLINDER references each
+    (BEAM_SORT_REFS_PER_MARKED with marks), with the most bits (up to
+    BEAM_SORT_SUB_BITS_MAX) whose fine slices number no more than BEAM_SORT_SLICES_PER_ENTRY
+    times the entries of a bin on average; else a fine slice a dispatch, fine_bits' bits.
+    Measured on llvmpipe: 100,000 wavy strands' coarse sun lists (3.7 references a listed
+    cylinder) took 0.87-1.0 s against 1.06-1.22 without marks; their fine lists and the
+    camera's of 1-pixel bins (7.5 and 6.9) took 1.9-2.1 and 1.7-1.9 s sorted against 1.8-1.9
+    and 1.6-1.75. With marks, whose sort moves twice the bytes, the coarse lists took 1.9 s
+    sorted against 1.5, and 10,000 strands' 176 ms against 159 (docs/DECISIONS.md)."""
     sizes = np.asarray(sizes)
     top = (len(sizes) // layout.BEAM_SLICES).bit_length() - 1
     listed = int(sizes.sum())
-    if listed and 2 * listed >= n and refs <= layout.BEAM_SORT_REFS_PER_CYLINDER * listed:
+    per = layout.BEAM_SORT_REFS_PER_MARKED if marks else layout.BEAM_SORT_REFS_PER_CYLINDER
+    if listed and 2 * listed >= n and refs <= per * listed:
         sub = 0
         while (sub < min(top, layout.BEAM_SORT_SUB_BITS_MAX)
                and (layout.BEAM_SLICES << (sub + 1)) * max(bins, 1) <= layout.BEAM_SORT_SLICES_PER_ENTRY * refs):

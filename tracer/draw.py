@@ -15,7 +15,7 @@ from .gpu_build import set_uniforms
 from .grid import Grid
 from .mesh_upload import MESH_BUFFERS
 from .scene_buffers import split_part_names
-from .scene_beams import CAMERA_AXES, CAMERA_BUFFERS, SUN_AXES, SUN_BUFFERS
+from .scene_beams import CAMERA_BUFFERS, SUN_BUFFERS
 from .scene_grid import WIDE
 from .shader_source import shader_source
 from .settings import pixel_group
@@ -34,7 +34,7 @@ SPLIT_PARTS = split_part_names()
 # one beside the scene's grid.
 WIDE_BUFFERS = WIDE
 # Then the beams (tracer/scene_beams.py): the camera's, then each sun slot's.
-BEAM_BUFFERS = CAMERA_BUFFERS + tuple(n for pair in SUN_BUFFERS for n in pair) + SUN_AXES + (CAMERA_AXES,)
+BEAM_BUFFERS = CAMERA_BUFFERS + tuple(n for pair in SUN_BUFFERS for n in pair)
 
 _VERTEX = """#version 330 core
 void main() {   // one triangle that covers the screen; the scissor picks the pixels
@@ -74,7 +74,7 @@ class Drawer:
         `wide`: the pixel sampler walks a grid of its own (WIDE_BUFFERS); `group`: the pixel
         sampler's samples a walk (settings.pixel_group); `beams` (accel "beams"): whether the
         camera has beams, how many sun slots are used, whether some ray walks the grid, whether
-        the camera's lists come with the cylinders' axes (Beams.reach)."""
+        the camera's entries come with their marks (Beams.reach)."""
         key = (layers, settings.shadows and (1 if settings.shadow_mode == "hard" else 2),
                settings.shading, len(settings.lights), settings.spp_n, settings.min_pixel_width,
                camera.type, settings.count, bool(meshes), layout.glsl_header(), accel, settings.sampler,
@@ -98,7 +98,7 @@ class Drawer:
                 "CAMERA_BEAMS": int(beams[0]),
                 "SUN_BEAMS": int(beams[1]),
                 "WALK": int(beams[2]),
-                "CAMERA_AXES": int(beams[3]),
+                "CAMERA_MARKS": int(beams[3]),
             }
             program = self.ctx.program(vertex_shader=_VERTEX,
                                        fragment_shader=shader_source(

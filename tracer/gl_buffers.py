@@ -22,7 +22,7 @@ GL_READ_ONLY, GL_WRITE_ONLY, GL_READ_WRITE = 0x88B8, 0x88B9, 0x88BA
 # (dtype, components) -> sized internal format. RGB32F buffers need GL 4.0; only the
 # compute passes (GL 4.3) use them.
 FORMATS = {("f4", 1): 0x822E, ("f4", 3): 0x8815, ("f4", 4): 0x8814, ("i4", 1): 0x8235, ("i4", 2): 0x823B,
-           ("i4", 4): 0x8D82, ("u4", 1): 0x8236}
+           ("i4", 4): 0x8D82, ("u4", 1): 0x8236, ("u4", 2): 0x823C}
 
 # One set of entry points per context: on Windows a pointer is only valid for contexts like
 # the one it was looked up in, so none outlives its context.

@@ -33,16 +33,17 @@ class BeamBuilder:
         self._passes = {}
         self._scratch = {}
 
-    def _program(self, pass_, cyl_parts, centres=False, sort_keys=0, axes=False):
+    def _program(self, pass_, cyl_parts, centres=False, sort_keys=0, marks=False):
         """Pass `pass_`; sort_keys: 0 the fill a fine slice a dispatch, else the sorted fill
-        (PASS 6 in id order, PASS 7 sorting by that many fine slices)."""
-        key = (layout.glsl_header(), pass_, cyl_parts, bool(centres), sort_keys, bool(axes))
+        (PASS 6 in id order, PASS 7 sorting by that many fine slices); marks: entries with
+        their marks (MARKS)."""
+        key = (layout.glsl_header(), pass_, cyl_parts, bool(centres), sort_keys, bool(marks))
         prog = self._passes.get(key)
         if prog is None:
             prog = self._passes[key] = self.ctx.compute_shader(
                 shader_source(430, BUILD_FILES, {"PASS": pass_, "CYL_PARTS": cyl_parts, "CENTRES": int(centres),
                                                  "SORTED": int(sort_keys > 0), "SORT_KEYS": max(sort_keys, 1),
-                                                 "AXES": int(bool(axes))}))
+                                                 "MARKS": int(bool(marks))}))
         return prog
 
     def _buffer(self, name, words):
@@ -78,19 +79,20 @@ class BeamBuilder:
         for unit, part in enumerate(tex_cyl.parts):
             part.use(unit)
 
-    def build(self, frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs, axes_name=None):
+    def build(self, frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs, reach=None):
         """Beams of `frame` over the `n` cylinders of `tex_cyl` (a SplitBuffer), their lists
-        into buffer `list_name` and bin table into `table_name` of `store` (SceneBuffers),
-        and with `axes_name` each cylinder's capsule axis in the bins (vec4: top, far end)
-        into that buffer, written by the count pass (tracer/scene_beams.py, SUN_AXES).
-        Returns Beams without host arrays; BeamsUnfit where the numpy build would raise it."""
+        into buffer `list_name` and bin table into `table_name` of `store` (SceneBuffers).
+        With `reach` (bins) every entry comes with its mark, two uint32 a texel: its
+        cylinder's capsule axis in its bin, clipped to the bin widened by `reach`, 8 bits a
+        coordinate (shaders/beams_build.glsl, beam_mark). Returns Beams without host arrays;
+        BeamsUnfit where the numpy build would raise it."""
         try:
-            return self._build(frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs, axes_name)
+            return self._build(frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs, reach)
         finally:
             for name in [k for k, buf in self._scratch.items() if buf.size > 4 * KEEP_WORDS]:
                 self._scratch.pop(name).release()
 
-    def _build(self, frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs, axes_name=None):
+    def _build(self, frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs, reach=None):
         ctx = self.ctx
         nbins = frame.num_bins
         chunks = -(-nbins // layout.BEAM_SCAN_CHUNK)
@@ -107,14 +109,10 @@ class BeamBuilder:
         self._zero(slices, fines)
         self._zero(flags, 2)
         ctx.memory_barrier()
-        # (Made before the cylinders' textures are bound: making a texture binds it.)
-        axes = None if axes_name is None else store.store(axes_name, max(n, 1), 4, "f4")
-        prog = self._program(1, parts, frame.centres, axes=axes is not None)
+        prog = self._program(1, parts, frame.centres)
         self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n, top)
         for binding, buf in enumerate((counts, slices, perm, sums, flags, filed)):
             buf.bind_to_storage_buffer(binding)
-        if axes is not None:
-            axes.buffer.bind_to_storage_buffer(6)
         prog.run(*_groups(n))
         ctx.memory_barrier()
         near, wide = np.frombuffer(flags.read(size=8), np.int32)
@@ -138,7 +136,8 @@ class BeamBuilder:
         if total > max_refs:
             raise TooManyRefs(f"{total:,} references, more than {max_refs:,}")
         table = store.store(table_name, nbins, 2, "i4")
-        lists = store.store(list_name, max(total, 1), 1, "u4")
+        marks = reach is not None
+        lists = store.store(list_name, max(total, 1), 2 if marks else 1, "u4")
         prog = self._program(4, 1)
         set_uniforms(prog, n_items=chunks, dims=tuple(int(d) for d in frame.dims))
         counts.bind_to_storage_buffer(0)
@@ -146,9 +145,9 @@ class BeamBuilder:
         table.buffer.bind_to_storage_buffer(6)
         prog.run(*_groups(chunks))
         sizes = np.frombuffer(slices.read(size=4 * fines), np.int32).astype(np.int64)
-        sort, sub = fill_plan(sizes, total, n, nbins)
+        sort, sub = fill_plan(sizes, total, n, nbins, marks)
         if sort:
-            self._sorted_fill(frame, n, tex_cyl, pad_factor, sub, total, (counts, filed), table, lists)
+            self._sorted_fill(frame, n, tex_cyl, pad_factor, sub, total, (counts, filed), table, lists, reach)
             return Beams(frame, total, sub)
         # The cylinders bucketed by fine slice: every fine slice's first place from its count.
         first = np.cumsum(sizes) - sizes
@@ -164,8 +163,10 @@ class BeamBuilder:
         # come fine slice by fine slice.
         group = 1 << (top - sub)
         filled = sizes.reshape(-1, group).sum(axis=1)
-        prog = self._program(6, parts, frame.centres)
+        prog = self._program(6, parts, frame.centres, marks=marks)
         self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n, sub)
+        if marks:
+            set_uniforms(prog, mark_reach=float(reach))
         lists.buffer.bind_to_storage_buffer(6)
         for k in np.flatnonzero(filled):
             set_uniforms(prog, n_items=int(filled[k]), first_item=int(first[k * group]))
@@ -173,23 +174,26 @@ class BeamBuilder:
             ctx.memory_barrier()
         return Beams(frame, total, sub)
 
-    def _sorted_fill(self, frame, n, tex_cyl, pad_factor, sub, total, scratch, table, lists):
+    def _sorted_fill(self, frame, n, tex_cyl, pad_factor, sub, total, scratch, table, lists, reach):
         """fill_plan's other fill (PASS 6 SORTED, PASS 7): every listed cylinder in id order in
         one dispatch into scratch lists at the bins' cursors, then each bin's entries into
-        `lists` sorted by fine slice of `sub` bits. scratch: the build's (cursors, filed);
-        table: the bins' starts and counts."""
+        `lists` sorted by fine slice of `sub` bits (with `reach`, entries with their marks).
+        scratch: the build's (cursors, filed); table: the bins' starts and counts."""
         ctx = self.ctx
         ctx.memory_barrier()
         keys = layout.BEAM_SLICES << sub
-        unsorted = self._buffer("unsorted", max(total, 1))
-        prog = self._program(6, len(tex_cyl.parts), frame.centres, keys)
+        marks = reach is not None
+        unsorted = self._buffer("unsorted", max(total, 1) * (2 if marks else 1))
+        prog = self._program(6, len(tex_cyl.parts), frame.centres, keys, marks)
         self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n, sub)
+        if marks:
+            set_uniforms(prog, mark_reach=float(reach))
         scratch[0].bind_to_storage_buffer(0)
         scratch[1].bind_to_storage_buffer(5)
         unsorted.bind_to_storage_buffer(6)
         prog.run(*_groups(n))
         ctx.memory_barrier()
-        prog = self._program(7, 1, sort_keys=keys)
+        prog = self._program(7, 1, sort_keys=keys, marks=marks)
         set_uniforms(prog, n_items=int(frame.num_bins), sub_bits=int(sub))
         table.buffer.bind_to_storage_buffer(6)
         unsorted.bind_to_storage_buffer(7)

@@ -97,7 +97,10 @@ BEAM_REFS_PER_FILL = 65536
 # most BEAM_SORT_REFS_PER_CYLINDER references each. Its fine slices: no more of them than
 # BEAM_SORT_SLICES_PER_ENTRY times the lists' entries a bin (the sort's work per bin goes over
 # them all), at most BEAM_SLICES << BEAM_SORT_SUB_BITS_MAX (a sort's counters, 2 KB).
+# Entries with marks (two uint32 each, tracer/gpu_beams.py) take BEAM_SORT_REFS_PER_MARKED
+# instead: their sort moves twice the bytes and was slower at every count measured (none).
 BEAM_SORT_REFS_PER_CYLINDER = 5.0
+BEAM_SORT_REFS_PER_MARKED = 0.0
 BEAM_SORT_SLICES_PER_ENTRY = 1.0
 BEAM_SORT_SUB_BITS_MAX = 3
 # References one family's lists may hold (one buffer texture's worth and then some room).

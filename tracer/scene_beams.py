@@ -26,15 +26,15 @@ from .beams import (Beams, BeamsUnfit, TooManyRefs, box_corners, camera_frame, f
 from .cylinders import column_bounds, segment_radius
 from .gl_state import beam_builder
 
+# The lists (entries, two uint32 a texel where they come with marks) and bin tables. A sun's
+# entries, and the camera's whole bins' for independent samples (a 1-pixel bin lists
+# cylinders a sample of the pixel may miss), come with marks: each its cylinder's capsule
+# axis in its bin, 8 bits a coordinate (written by the fill: shaders/beams_build.glsl,
+# beam_mark). A ray tests a listed cylinder fully only where its point lies within the
+# capsule (shaders/accel_beams.glsl, beam_mark_holds), reading the marks in list order beside
+# the entries, not each cylinder's axis wherever its id points.
 CAMERA_BUFFERS = ("tex_beam", "tex_beam_cell")
-# The camera's whole bins for independent samples: each cylinder's capsule axis in the bins
-# (as SUN_AXES; a 1-pixel bin lists cylinders a sample of the pixel may miss).
-CAMERA_AXES = "tex_beam_axis"
 SUN_BUFFERS = (("tex_sun0", "tex_sun_cell0"), ("tex_sun1", "tex_sun_cell1"))
-# Per sun slot, each cylinder's capsule axis in the slot's bins (written by the count pass):
-# a shadow ray tests a listed cylinder fully only where its point lies in that capsule's
-# shadow (shaders/accel_beams.glsl, sun_transmittance).
-SUN_AXES = ("tex_sun_axis0", "tex_sun_axis1")
 MAX_SUN_BEAMS = len(SUN_BUFFERS)
 CAMERA_BIN_PX = (1, 2, 4)
 # A render of one sample a pixel starts at 2-pixel bins, which build in about half the time;
@@ -240,7 +240,7 @@ def camera_beams(state, scene, buffers, camera, box, pad, samples=1, pixel_n=0):
                 # Independent samples test a cylinder's capsule first (the pixel sampler's
                 # walk takes every sample of a pixel at once).
                 state.camera = _build(scene, buffers, frame, pad, CAMERA_BUFFERS, budget,
-                                      None if pixel_n else CAMERA_AXES)
+                                      marks=not pixel_n)
                 break
             except TooManyRefs:
                 continue
@@ -312,7 +312,7 @@ def _sun_build(state, scene, buffers, slot, key, frame, later, refused=None):
     fine ones do not fit (the refusal comes before anything is written over), else None."""
     t0 = time.perf_counter()
     try:
-        beams = _build(scene, buffers, frame, 1.0, SUN_BUFFERS[slot], _ref_budget(buffers), SUN_AXES[slot])
+        beams = _build(scene, buffers, frame, 1.0, SUN_BUFFERS[slot], _ref_budget(buffers), marks=True)
         state.suns[slot] = (key, beams, later)
     except BeamsUnfit:
         beams = refused
@@ -361,25 +361,29 @@ def _sun_frames(scene, towards, spread, sample):
     return frame_for
 
 
-def _build(scene, buffers, frame, pad, names, budget, axes=None):
+def _build(scene, buffers, frame, pad, names, budget, marks=False):
     """Beams of `frame` built by the compute passes into buffers `names` (lists, bin table),
-    and with `axes` every cylinder's capsule axis in its bins into that buffer, with the
-    widest listing radius in bins (Beams.reach, beams.frame_reach)."""
+    with `marks` every entry with its mark (its cylinder's capsule axis in its bin), over the
+    bins widened by the widest listing radius in bins (Beams.reach, beams.frame_reach)."""
     if frame.num_bins > layout.BEAM_MAX_BINS:
         raise TooManyRefs(f"{frame.num_bins:,} bins")
+    reach = None
+    if marks:
+        lo, hi = scene.box
+        reach = frame_reach(frame, lo, hi, float(scene.plan.radius.max()), pad)
     beams = beam_builder().build(frame, scene.num_cylinders, buffers["tex_cyl"], pad, buffers, names[0], names[1],
-                                 budget, axes)
-    if axes is None:
-        return beams
-    lo, hi = scene.box
-    return dataclasses.replace(beams, reach=frame_reach(frame, lo, hi, float(scene.plan.radius.max()), pad))
+                                 budget, reach)
+    return beams if reach is None else dataclasses.replace(beams, reach=reach)
 
 
 def read_beams(beams, buffers, names):
-    """(start, count, entries) of Beams built on the GPU, read back (for tests and tools)."""
+    """(start, count, entries, marks) of Beams built on the GPU, read back (for tests and
+    tools); marks None where the entries come without."""
     cells = np.frombuffer(buffers[names[1]].read(beams.frame.num_bins), np.int32).reshape(-1, 2)
-    entries = np.frombuffer(buffers[names[0]].read(beams.refs), np.uint32)
-    return cells[:, 0].copy(), cells[:, 1].copy(), entries.copy()
+    lists = np.frombuffer(buffers[names[0]].read(beams.refs), np.uint32)
+    lists = lists.reshape(-1, 2) if beams.reach is not None else lists[:, None]
+    marks = lists[:, 1].copy() if beams.reach is not None else None
+    return cells[:, 0].copy(), cells[:, 1].copy(), lists[:, 0].copy(), marks
 
 
 def beam_scene_box(plan, bounds, pad):

@@ -4,15 +4,17 @@ give the grid's image, every cylinder a ray of a bin can meet is in the bin's li
 than its depth allows, the compute passes list what numpy lists, and where beams cannot serve
 a family of rays (a camera among the hair, lists past their budget, a point light) those
 rays walk the grid and the image does not change. A camera move uploads nothing."""
+import dataclasses
+
 import numpy as np
 import pytest
 
 from tracer import Camera, Light, Renderer, RenderSettings, strands_to_cylinders
 from tracer import layout
-from tracer.beams import BeamsUnfit, build_beams, camera_frame, fine_bits, project, sun_frame
+from tracer.beams import BeamsUnfit, build_beams, camera_frame, fine_bits, frame_reach, project, sun_frame
 from tracer.gpu_build import compute_available
 from tracer.gl_state import shared_context
-from tracer.scene_beams import CAMERA_AXES, CAMERA_BUFFERS, SUN_AXES, SUN_BUFFERS, beam_scene_box, read_beams
+from tracer.scene_beams import CAMERA_BUFFERS, SUN_BUFFERS, beam_scene_box, read_beams
 
 from test_tracer_accel import CAM, CASES as ACCEL_CASES, _render_both
 from test_tracer_grid import _surface_samples
@@ -53,9 +55,11 @@ def _fill(monkeypatch, how):
     from tracer.gpu_beams import BeamBuilder
     if how == "sorted":
         monkeypatch.setattr(layout, "BEAM_SORT_REFS_PER_CYLINDER", 1e9)
+        monkeypatch.setattr(layout, "BEAM_SORT_REFS_PER_MARKED", 1e9)
         monkeypatch.setattr(layout, "BEAM_SORT_SLICES_PER_ENTRY", 1e9)
     else:
         monkeypatch.setattr(layout, "BEAM_SORT_REFS_PER_CYLINDER", 0.0)
+        monkeypatch.setattr(layout, "BEAM_SORT_REFS_PER_MARKED", 0.0)
         monkeypatch.setattr(layout, "BEAM_REFS_PER_FILL", 1)
     sorted_subs = []
     real = BeamBuilder._sorted_fill
@@ -93,11 +97,10 @@ def test_fine_slices_give_the_grids_image(pair, case, how, monkeypatch):
 def test_rays_test_fully_only_the_cylinders_whose_capsule_holds_their_point(pair, family, monkeypatch):
     """A shadow ray toward a sun, and an independent sample's camera ray in a bin of whole
     pixels, test a listed cylinder fully only where the ray's point lies within the
-    cylinder's capsule across the family's bins (scene_beams.SUN_AXES, CAMERA_AXES;
-    Beams.reach): a share of the full tests they make when every entry passes (a reach past
-    the scene), and the same image, the grid's."""
-    import dataclasses
-    from tracer import scene_beams
+    cylinder's capsule in its bin, as the entry's mark codes it (scene_beams.SUN_BUFFERS,
+    CAMERA_BUFFERS; shaders/accel_beams.glsl, beam_mark_holds): a share of the full tests
+    they make when every mark lets its entry through, and the same image, the grid's."""
+    from tracer import shader_source
     # The sun's at one sample (the camera's lists then for the pixels' centres: few tests),
     # the camera's at four with shadows off (and hair its beams serve at four samples), so
     # that the family's rays make most tests.
@@ -111,16 +114,20 @@ def test_rays_test_fully_only_the_cylinders_whose_capsule_holds_their_point(pair
     assert (grid[..., 3] > 0).mean() > 0.1
     state = pair[1].beam_state
     kept = state.suns[0][1] if family == "sun" else state.camera
-    assert kept is not None and kept.reach is not None      # the family's rays walked its beams
+    assert kept is not None and kept.reach is not None      # the family's rays walked its marked lists
     assert family == "camera" or pair[1].stats.shadow_rays > 500
     tests = pair[1].stats.cylinder_tests
-    real = scene_beams._build
+    # The same walks with marks that hold every point (a new renderer compiles its programs).
+    real = shader_source.load_shader
+    head = "bool beam_mark_holds(vec2 l, uint m, float reach) {\n"
 
-    def every_entry(scene, buffers, frame, *args):
-        built = real(scene, buffers, frame, *args)
-        mine = (frame.kind == "sun") == (family == "sun")
-        return dataclasses.replace(built, reach=1e30) if mine and built.reach is not None else built
-    monkeypatch.setattr(scene_beams, "_build", every_entry)
+    def every_entry(name):
+        text = real(name)
+        if name == "accel_beams.glsl":
+            assert text.count(head) == 1
+            text = text.replace(head, head + "    if (true) return true;\n")
+        return text
+    monkeypatch.setattr(shader_source, "load_shader", every_entry)
     r = Renderer(build="gpu", accel="beams")
     r.set_strands(strands)
     every = [r.render(cam, settings) for _ in range(2)][1]
@@ -562,6 +569,8 @@ def test_the_fill_sorts_where_most_cylinders_are_listed_in_few_references():
     assert fill_plan(sizes, int(per * listed) + 1, 2000, 1) == (False, fine_bits(sizes, int(per * listed) + 1))
     assert fill_plan(sizes, refs, 2 * listed + 1, 1) == (False, fine_bits(sizes, refs))
     assert not fill_plan(np.zeros_like(sizes), 0, 2000, 1)[0]      # nothing listed
+    # Entries with marks: by their own threshold (none sorted at the shipped one).
+    assert fill_plan(sizes, refs, 2000, 50, marks=True) == (False, fine_bits(sizes, refs))
 
 
 def _compute_vs_numpy(family):
@@ -575,20 +584,13 @@ def _compute_vs_numpy(family):
     want = build_beams(frame, c)
     from tracer.gl_state import beam_builder
     names = CAMERA_BUFFERS if family != "sun" else SUN_BUFFERS[1]
-    axes = SUN_AXES[1] if family == "sun" else CAMERA_AXES
+    # (The pixel centres' walk takes no marks.)
+    reach = None if family == "pixel centres" else frame_reach(frame, lo, hi, rmax, 1.0)
     built = beam_builder().build(frame, r.num_cylinders, r.buffers["tex_cyl"], 1.0, r.buffers, *names,
-                                 layout.BEAM_MAX_REFS, axes)
+                                 layout.BEAM_MAX_REFS, reach)
     assert built.refs == want.refs
-    if family != "pixel centres":       # (whose walk takes no axes)
-        # Each cylinder's capsule axis (top to far end) in the family's bins, as numpy projects it.
-        axis = c.tip.astype(np.float64) - c.top
-        length = np.sqrt(np.einsum("ij,ij->i", axis, axis))
-        far = c.tip + axis * (c.extension / np.maximum(length, 1e-30))[:, None]
-        got = np.frombuffer(r.buffers[axes].read(len(c)), np.float32).reshape(-1, 4)
-        want_axes = np.stack(project(frame, c.top)[:2] + project(frame, far)[:2], axis=1)
-        assert np.ptp(want_axes) > 10.0
-        np.testing.assert_allclose(got, want_axes, atol=layout.BEAM_BIN_EPS)
-    start, count, entries = read_beams(built, r.buffers, names)
+    built = dataclasses.replace(built, reach=reach)
+    start, count, entries, marks = read_beams(built, r.buffers, names)
     np.testing.assert_array_equal(count, want.count)
     np.testing.assert_array_equal(start, want.start)
     assert built.sub == want.sub
@@ -597,7 +599,41 @@ def _compute_vs_numpy(family):
         run = slice(start[b], start[b] + count[b])
         assert np.all(np.diff(fine[run].astype(np.int64)) >= 0)
         np.testing.assert_array_equal(np.sort(entries[run]), want.entries[run])
+    assert (marks is None) == (reach is None)
+    if marks is not None:
+        bins = np.repeat(np.arange(len(count)), count)      # (a bin's entries follow the bin before's)
+        _assert_marks_hold_the_capsules(frame, c, reach, entries & ((1 << built.id_bits) - 1), bins, marks)
     return built.sub
+
+
+def _assert_marks_hold_the_capsules(frame, c, reach, ids, bins, marks):
+    """Each entry's mark (shaders/beams_build.glsl, beam_mark) against its cylinder's capsule
+    axis as numpy projects it, at points across the entry's bin: a point within `reach` of the
+    axis is within reach + a step of the mark's (the walk's test keeps every cylinder it can
+    meet), and the mark's axis is no nearer to any point than the axis less the step's
+    rounding (a mark that let everything through would fail)."""
+    axis = c.tip.astype(np.float64) - c.top
+    length = np.sqrt(np.einsum("ij,ij->i", axis, axis))
+    far = c.tip + axis * (c.extension / np.maximum(length, 1e-30))[:, None]
+    g = np.stack(project(frame, c.top)[:2] + project(frame, far)[:2], axis=1)[ids]
+    corner = np.stack([bins % frame.dims[0], bins // frame.dims[0]], axis=1).astype(np.float64)
+    step = (1 + 2 * reach) / 255
+    code = (marks[:, None] >> np.array([0, 8, 16, 24], np.uint32)) & 255
+    decoded = code.astype(np.float64) * step - reach
+    u = (np.arange(5) + 0.5) / 5
+    points = np.stack(np.meshgrid(u, u), axis=-1).reshape(-1, 2)
+
+    def distance(ends, p):          # (entries, points): from each point to each entry's segment
+        a, d = ends[:, None, :2], (ends[:, 2:] - ends[:, :2])[:, None, :]
+        s = np.clip(np.sum((p - a) * d, axis=2) / np.maximum(np.sum(d * d, axis=2), 1e-30), 0, 1)
+        return np.linalg.norm(a + s[..., None] * d - p, axis=2)
+
+    true = distance(g - np.tile(corner, 2), points[None])
+    coded = distance(decoded, points[None])
+    near = true <= reach
+    assert near.sum() > len(ids)    # most entries' capsules cover some of the points
+    assert np.all(coded[near] <= reach + step)
+    assert np.all(coded >= np.minimum(true, reach + step) - step)
 
 
 @pytest.mark.parametrize("radius", [0.01, 0.002])

@@ -20,9 +20,11 @@ int beam_entry_id(uint e, int sub) {
     return int(e & ((1u << uint(BEAM_ID_BITS - sub)) - 1u));
 }
 
-// Entries of a beam walk go in runs of BEAM_RUN (the bits of a uint) where the lists come with
-// each cylinder's capsule axis (CAMERA_AXES, SUN_AXES): each entry's capsule against the ray's
-// point first, a bit each, then the full test of those that pass, in list order. Runs of 32
+// Entries of a beam walk go in runs of BEAM_RUN (the bits of a uint) where they come with
+// marks (a sun's, and the camera's with CAMERA_MARKS: a texel (entry, mark), the mark its
+// cylinder's capsule axis in its bin, beams_build.glsl's beam_mark): each entry's capsule
+// against the ray's point first, a bit each, then the full test of those that pass, in list
+// order. Runs of 32
 // against 8 and 16, interleaved on llvmpipe, shadow rays toward a sun: straight.hair's trace
 // 72 ms against 84 and 77, 10,000 wavy strands 36 against 37 and 38; without the capsule test
 // 95 and 47 (docs/DECISIONS.md, "Rays of a beam test a cylinder's capsule first"). Not the
@@ -36,6 +38,15 @@ bool beam_capsule_holds(vec2 g, vec4 G, float reach) {
     float s = clamp(dot(ga, ab) / max(dot(ab, ab), 1e-30), 0.0, 1.0);
     vec2 q = ga - s * ab;
     return dot(q, q) <= reach * reach;
+}
+
+// Whether point l of a bin (bins, from its corner) lies within `reach` of the axis that mark m
+// codes (beams_build.glsl, beam_mark: over the bin widened by `reach`, 8 bits a coordinate;
+// each end within half a step a coordinate of the clipped axis, so a step more is enough).
+bool beam_mark_holds(vec2 l, uint m, float reach) {
+    float step = (1.0 + 2.0 * reach) / 255.0;
+    vec4 G = vec4(uvec4(m, m >> 8u, m >> 16u, m >> 24u) & 255u) * step - reach;
+    return beam_capsule_holds(l, G, reach + step);
 }
 
 // The lowest set bit of `bits` (nonzero) as an index (GLSL 3.30 has no findLSB), and `bits`
@@ -86,8 +97,7 @@ float beam_offer(int id, vec3 o, vec3 d, float tmax, float widen_per_t, float wi
     return ok ? beam_reach(min(tmax, hits_horizon())) : reach;
 }
 
-#if CAMERA_AXES
-uniform samplerBuffer tex_beam_axis;    // per cylinder: its capsule's axis in the camera's bins
+#if CAMERA_MARKS
 uniform float beam_axis_reach;          // the widest listing radius in bins (Beams.reach)
 #endif
 
@@ -99,17 +109,18 @@ void beam_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_con
     vec2 at = camera_point + beam_shift;
     ivec2 sc = bin_at(ivec2(floor(at)));
     float reach = beam_reach(tmax);
-#if CAMERA_AXES
-    // The ray's point in bins (tracer/beams.py, camera_frame: bin (0, 0) at beam_box.xy).
+#if CAMERA_MARKS
+    // The ray's point in its bin (tracer/beams.py, camera_frame: bin (0, 0) at beam_box.xy).
     vec2 g = (at - vec2(beam_box.xy)) / float(beam_box.z);
+    g -= vec2((ivec2(floor(at)) - beam_box.xy) / beam_box.z);
     for (int k0 = 0; k0 < sc.y; k0 += BEAM_RUN) {
         uint pass_ = 0u;
         int k1 = min(sc.y, k0 + BEAM_RUN);
         bool last = false;
         for (int k = k0; k < k1; ++k) {
-            uint e = texelFetch(tex_beam, sc.x + k).x;
-            if (beam_entry_start(e, beam_sub, beam_keys.x, beam_keys.y) > reach) { last = true; break; }
-            if (beam_capsule_holds(g, texelFetch(tex_beam_axis, beam_entry_id(e, beam_sub)), beam_axis_reach))
+            uvec2 em = texelFetch(tex_beam, sc.x + k).xy;
+            if (beam_entry_start(em.x, beam_sub, beam_keys.x, beam_keys.y) > reach) { last = true; break; }
+            if (beam_mark_holds(g, em.y, beam_axis_reach))
                 pass_ |= 1u << uint(k - k0);
         }
         while (pass_ != 0u) {
@@ -176,23 +187,12 @@ uniform vec4 sun_frame[SUN_BEAMS];
 uniform ivec2 sun_dims[SUN_BEAMS];
 uniform int sun_sub[SUN_BEAMS];
 uniform float sun_reach[SUN_BEAMS];     // the widest capsule's radius in bins, the drift and the listing's margin
-uniform samplerBuffer tex_sun_axis0;    // per cylinder: its capsule's axis in set 0's bins (top, far end)
+// Entry i of sun set `set` and its mark.
+uvec2 sun_entry(int set, int i) {
 #if SUN_BEAMS > 1
-uniform samplerBuffer tex_sun_axis1;
+    if (set == 1) return texelFetch(tex_sun1, i).xy;
 #endif
-
-vec4 sun_axis(int set, int id) {
-#if SUN_BEAMS > 1
-    if (set == 1) return texelFetch(tex_sun_axis1, id);
-#endif
-    return texelFetch(tex_sun_axis0, id);
-}
-
-uint sun_entry(int set, int i) {
-#if SUN_BEAMS > 1
-    if (set == 1) return texelFetch(tex_sun1, i).x;
-#endif
-    return texelFetch(tex_sun0, i).x;
+    return texelFetch(tex_sun0, i).xy;
 }
 
 // accel_transmittance for a shadow ray from p toward sun set `set` (its direction, or within
@@ -227,13 +227,13 @@ float sun_transmittance(int set, vec3 p, vec3 d, float tmax, int own, float tmin
         int k1 = min(sc.y, k0 + BEAM_RUN);
         bool last = false;
         for (int k = k0; k < k1; ++k) {
-            uint e = sun_entry(set, sc.x + k);
-            if (beam_entry_start(e, sub, fr.z, fr.w) > below) { last = true; break; }
-            int id = beam_entry_id(e, sub);
-            if (id != own && beam_capsule_holds(g, sun_axis(set, id), reach)) pass_ |= 1u << uint(k - k0);
+            uvec2 em = sun_entry(set, sc.x + k);
+            if (beam_entry_start(em.x, sub, fr.z, fr.w) > below) { last = true; break; }
+            int id = beam_entry_id(em.x, sub);
+            if (id != own && beam_mark_holds(g - vec2(b), em.y, reach)) pass_ |= 1u << uint(k - k0);
         }
         while (pass_ != 0u) {
-            int id = beam_entry_id(sun_entry(set, sc.x + k0 + beam_next_bit(pass_)), sub);
+            int id = beam_entry_id(sun_entry(set, sc.x + k0 + beam_next_bit(pass_)).x, sub);
 #if COUNT
             counter.w += 1.0;
 #endif

@@ -8,9 +8,7 @@
 //   PASS 0  zero:   counts[i] = 0 for i < n_items (the bins' counters, then the slices')
 //   PASS 1  count:  counts[bin] += 1 for every (cylinder, bin), slices[fine slice] += 1 per
 //                   cylinder listed somewhere, filed[cylinder] = its fine slice (-1: listed
-//                   nowhere), the fine slices of the most bits the ids leave; AXES: also
-//                   axes[cylinder] = its capsule's axis in bins (top, far end), which the
-//                   walks test a ray's point against first (shaders/accel_beams.glsl)
+//                   nowhere), the fine slices of the most bits the ids leave
 //   PASS 2  sums:   sums[c] = the counts of bins c·CHUNK .. (c+1)·CHUNK (counts is padded
 //                   with zeros to whole chunks)
 //   PASS 3  scan:   one invocation: sums become exclusive prefix sums, sums[n_items] the total
@@ -21,7 +19,9 @@
 //   PASS 6  fill:   for the cylinders perm[first_item ..] of one fine slice of sub_bits (the
 //                   host's choice, tracer/beams.py fill_plan; PASS 1 files them at the most
 //                   bits), one dispatch a fine slice in order: slot = cursors[bin]++,
-//                   lists[slot] = id | fine slice << (BEAM_ID_BITS - sub_bits);
+//                   lists[slot] = id | fine slice << (BEAM_ID_BITS - sub_bits); MARKS: the
+//                   entry is that and the cylinder's capsule axis in that bin (beam_mark),
+//                   which the walks test a ray's point against first (accel_beams.glsl);
 //                   SORTED: every cylinder filed somewhere, in id order in one dispatch (no
 //                   PASS 5), into `lists` = a scratch buffer of the same layout, for PASS 7
 //   PASS 7  sort:   one bin an invocation (SORTED): its entries from the scratch buffer into
@@ -61,16 +61,21 @@ layout(std430, binding = 5) buffer Filed { int filed[]; };       // per cylinder
 #if PASS == 4
 layout(std430, binding = 6) writeonly buffer Table { ivec2 table[]; };
 #endif
-#if PASS == 6
-layout(std430, binding = 6) writeonly buffer Lists { uint lists[]; };
+// MARKS: an entry is (id | fine slice, its mark), else id | fine slice.
+#if MARKS
+#define ENTRY uvec2
+#define ENTRY_CODE(e) (e).x
+#else
+#define ENTRY uint
+#define ENTRY_CODE(e) (e)
 #endif
-#if PASS == 1 && AXES
-layout(std430, binding = 6) writeonly buffer Axes { vec4 axes[]; };  // per cylinder: its capsule's axis in bins
+#if PASS == 6
+layout(std430, binding = 6) writeonly buffer Lists { ENTRY lists[]; };
 #endif
 #if PASS == 7
 layout(std430, binding = 6) readonly buffer TableIn { ivec2 table_in[]; };
-layout(std430, binding = 7) readonly buffer Unsorted { uint unsorted[]; };
-layout(std430, binding = 8) writeonly buffer Lists { uint lists[]; };
+layout(std430, binding = 7) readonly buffer Unsorted { ENTRY unsorted[]; };
+layout(std430, binding = 8) writeonly buffer Lists { ENTRY lists[]; };
 #endif
 // A point in the frame: (X, Y, Z) = axes·(p - origin).
 vec3 to_frame(vec3 p) {
@@ -118,13 +123,57 @@ int project_cylinder(int id, out vec2 g0, out vec2 g1, out float rho, out int sl
     return 0;
 }
 
+#if PASS == 6 && MARKS
+const float FAR_S = 1e30;     // a crossing never reached
+uniform float mark_reach;     // the walks' reach (Beams.reach, bins): the marks' box is the bin widened by it
+// The cylinder being filled (fill_begin): its projected axis g0 + s·dg, and where its line
+// crosses the lines x, y = -mark_reach and 1 + mark_reach of bin (0, 0), s = cross + corner·per
+// for a bin's corner (a direction along which it does not move: never, or always inside).
+vec2 fill_g0, fill_dg, fill_lo, fill_hi, fill_per;
+
+void fill_begin(vec2 g0, vec2 g1) {
+    fill_g0 = g0;
+    fill_dg = g1 - g0;
+    bvec2 moves = greaterThanEqual(abs(fill_dg), vec2(1e-30));
+    vec2 per = 1.0 / mix(vec2(1.0), fill_dg, moves);
+    vec2 outside = vec2(FAR_S);
+    fill_lo = mix(-outside, (-mark_reach - g0) * per, moves);
+    fill_hi = mix(outside, (1.0 + mark_reach - g0) * per, moves);
+    fill_per = mix(vec2(0.0), per, moves);
+}
+
+// The axis as seen from the bin of corner (x, y) (bins): clipped to the bin's square widened
+// by mark_reach on every side, its ends relative to that box in 8 bits a coordinate
+// (x0 | y0 << 8 | x1 << 16 | y1 << 24; accel_beams.glsl, beam_mark_holds). A point of the bin
+// within mark_reach of the axis is within it of the clipped part, whose ends the code moves by
+// at most half a step a coordinate; an axis that misses the box (the listing never lists one,
+// bar float32's rounding) comes no nearer than mark_reach to the bin, and whatever its code
+// says only costs a test. A direction along which the axis does not move clips nothing: its
+// coordinate, the same at both ends, is coded clamped to the box.
+uint beam_mark(vec2 corner) {
+    vec2 u = fill_lo + corner * fill_per, v = fill_hi + corner * fill_per;
+    vec2 enter = min(u, v), leave = max(u, v);
+    float t0 = clamp(max(enter.x, enter.y), 0.0, 1.0), t1 = clamp(min(leave.x, leave.y), t0, 1.0);
+    float scale = 255.0 / (1.0 + 2.0 * mark_reach);
+    vec2 base = fill_g0 - corner + mark_reach;
+    vec4 ends = (base.xyxy + vec4(t0 * fill_dg, t1 * fill_dg)) * scale;
+    uvec4 c = uvec4(clamp(round(ends), 0.0, 255.0));
+    return c.x | (c.y << 8u) | (c.z << 16u) | (c.w << 24u);
+}
+#endif
+
 #if PASS == 1 || PASS == 6
-void visit(int bin, int id, int slice) {
+void visit(int bin, vec2 corner, int id, int slice) {
 #if PASS == 1
     atomicAdd(counts[bin], 1);
 #else
     int slot = atomicAdd(counts[bin], 1);
-    lists[slot] = uint(id) | (uint(slice) << uint(BEAM_ID_BITS - sub_bits));
+    uint e = uint(id) | (uint(slice) << uint(BEAM_ID_BITS - sub_bits));
+#if MARKS
+    lists[slot] = uvec2(e, beam_mark(corner));
+#else
+    lists[slot] = e;
+#endif
 #endif
 }
 
@@ -204,7 +253,7 @@ bool list_cylinder(int id, vec2 g0, vec2 g1, float rho, int slice, inout int lis
             col++;
             continue;
         }
-        visit((col - 1) * SA + row * SB, id, slice);
+        visit((col - 1) * SA + row * SB, xdom ? vec2(col - 1, row) : vec2(row, col - 1), id, slice);
         listed++;
         row++;
     }
@@ -223,9 +272,6 @@ void main() {
     filed[i] = -1;
     if (state == 2) { atomicAdd(flags[0], 1); return; }
     if (state == 1) return;
-#if AXES
-    axes[i] = vec4(g0, g1);     // (a cylinder never seen is never looked up)
-#endif
     int listed = 0;
     if (!list_cylinder(i, g0, g1, rho, slice, listed)) atomicAdd(flags[1], 1);
     // Only a cylinder listed somewhere is filled: the fill goes over filed's cylinders alone
@@ -273,6 +319,9 @@ void main() {
 #endif
     vec2 g0, g1; float rho; int slice;
     project_cylinder(id, g0, g1, rho, slice);
+#if MARKS
+    fill_begin(g0, g1);
+#endif
     int listed = 0;
     list_cylinder(id, g0, g1, rho, slice, listed);
 #elif PASS == 7
@@ -288,7 +337,7 @@ void main() {
     uint shift = uint(BEAM_ID_BITS - sub_bits);
     int place[SORT_KEYS];
     for (int k = 0; k < SORT_KEYS; ++k) place[k] = 0;
-    for (int k = 0; k < sc.y; ++k) place[int(unsorted[sc.x + k] >> shift)]++;
+    for (int k = 0; k < sc.y; ++k) place[int(ENTRY_CODE(unsorted[sc.x + k]) >> shift)]++;
     int at = sc.x;
     for (int k = 0; k < SORT_KEYS; ++k) {
         int c = place[k];
@@ -296,8 +345,8 @@ void main() {
         at += c;
     }
     for (int k = 0; k < sc.y; ++k) {
-        uint e = unsorted[sc.x + k];
-        int key = int(e >> shift);
+        ENTRY e = unsorted[sc.x + k];
+        int key = int(ENTRY_CODE(e) >> shift);
         lists[place[key]] = e;
         place[key]++;
     }
