@@ -109,10 +109,10 @@ class Beams:
     bin id x + nx·y) and the entries (uint32 id | fine slice << id_bits, sorted within a
     bin). The compute passes leave those three None: their lists exist only on the GPU
     (tracer.scene_beams.read_beams brings them back). `reach` (built on the GPU with each
-    cylinder's projected axis: a sun's, a camera's whole bins for independent samples; else
-    None): the largest listing radius in bins (frame_reach), which a ray's point must lie
-    within of a cylinder's projected axis for its full test (tracer/scene_beams.py,
-    SUN_AXES, CAMERA_AXES)."""
+    entry's mark: a sun's, a camera's whole bins for independent samples; else None): the
+    largest listing radius in bins (frame_reach), which a ray's point must lie within of a
+    cylinder's projected axis for its full test, and the margin of the box the marks code
+    the axis in (tracer/scene_beams.py; shaders/beams_build.glsl, beam_mark)."""
     frame: BeamFrame
     refs: int
     sub: int = 0
