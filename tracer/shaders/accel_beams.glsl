@@ -24,12 +24,12 @@ int beam_entry_id(uint e, int sub) {
 // marks (a sun's, and the camera's with CAMERA_MARKS: a texel (entry, mark), the mark its
 // cylinder's capsule axis in its bin, beams_build.glsl's beam_mark): each entry's capsule
 // against the ray's point first, a bit each, then the full test of those that pass, in list
-// order. Runs of 32
-// against 8 and 16, interleaved on llvmpipe, shadow rays toward a sun: straight.hair's trace
-// 72 ms against 84 and 77, 10,000 wavy strands 36 against 37 and 38; without the capsule test
-// 95 and 47 (docs/DECISIONS.md, "Rays of a beam test a cylinder's capsule first"). Not the
-// full test behind a branch: llvmpipe would run it for every entry (hit_cylinder_ab); the bits
-// make a loop of the entries that pass.
+// order. Runs of 32 against 8 and 16, interleaved on llvmpipe, shadow rays toward a sun:
+// straight.hair's trace 72 ms against 84 and 77, 10,000 wavy strands 36 against 37 and 38;
+// without the capsule test 95 and 47 (docs/DECISIONS.md, "Rays of a beam test a cylinder's
+// capsule first"; the marks: "A beam's entries carry their marks"). Not the full test behind
+// a branch: llvmpipe would run it for every entry (hit_cylinder_ab); the bits make a loop of
+// the entries that pass.
 const int BEAM_RUN = 32;
 
 // Whether point g (bins) lies within `reach` of the capsule axis G.xy..G.zw (bins).
