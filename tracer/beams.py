@@ -433,6 +433,14 @@ def fill_plan(sizes, refs, n, bins, marks=False):
     return False, fine_bits(sizes, refs)
 
 
+def capsule_far(c):
+    """(N,3) float64: the far end of each capsule's axis of tracer.cylinders.Cylinders `c`,
+    its tip moved on along the axis by its extension (shaders/capsule.glsl, capsule_far)."""
+    axis = c.tip.astype(np.float64) - c.top
+    length = np.sqrt(np.einsum("ij,ij->i", axis, axis))
+    return c.tip + axis * (c.extension / np.maximum(length, 1e-30))[:, None]
+
+
 def build_beams(frame, cylinders, pad_factor=1.0, max_refs=None):
     """Beams of `frame` over tracer.cylinders.Cylinders (capsules widened `pad_factor` times).
     BeamsUnfit past `max_refs` references (default: one buffer texture's worth,
@@ -447,10 +455,7 @@ def build_beams(frame, cylinders, pad_factor=1.0, max_refs=None):
     refs = 0
     for a in range(0, n, CHUNK):
         c = cylinders.select(slice(a, min(n, a + CHUNK)))
-        axis = c.tip.astype(np.float64) - c.top
-        length = np.sqrt(np.einsum("ij,ij->i", axis, axis))
-        far = c.tip + axis * (c.extension / np.maximum(length, 1e-30))[:, None]
-        cyl, bins, slc = bins_touched(frame, c.top, far, c.radius.astype(np.float64) * pad_factor, top)
+        cyl, bins, slc = bins_touched(frame, c.top, capsule_far(c), c.radius.astype(np.float64) * pad_factor, top)
         refs += len(cyl)
         if refs > max_refs:
             raise TooManyRefs(f"more than {max_refs:,} references")

@@ -84,8 +84,8 @@ class BeamBuilder:
         into buffer `list_name` and bin table into `table_name` of `store` (SceneBuffers).
         With `reach` (bins) every entry comes with its mark, two uint32 a texel: its
         cylinder's capsule axis in its bin, clipped to the bin widened by `reach`, 8 bits a
-        coordinate (shaders/beams_build.glsl, beam_mark). Returns Beams without host arrays;
-        BeamsUnfit where the numpy build would raise it."""
+        coordinate (shaders/beams_build.glsl, beam_mark). Returns Beams without host arrays,
+        with that reach; BeamsUnfit where the numpy build would raise it."""
         try:
             return self._build(frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs, reach)
         finally:
@@ -148,7 +148,7 @@ class BeamBuilder:
         sort, sub = fill_plan(sizes, total, n, nbins, marks)
         if sort:
             self._sorted_fill(frame, n, tex_cyl, pad_factor, sub, total, (counts, filed), table, lists, reach)
-            return Beams(frame, total, sub)
+            return Beams(frame, total, sub, reach=reach)
         # The cylinders bucketed by fine slice: every fine slice's first place from its count.
         first = np.cumsum(sizes) - sizes
         slices.write(first.astype(np.int32).tobytes())
@@ -172,7 +172,7 @@ class BeamBuilder:
             set_uniforms(prog, n_items=int(filled[k]), first_item=int(first[k * group]))
             prog.run(*_groups(int(filled[k])))
             ctx.memory_barrier()
-        return Beams(frame, total, sub)
+        return Beams(frame, total, sub, reach=reach)
 
     def _sorted_fill(self, frame, n, tex_cyl, pad_factor, sub, total, scratch, table, lists, reach):
         """fill_plan's other fill (PASS 6 SORTED, PASS 7): every listed cylinder in id order in

@@ -13,7 +13,6 @@ SUN_REFS_PER_CYLINDER bins (fewer for large scenes, within the same budget), or 
 until the renders have traced rays enough to pay for those (SUN_FINE_RAYS_PER_BIN). Smaller bins list
 each cylinder more often but hand a ray fewer cylinders to test: docs/DECISIONS.md, "Beams".
 """
-import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Optional
@@ -371,9 +370,8 @@ def _build(scene, buffers, frame, pad, names, budget, marks=False):
     if marks:
         lo, hi = scene.box
         reach = frame_reach(frame, lo, hi, float(scene.plan.radius.max()), pad)
-    beams = beam_builder().build(frame, scene.num_cylinders, buffers["tex_cyl"], pad, buffers, names[0], names[1],
-                                 budget, reach)
-    return beams if reach is None else dataclasses.replace(beams, reach=reach)
+    return beam_builder().build(frame, scene.num_cylinders, buffers["tex_cyl"], pad, buffers, names[0], names[1],
+                                budget, reach)
 
 
 def read_beams(beams, buffers, names):

@@ -22,8 +22,8 @@ class RenderStats:
     compiled for), screen_box and traversed_pixels (the projected bounds that were traced),
     and with RenderSettings(count=True) the counters shadow_rays, layers_traced,
     cells_visited, cylinder_tests (summed over samples; full intersection tests: a ray of
-    beams that come with the cylinders' axes, a sun's or a camera's whole bins, counts only
-    the listed cylinders whose capsule holds its point). gl_backend: the shared context's
+    beams whose entries come with marks, a sun's or a camera's whole bins, counts only the
+    listed cylinders whose capsule holds its point). gl_backend: the shared context's
     (egl, glx, wgl or cgl). None: not measured yet."""
     gl_backend: str = ""
     bytes_uploaded: int = 0

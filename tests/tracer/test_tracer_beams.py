@@ -4,14 +4,13 @@ give the grid's image, every cylinder a ray of a bin can meet is in the bin's li
 than its depth allows, the compute passes list what numpy lists, and where beams cannot serve
 a family of rays (a camera among the hair, lists past their budget, a point light) those
 rays walk the grid and the image does not change. A camera move uploads nothing."""
-import dataclasses
-
 import numpy as np
 import pytest
 
 from tracer import Camera, Light, Renderer, RenderSettings, strands_to_cylinders
 from tracer import layout
-from tracer.beams import BeamsUnfit, build_beams, camera_frame, fine_bits, frame_reach, project, sun_frame
+from tracer.beams import (BeamsUnfit, build_beams, camera_frame, capsule_far, fine_bits, frame_reach, project,
+                          sun_frame)
 from tracer.gpu_build import compute_available
 from tracer.gl_state import shared_context
 from tracer.scene_beams import CAMERA_BUFFERS, SUN_BUFFERS, beam_scene_box, read_beams
@@ -588,8 +587,7 @@ def _compute_vs_numpy(family):
     reach = None if family == "pixel centres" else frame_reach(frame, lo, hi, rmax, 1.0)
     built = beam_builder().build(frame, r.num_cylinders, r.buffers["tex_cyl"], 1.0, r.buffers, *names,
                                  layout.BEAM_MAX_REFS, reach)
-    assert built.refs == want.refs
-    built = dataclasses.replace(built, reach=reach)
+    assert built.refs == want.refs and built.reach == reach
     start, count, entries, marks = read_beams(built, r.buffers, names)
     np.testing.assert_array_equal(count, want.count)
     np.testing.assert_array_equal(start, want.start)
@@ -612,10 +610,7 @@ def _assert_marks_hold_the_capsules(frame, c, reach, ids, bins, marks):
     axis is within reach + a step of the mark's (the walk's test keeps every cylinder it can
     meet), and the mark's axis is no nearer to any point than the axis less the step's
     rounding (a mark that let everything through would fail)."""
-    axis = c.tip.astype(np.float64) - c.top
-    length = np.sqrt(np.einsum("ij,ij->i", axis, axis))
-    far = c.tip + axis * (c.extension / np.maximum(length, 1e-30))[:, None]
-    g = np.stack(project(frame, c.top)[:2] + project(frame, far)[:2], axis=1)[ids]
+    g = np.stack(project(frame, c.top)[:2] + project(frame, capsule_far(c))[:2], axis=1)[ids]
     corner = np.stack([bins % frame.dims[0], bins // frame.dims[0]], axis=1).astype(np.float64)
     step = (1 + 2 * reach) / 255
     code = (marks[:, None] >> np.array([0, 8, 16, 24], np.uint32)) & 255

@@ -77,6 +77,7 @@ layout(std430, binding = 6) readonly buffer TableIn { ivec2 table_in[]; };
 layout(std430, binding = 7) readonly buffer Unsorted { ENTRY unsorted[]; };
 layout(std430, binding = 8) writeonly buffer Lists { ENTRY lists[]; };
 #endif
+const float FAR = 1e30;     // past every bin, every crossing of an axis
 // A point in the frame: (X, Y, Z) = axes·(p - origin).
 vec3 to_frame(vec3 p) {
     vec3 q = p - frame_origin;
@@ -124,7 +125,6 @@ int project_cylinder(int id, out vec2 g0, out vec2 g1, out float rho, out int sl
 }
 
 #if PASS == 6 && MARKS
-const float FAR_S = 1e30;     // a crossing never reached
 uniform float mark_reach;     // the walks' reach (Beams.reach, bins): the marks' box is the bin widened by it
 // The cylinder being filled (fill_begin): its projected axis g0 + s·dg, and where its line
 // crosses the lines x, y = -mark_reach and 1 + mark_reach of bin (0, 0), s = cross + corner·per
@@ -136,7 +136,7 @@ void fill_begin(vec2 g0, vec2 g1) {
     fill_dg = g1 - g0;
     bvec2 moves = greaterThanEqual(abs(fill_dg), vec2(1e-30));
     vec2 per = 1.0 / mix(vec2(1.0), fill_dg, moves);
-    vec2 outside = vec2(FAR_S);
+    vec2 outside = vec2(FAR);
     fill_lo = mix(-outside, (-mark_reach - g0) * per, moves);
     fill_hi = mix(outside, (1.0 + mark_reach - g0) * per, moves);
     fill_per = mix(vec2(0.0), per, moves);
@@ -180,7 +180,6 @@ void visit(int bin, vec2 corner, int id, int slice) {
 #if CENTRES
 // Where the line A = a crosses the points within P of the segment (A0, B0) + s·(dA, dB):
 // (lo, hi), lo > hi where it does not (tracer/beams.py, centre_span, the same steps).
-const float FAR = 1e30;     // past every bin
 
 vec2 centre_span(float a, float A0, float dA, float B0, float dB, float P) {
     float lo = FAR, hi = -FAR;
