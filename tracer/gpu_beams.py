@@ -8,16 +8,34 @@ into the lists (tracer/beams.py, fill_plan). Nothing goes up from the host but u
 the fine slices' first places (the scratch buffers are zeroed by a pass), so a camera move
 uploads next to nothing; what comes back is the total, the fine slices' sizes and two flags.
 """
+import math
+
 import numpy as np
 
 from . import layout
 from .beams import Beams, BeamsUnfit, TooManyRefs, fill_plan
+from .gl_buffers import storage_limits
 from .gpu_build import _groups, set_uniforms
 from .shader_source import shader_source
 
 KIND_CODE = {"persp": 0, "ortho": 1, "sun": 2}
 BUILD_FILES = ["build_cylinders.glsl", "capsule.glsl", "beams_build.glsl"]
 
+
+# A word written and read back through a whole binding past GL_MAX_SHADER_STORAGE_BLOCK_SIZE
+# (BeamBuilder._binds_past_block): what it read goes to the first word.
+PROBE_SOURCE = """#version 430 core
+layout(local_size_x = 1) in;
+layout(std430, binding = 0) buffer Words { uint words[]; };
+uniform int at;
+uniform uint word;
+void main() {
+    words[at] = word;
+    memoryBarrierBuffer();
+    words[0] = words[at] ^ 1u;
+}
+"""
+PROBE_WORD = 0x9E3779B9
 
 # Scratch buffers up to this many words are kept between builds; bigger ones (a scene of
 # tens of millions of cylinders) are given back after the build that needed them.
@@ -32,6 +50,7 @@ class BeamBuilder:
         self.ctx = ctx
         self._passes = {}
         self._scratch = {}
+        self._past_block = None       # _binds_past_block's answer, once probed
 
     def _program(self, pass_, cyl_parts, centres=False, sort_keys=0, marks=False):
         """Pass `pass_`; sort_keys: 0 the fill a fine slice a dispatch, else the sorted fill
@@ -67,7 +86,8 @@ class BeamBuilder:
         prog.run(*_groups(words))
 
     def _frame_uniforms(self, prog, frame, pad_factor, tex_cyl, n, sub):
-        set_uniforms(prog, n_items=int(n), pad_factor=float(pad_factor), frame_kind=KIND_CODE[frame.kind],
+        """The frame's uniforms, the whole frame's rows for `band` (a window's fill sets its own)."""
+        set_uniforms(prog, band=(0, int(frame.dims[1]) - 1), n_items=int(n), pad_factor=float(pad_factor), frame_kind=KIND_CODE[frame.kind],
                      frame_origin=tuple(float(x) for x in frame.origin),
                      axis_x=tuple(float(x) for x in frame.axes[0]), axis_y=tuple(float(x) for x in frame.axes[1]),
                      axis_z=tuple(float(x) for x in frame.axes[2]),
@@ -78,6 +98,63 @@ class BeamBuilder:
                      cyl_split=tex_cyl.part_texels // layout.TEXELS_PER_CYL)
         for unit, part in enumerate(tex_cyl.parts):
             part.use(unit)
+
+    def _binds_past_block(self, buf, most):
+        """Whether this context's storage bindings reach past `most` bytes (the driver's
+        largest storage block), probed once on `buf` (bigger than that: the lists about to be
+        filled, which the fill then writes over): a word written through the whole buffer
+        bound, at its last word, lands, and reads back (the sorted fill reads its scratch
+        lists). llvmpipe's do, so its lists are filled in one window (three windows cost
+        2.4 → 3.5 s for 100,000 strands' camera lists at 16 samples)."""
+        if self._past_block is None:
+            at = buf.size // 4 - 1
+            prog = self._passes.get("probe")
+            if prog is None:
+                prog = self._passes["probe"] = self.ctx.compute_shader(PROBE_SOURCE)
+            set_uniforms(prog, at=int(at), word=PROBE_WORD)
+            buf.bind_to_storage_buffer(0)
+            prog.run(1)
+            self.ctx.memory_barrier()
+            landed = int(np.frombuffer(buf.read(size=4, offset=4 * at), np.uint32)[0]) == PROBE_WORD
+            read = int(np.frombuffer(buf.read(size=4), np.uint32)[0]) == PROBE_WORD ^ 1
+            self._past_block = bool(landed and read and 4 * at >= most)
+        return self._past_block
+
+    def _windows(self, frame, sums, chunks, total, entry_bytes, lists):
+        """The ranges of the lists a fill or sort binds, each within the driver's largest
+        storage block (GL_MAX_SHADER_STORAGE_BLOCK_SIZE: 128 MB on llvmpipe and some Mesa
+        drivers; a buffer bound whole past it may be cut short) from an offset it aligns:
+        (first bin, end bin, first entry, entries, rows (first, last) of those bins), whole
+        chunks of bins of the scan (`sums`: their first entries, `total` after the last).
+        One range where the lists fit, or where the driver binds past its block anyway
+        (_binds_past_block, probed on buffer `lists`); TooManyRefs where one chunk's entries
+        do not fit one."""
+        nbins, dx = frame.num_bins, int(frame.dims[0])
+        most, align = storage_limits(self.ctx)
+        if total * entry_bytes <= most or self._binds_past_block(lists, most):
+            return [(0, nbins, 0, total, (0, int(frame.dims[1]) - 1))]
+        starts = np.frombuffer(sums.read(size=4 * (chunks + 1)), np.int32).astype(np.int64)
+        step = math.lcm(entry_bytes, align) // entry_bytes      # entries between aligned offsets
+        room = most // entry_bytes - step
+        windows, c = [], 0
+        while c < chunks:
+            base = int(starts[c]) // step * step
+            e = min(int(np.searchsorted(starts, base + room, side="right")) - 1, chunks)
+            if e <= c:
+                raise TooManyRefs(f"{int(starts[c + 1] - starts[c]):,} references in {layout.BEAM_SCAN_CHUNK} bins, "
+                                  f"more than one storage block of {most:,} bytes holds")
+            b0, b1 = c * layout.BEAM_SCAN_CHUNK, min(e * layout.BEAM_SCAN_CHUNK, nbins)
+            if starts[e] > starts[c]:
+                windows.append((b0, b1, base, int(starts[e]) - base, (b0 // dx, (b1 - 1) // dx)))
+            c = e
+        return windows
+
+    def _bind_window(self, prog, buffers, window, entry_bytes):
+        """Binds `window` (_windows) of each (buffer, binding) and sets the pass's uniforms."""
+        b0, b1, base, count, rows = window
+        set_uniforms(prog, window=(int(b0), int(b1)), window_base=int(base), band=tuple(int(r) for r in rows))
+        for buf, binding in buffers:
+            buf.bind_to_storage_buffer(binding, offset=base * entry_bytes, size=max(count, 1) * entry_bytes)
 
     def build(self, frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs, reach=None):
         """Beams of `frame` over the `n` cylinders of `tex_cyl` (a SplitBuffer), their lists
@@ -95,6 +172,12 @@ class BeamBuilder:
     def _build(self, frame, n, tex_cyl, pad_factor, store, list_name, table_name, max_refs, reach=None):
         ctx = self.ctx
         nbins = frame.num_bins
+        most, _ = storage_limits(ctx)
+        if 4 * n > most:
+            # The passes bind a word a cylinder whole (the lists go a window at a time:
+            # _windows; the bins' counts and table, BEAM_MAX_BINS at most, take 16 and 32 MB);
+            # no scene that beams pay for comes near it (128 MB: 33 M cylinders).
+            raise TooManyRefs(f"{n:,} cylinders, more words than one storage block of {most:,} bytes holds")
         chunks = -(-nbins // layout.BEAM_SCAN_CHUNK)
         parts = len(tex_cyl.parts)
         counts = self._buffer("counts", chunks * layout.BEAM_SCAN_CHUNK)
@@ -146,8 +229,10 @@ class BeamBuilder:
         prog.run(*_groups(chunks))
         sizes = np.frombuffer(slices.read(size=4 * fines), np.int32).astype(np.int64)
         sort, sub = fill_plan(sizes, total, n, nbins, marks)
+        windows = self._windows(frame, sums, chunks, total, 8 if marks else 4, lists.buffer)
         if sort:
-            self._sorted_fill(frame, n, tex_cyl, pad_factor, sub, total, (counts, filed), table, lists, reach)
+            self._sorted_fill(frame, n, tex_cyl, pad_factor, sub, total, (counts, filed), table, lists, reach,
+                              windows)
             return Beams(frame, total, sub, reach=reach)
         # The cylinders bucketed by fine slice: every fine slice's first place from its count.
         first = np.cumsum(sizes) - sizes
@@ -160,43 +245,48 @@ class BeamBuilder:
         prog.run(*_groups(n))
         ctx.memory_barrier()
         # The lists, a fine slice of `sub` bits a dispatch in order, so each bin's entries
-        # come fine slice by fine slice.
+        # come fine slice by fine slice (a window of bins after another where they outgrow
+        # one storage block).
         group = 1 << (top - sub)
         filled = sizes.reshape(-1, group).sum(axis=1)
         prog = self._program(6, parts, frame.centres, marks=marks)
         self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n, sub)
         if marks:
             set_uniforms(prog, mark_reach=float(reach))
-        lists.buffer.bind_to_storage_buffer(6)
-        for k in np.flatnonzero(filled):
-            set_uniforms(prog, n_items=int(filled[k]), first_item=int(first[k * group]))
-            prog.run(*_groups(int(filled[k])))
-            ctx.memory_barrier()
+        for window in windows:
+            self._bind_window(prog, [(lists.buffer, 6)], window, 8 if marks else 4)
+            for k in np.flatnonzero(filled):
+                set_uniforms(prog, n_items=int(filled[k]), first_item=int(first[k * group]))
+                prog.run(*_groups(int(filled[k])))
+                ctx.memory_barrier()
         return Beams(frame, total, sub, reach=reach)
 
-    def _sorted_fill(self, frame, n, tex_cyl, pad_factor, sub, total, scratch, table, lists, reach):
+    def _sorted_fill(self, frame, n, tex_cyl, pad_factor, sub, total, scratch, table, lists, reach, windows):
         """fill_plan's other fill (PASS 6 SORTED, PASS 7): every listed cylinder in id order in
         one dispatch into scratch lists at the bins' cursors, then each bin's entries into
-        `lists` sorted by fine slice of `sub` bits (with `reach`, entries with their marks).
-        scratch: the build's (cursors, filed); table: the bins' starts and counts."""
+        `lists` sorted by fine slice of `sub` bits (with `reach`, entries with their marks), a
+        window of bins at a time (`windows`, _windows). scratch: the build's (cursors, filed);
+        table: the bins' starts and counts."""
         ctx = self.ctx
         ctx.memory_barrier()
         keys = layout.BEAM_SLICES << sub
         marks = reach is not None
+        entry_bytes = 8 if marks else 4
         unsorted = self._buffer("unsorted", max(total, 1) * (2 if marks else 1))
-        prog = self._program(6, len(tex_cyl.parts), frame.centres, keys, marks)
-        self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n, sub)
+        fill = self._program(6, len(tex_cyl.parts), frame.centres, keys, marks)
+        self._frame_uniforms(fill, frame, pad_factor, tex_cyl, n, sub)
         if marks:
-            set_uniforms(prog, mark_reach=float(reach))
-        scratch[0].bind_to_storage_buffer(0)
-        scratch[1].bind_to_storage_buffer(5)
-        unsorted.bind_to_storage_buffer(6)
-        prog.run(*_groups(n))
-        ctx.memory_barrier()
-        prog = self._program(7, 1, sort_keys=keys, marks=marks)
-        set_uniforms(prog, n_items=int(frame.num_bins), sub_bits=int(sub))
-        table.buffer.bind_to_storage_buffer(6)
-        unsorted.bind_to_storage_buffer(7)
-        lists.buffer.bind_to_storage_buffer(8)
-        prog.run(*_groups(int(frame.num_bins)))
-        ctx.memory_barrier()
+            set_uniforms(fill, mark_reach=float(reach))
+        sort = self._program(7, 1, sort_keys=keys, marks=marks)
+        set_uniforms(sort, sub_bits=int(sub))
+        for window in windows:
+            scratch[0].bind_to_storage_buffer(0)
+            scratch[1].bind_to_storage_buffer(5)
+            self._bind_window(fill, [(unsorted, 6)], window, entry_bytes)
+            fill.run(*_groups(n))
+            ctx.memory_barrier()
+            table.buffer.bind_to_storage_buffer(6)
+            self._bind_window(sort, [(unsorted, 7), (lists.buffer, 8)], window, entry_bytes)
+            set_uniforms(sort, n_items=int(window[1] - window[0]))
+            sort.run(*_groups(int(window[1] - window[0])))
+            ctx.memory_barrier()

@@ -4,13 +4,15 @@ give the grid's image, every cylinder a ray of a bin can meet is in the bin's li
 than its depth allows, the compute passes list what numpy lists, and where beams cannot serve
 a family of rays (a camera among the hair, lists past their budget, a point light) those
 rays walk the grid and the image does not change. A camera move uploads nothing."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from tracer import Camera, Light, Renderer, RenderSettings, strands_to_cylinders
 from tracer import layout
-from tracer.beams import (BeamsUnfit, build_beams, camera_frame, capsule_far, fine_bits, frame_reach, project,
-                          sun_frame)
+from tracer.beams import (BeamsUnfit, TooManyRefs, build_beams, camera_frame, capsule_far, fine_bits, frame_reach,
+                          project, sun_frame)
 from tracer.gpu_build import compute_available
 from tracer.gl_state import shared_context
 from tracer.scene_beams import CAMERA_BUFFERS, SUN_BUFFERS, beam_scene_box, read_beams
@@ -546,6 +548,90 @@ def test_the_compute_passes_list_in_fine_slices_what_numpy_lists(family, how, mo
     finest = layout.BEAM_SUB_BITS_MAX if how == "by fine slice" else layout.BEAM_SORT_SUB_BITS_MAX
     assert _compute_vs_numpy(family) == finest
     assert sorted_subs == ([] if how == "by fine slice" else [finest])
+
+
+def _small_storage_blocks(monkeypatch, most=1 << 13, probed=False):
+    """Makes the compute passes take the driver's largest storage block as `most` bytes (at
+    offsets aligned to 256), so that lists past it are filled a window of bins at a time
+    (tracer/gpu_beams.py, _windows), as on a driver that does not bind past it (`probed`:
+    the driver's own answer, probed again); returns the list of the windows each build took."""
+    from tracer import gpu_beams
+    from tracer.gl_state import beam_builder
+    monkeypatch.setattr(gpu_beams, "storage_limits", lambda ctx: (most, 256))
+    if probed:
+        monkeypatch.setattr(beam_builder(), "_past_block", None)
+    else:
+        monkeypatch.setattr(gpu_beams.BeamBuilder, "_binds_past_block", lambda self, buf, most: False)
+    taken = []
+    real = gpu_beams.BeamBuilder._windows
+
+    def spy(self, *args):
+        windows = real(self, *args)
+        taken.append(windows)
+        return windows
+    monkeypatch.setattr(gpu_beams.BeamBuilder, "_windows", spy)
+    return taken
+
+
+@pytest.mark.parametrize("how", ["by fine slice", "sorted"])
+@pytest.mark.parametrize("family", ["perspective", "sun", "pixel centres"])
+def test_lists_past_the_drivers_storage_block_are_filled_a_window_at_a_time(family, how, monkeypatch):
+    """Lists bigger than the driver's largest storage block (128 MB on llvmpipe, past which a
+    buffer bound whole may be cut short) are filled and sorted a window of bins at a time,
+    each bound within the block, where the driver does not bind past it: the same entries,
+    fine slices and marks as numpy's."""
+    _fill(monkeypatch, how)
+    most = 1 << 11 if family == "pixel centres" else 1 << 13     # (its lists are few and plain)
+    taken = _small_storage_blocks(monkeypatch, most)
+    _compute_vs_numpy(family)
+    (windows,) = taken
+    entry = 4 if family == "pixel centres" else 8
+    assert len(windows) >= 3
+    assert all(count * entry <= most and base * entry % 256 == 0 for _, _, base, count, _ in windows)
+    bins = np.concatenate([np.arange(b0, b1) for b0, b1, *_ in windows])
+    assert np.all(np.diff(bins) > 0), "each bin in one window"
+
+
+@pytest.mark.parametrize("family", ["perspective", "sun"])
+def test_a_driver_that_binds_past_its_storage_block_fills_the_lists_at_once(family, monkeypatch):
+    """The probe (BeamBuilder._binds_past_block: a word written through a whole binding past
+    the block lands) decides: one window where the driver binds past its block, as llvmpipe
+    does, windows where not; numpy's lists either way."""
+    from tracer.gl_state import beam_builder
+    taken = _small_storage_blocks(monkeypatch, probed=True)
+    _compute_vs_numpy(family)
+    past, windows = beam_builder()._past_block, len(taken[0])
+    assert past is not None
+    assert (windows == 1) if past else (windows >= 3)
+    if "llvmpipe" in shared_context().info["GL_RENDERER"]:
+        assert past, "llvmpipe writes through a whole binding past its block"
+
+
+@pytest.mark.parametrize("spp", [1, 16])
+def test_a_render_of_lists_past_the_storage_block_is_the_grids(pair, spp, monkeypatch):
+    """A render whose sun's lists, and at 16 samples its camera's, are filled a window at a
+    time gives the grid's image (the pixel centres' few lists of one sample fit one here;
+    test_lists_past_the_drivers_storage_block_are_filled_a_window_at_a_time windows them)."""
+    taken = _small_storage_blocks(monkeypatch)
+    strands, settings = CASES["alpha layers, transmittance"]
+    settings = replace(settings, spp=spp)
+    grid, beams = _render_both(pair, strands, CAM, settings)
+    assert [len(w) >= 2 for w in taken] == [spp > 1, True]
+    assert (grid[..., 3] > 0).mean() > 0.05
+    assert np.abs(grid - beams).max() <= 1e-6
+
+
+def test_a_chunk_of_bins_past_the_storage_block_is_too_many_references(monkeypatch):
+    """Where one chunk of bins (the scan's) holds more entries than a storage block, the lists
+    cannot be bound a window at a time, nor the passes' words of the cylinders past one:
+    TooManyRefs, whose camera then takes coarser bins or the grid."""
+    _small_storage_blocks(monkeypatch, most=1 << 11)
+    with pytest.raises(TooManyRefs, match="references in 256 bins, more than one storage block"):
+        _compute_vs_numpy("perspective")
+    # Nor can the passes bind their word a cylinder past it (440 cylinders: 1,760 bytes).
+    _small_storage_blocks(monkeypatch, most=1 << 10)
+    with pytest.raises(TooManyRefs, match="440 cylinders, more words than one storage block"):
+        _compute_vs_numpy("perspective")
 
 
 def test_the_fill_sorts_where_most_cylinders_are_listed_in_few_references():

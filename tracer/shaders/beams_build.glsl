@@ -26,6 +26,8 @@
 //                   PASS 5), into `lists` = a scratch buffer of the same layout, for PASS 7
 //   PASS 7  sort:   one bin an invocation (SORTED): its entries from the scratch buffer into
 //                   the lists by fine slice, a counting sort of SORT_KEYS keys (stable)
+// Where the lists outgrow the driver's largest storage block, the host binds them a window
+// of bins at a time (PASS 6 and 7: `window`, `band`, `window_base`), the same entries.
 // The fine slices are dispatched one after another (or sorted), so a bin's entries come fine
 // slice by fine slice; within one their order depends on the atomics, which no walk depends on
 // (tracer/beams.py; the pixel sampler's list ends the same whatever the order:
@@ -51,6 +53,12 @@ uniform float near_limit;     // perspective: a capsule's key at or below this r
 uniform ivec2 dims;
 uniform int max_bins;         // MAX_BINS_PER_CYLINDER
 uniform int sub_bits;         // fine slices a slice: 2^sub_bits (count: the most, fill: the host's choice)
+// The lists as bound by a fill or sort (tracer/gpu_beams.py, _windows): the entries of bins
+// window.x .. window.y - 1 alone, from entry window_base on, within the driver's largest
+// storage block; `band`, the rows of bins (y) those bins lie in, is all of them for the count.
+uniform ivec2 band;
+uniform ivec2 window;
+uniform int window_base;
 
 layout(std430, binding = 0) buffer Counts { int counts[]; };     // per bin: count, then cursor
 layout(std430, binding = 1) buffer Slices { int slices[]; };     // per fine slice: count, then cursor
@@ -167,7 +175,8 @@ void visit(int bin, vec2 corner, int id, int slice) {
 #if PASS == 1
     atomicAdd(counts[bin], 1);
 #else
-    int slot = atomicAdd(counts[bin], 1);
+    if (bin < window.x || bin >= window.y) return;
+    int slot = atomicAdd(counts[bin], 1) - window_base;
     uint e = uint(id) | (uint(slice) << uint(BEAM_ID_BITS - sub_bits));
 #if MARKS
     lists[slot] = uvec2(e, beam_mark(corner));
@@ -207,8 +216,8 @@ vec2 centre_span(float a, float A0, float dA, float B0, float dB, float P) {
 // into the bins' columns along its longer side, each column's rows within rho of its part
 // (CENTRES: the columns and rows whose centre lies within rho of the projected axis).
 // One loop over (column, row), not nested loops (docs/DECISIONS.md, "One loop over the grid
-// build's cells"). False when the bound on its steps passes max_bins; `listed` counts the
-// bins it was listed in.
+// build's cells"), over the rows of `band` alone. False when the bound on its steps passes
+// max_bins; `listed` counts the bins it was listed in.
 bool list_cylinder(int id, vec2 g0, vec2 g1, float rho, int slice, inout int listed) {
     vec2 dg = g1 - g0;
     bool xdom = abs(dg.x) >= abs(dg.y);
@@ -216,13 +225,14 @@ bool list_cylinder(int id, vec2 g0, vec2 g1, float rho, int slice, inout int lis
     float B0 = xdom ? g0.y : g0.x, dB = xdom ? dg.y : dg.x;
     int NA = xdom ? dims.x : dims.y, NB = xdom ? dims.y : dims.x;
     int SA = xdom ? 1 : dims.x, SB = xdom ? dims.x : 1;
+    ivec2 lim_a = xdom ? ivec2(0, NA - 1) : band, lim_b = xdom ? band : ivec2(0, NB - 1);
 #if CENTRES
     float a_lo = ceil(min(A0, A0 + dA) - rho - 0.5), a_hi = floor(max(A0, A0 + dA) + rho - 0.5);
 #else
     float a_lo = floor(min(A0, A0 + dA) - rho), a_hi = floor(max(A0, A0 + dA) + rho);
 #endif
-    if (a_hi < 0.0 || a_lo > float(NA - 1) || a_lo > a_hi) return true;
-    int i0 = int(clamp(a_lo, 0.0, float(NA - 1))), i1 = int(clamp(a_hi, 0.0, float(NA - 1)));
+    if (a_hi < float(lim_a.x) || a_lo > float(lim_a.y) || a_lo > a_hi) return true;
+    int i0 = int(clamp(a_lo, float(lim_a.x), float(lim_a.y))), i1 = int(clamp(a_hi, float(lim_a.x), float(lim_a.y)));
     if (float(i1 - i0 + 1) * min(abs(dB) + 2.0 * rho + 2.0, float(NB)) > float(max_bins)) return false;
 #if !CENTRES
     bool no_dir = abs(dA) < 1e-12;
@@ -246,9 +256,9 @@ bool list_cylinder(int id, vec2 g0, vec2 g1, float rho, int slice, inout int lis
             float e0 = B0 + s0 * dB, e1 = B0 + s1 * dB;
             float b_lo = floor(min(e0, e1) - rho), b_hi = floor(max(e0, e1) + rho);
 #endif
-            bool some = b_hi >= 0.0 && b_lo <= float(NB - 1) && b_lo <= b_hi;
-            row = int(clamp(b_lo, 0.0, float(NB - 1)));
-            row_end = some ? int(clamp(b_hi, 0.0, float(NB - 1))) : row - 1;
+            bool some = b_hi >= float(lim_b.x) && b_lo <= float(lim_b.y) && b_lo <= b_hi;
+            row = int(clamp(b_lo, float(lim_b.x), float(lim_b.y)));
+            row_end = some ? int(clamp(b_hi, float(lim_b.x), float(lim_b.y))) : row - 1;
             col++;
             continue;
         }
@@ -318,6 +328,9 @@ void main() {
 #endif
     vec2 g0, g1; float rho; int slice;
     project_cylinder(id, g0, g1, rho, slice);
+    // Wholly outside the window's rows (every row it lists lies within its projection's
+    // extent widened by rho).
+    if (max(g0.y, g1.y) + rho < float(band.x) || min(g0.y, g1.y) - rho >= float(band.y + 1)) return;
 #if MARKS
     fill_begin(g0, g1);
 #endif
@@ -328,7 +341,9 @@ void main() {
     // fine slice's first place from the counts of those before it, then each entry to its
     // fine slice's next place, in the order filled.
     if (i >= n_items) return;
+    i += window.x;
     ivec2 sc = table_in[i];
+    sc.x -= window_base;
     if (sc.y < 2) {
         if (sc.y == 1) lists[sc.x] = unsorted[sc.x];
         return;
