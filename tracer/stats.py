@@ -21,9 +21,10 @@ class RenderStats:
     which camera_beam_refs and sun_beam_refs. Of the last render: render_s, layers_max (layers the shader was
     compiled for), screen_box and traversed_pixels (the projected bounds that were traced),
     and with RenderSettings(count=True) the counters shadow_rays, layers_traced,
-    cells_visited, cylinder_tests (summed over samples; full intersection tests: a ray of
-    beams whose entries come with marks, a sun's or a camera's whole bins, counts only the
-    listed cylinders whose capsule holds its point). gl_backend: the shared context's
+    cells_visited, cylinder_tests (summed over samples; cells: grid cells, BVH boxes, or a
+    ray of beams' bin and the list entries it reads; full intersection tests: a ray of beams
+    whose entries come with marks, a sun's or a camera's whole bins, counts only the listed
+    cylinders whose capsule holds its point). gl_backend: the shared context's
     (egl, glx, wgl or cgl). None: not measured yet."""
     gl_backend: str = ""
     bytes_uploaded: int = 0

@@ -6,12 +6,12 @@ settings, one renderer each.
 
 Per scene: the structure's build time and size, the render time at 1 and 16 samples per
 pixel (16 spp against 16 times 1 spp says how much of a pixel's work its samples share), and
-the work per ray from the tracer's own counters: boxes (BVH), cells (grid) or bins (beams)
-visited and cylinders tested per primary ray (a render without shadows) and per shadow ray
-(the rest of a render with the sun, over the shadow rays it cast). A test is a full
-intersection test: the beams' walks first test each listed cylinder's capsule in the bins
-(a 2-D distance, docs/DECISIONS.md "Rays of a beam test a cylinder's capsule first"), which
-the counters do not count. The images are compared pixel by pixel: the structures must find
+the work per ray from the tracer's own counters: boxes (BVH), cells (grid) or the bin and
+the list entries read (beams) and cylinders tested per primary ray (a render without
+shadows) and per shadow ray (the rest of a render with the sun, over the shadow rays it
+cast). A test is a full intersection test: the beams' walks first test each entry's mark, the
+listed cylinder's capsule in the bin (a 2-D distance, docs/DECISIONS.md "Rays of a beam test
+a cylinder's capsule first"), which the counters count as an entry read, a step. The images are compared pixel by pixel: the structures must find
 the same hits.
 
 Builds: the grid and the beams by the compute passes (the renderer's default build), the BVH
@@ -177,8 +177,8 @@ def run(sec, cfg):
     sec.table(["scene", "structure", "steps / primary ray", "tests / primary ray", "steps / shadow ray",
                "tests / shadow ray"], work_rows,
               caption="Work per ray (tracer counters, 1 spp). Steps are BVH boxes tested, grid cells visited or "
-                      "beam bins looked up (one a ray; with beams a 1-spp camera ray of dense hair walks the grid); "
-                      "tests are cylinder (BVH: piece) intersection tests.")
+                      "a beam ray's bin and the list entries it read, their marks tested (with beams a 1-spp camera "
+                      "ray of dense hair walks the grid); tests are cylinder (BVH: piece) intersection tests.")
 
 
 FINE = "grid, 16-spp aim"

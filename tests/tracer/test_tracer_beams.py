@@ -315,17 +315,30 @@ def test_split_cylinder_buffers_render_as_one(pair):
     np.testing.assert_array_equal(img, want)
 
 
-def test_the_counters_see_one_bin_a_ray(pair):
+@pytest.mark.parametrize("spp", [1, 4])
+def test_the_counters_see_a_bin_and_the_entries_read_a_ray(pair, spp):
+    """A ray of beams counts its bin and each list entry it reads as steps (cells_visited),
+    its full tests apart: every full test reads its entry first, and no ray reads more than
+    its bin's whole list (the camera's lists at one sample: one ray a pixel centre's bin;
+    the sun's: at most the longest list a shadow ray)."""
     r = pair[1]
     r.set_strands(curls(30, 10))
-    r.render(CAM, RenderSettings(count=True))
+    settings = RenderSettings(count=True, spp=spp)
+    r.render(CAM, settings)
     st = r.stats
     box = st.screen_box
-    # One bin a camera ray and one a shadow ray toward the sun.
-    assert st.cells_visited == (box[2] - box[0]) * (box[3] - box[1]) + st.shadow_rays
+    rays = spp * (box[2] - box[0]) * (box[3] - box[1])
+    read = st.cells_visited - rays - st.shadow_rays      # one bin a camera ray and one a shadow ray
+    assert st.cylinder_tests > 0 and read >= st.cylinder_tests
+    cam = r.beam_state.camera
+    sun = r.beam_state.suns[0][1]
+    _, cam_count, _, _ = read_beams(cam, r.buffers, CAMERA_BUFFERS)
+    _, sun_count, _, _ = read_beams(sun, r.buffers, SUN_BUFFERS[0])
+    most = (cam_count.sum() if spp == 1 else rays * cam_count.max()) + st.shadow_rays * sun_count.max()
+    assert read <= most
     grid = pair[0]
     grid.set_strands(curls(30, 10))
-    grid.render(CAM, RenderSettings(count=True))
+    grid.render(CAM, settings)
     assert st.cylinder_tests < 0.5 * grid.stats.cylinder_tests
 
 

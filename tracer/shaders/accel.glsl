@@ -19,8 +19,8 @@
 //       (1 - alpha) of every cylinder entered in (tmin, tmax), each counted once; 0 once
 //       it drops below t_eps.
 //
-// With COUNT it adds to counter.z the cells (or nodes) it visits and to counter.w the
-// cylinders it tests. Its buffers and uniforms are its own (the host binds them:
+// With COUNT it adds to counter.z the cells (or nodes; beams: its bin and the list entries
+// it reads) it visits and to counter.w the cylinders it tests. Its buffers and uniforms are its own (the host binds them:
 // tracer/draw.py TRACE_BUFFERS).
 
 // The pixel (whole-image coordinates) whose samples this invocation's camera rays go

@@ -119,6 +119,9 @@ void beam_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_con
         bool last = false;
         for (int k = k0; k < k1; ++k) {
             uvec2 em = texelFetch(tex_beam, sc.x + k).xy;
+#if COUNT
+            counter.z += 1.0;
+#endif
             if (beam_entry_start(em.x, beam_sub, beam_keys.x, beam_keys.y) > reach) { last = true; break; }
             if (beam_mark_holds(g, em.y, beam_axis_reach))
                 pass_ |= 1u << uint(k - k0);
@@ -134,6 +137,9 @@ void beam_nearest(vec3 o, vec3 d, float tmax, float widen_per_t, float widen_con
 #else
     for (int k = 0; k < sc.y; ++k) {
         uint e = texelFetch(tex_beam, sc.x + k).x;
+#if COUNT
+        counter.z += 1.0;
+#endif
         if (beam_entry_start(e, beam_sub, beam_keys.x, beam_keys.y) > reach) break;
         reach = beam_offer(beam_entry_id(e, beam_sub), o, d, tmax, widen_per_t, widen_const, reach);
     }
@@ -155,6 +161,9 @@ void beam_pixel_nearest(vec3 o, vec3 d, float tmax) {
     float reach = beam_reach(tmax);
     for (int k = 0; k < sc.y; ++k) {
         uint e = texelFetch(tex_beam, sc.x + k).x;
+#if COUNT
+        counter.z += 1.0;
+#endif
         if (beam_entry_start(e, beam_sub, beam_keys.x, beam_keys.y) > reach) break;
         int id = beam_entry_id(e, beam_sub);
 #if COUNT
@@ -228,6 +237,9 @@ float sun_transmittance(int set, vec3 p, vec3 d, float tmax, int own, float tmin
         bool last = false;
         for (int k = k0; k < k1; ++k) {
             uvec2 em = sun_entry(set, sc.x + k);
+#if COUNT
+            counter.z += 1.0;
+#endif
             if (beam_entry_start(em.x, sub, fr.z, fr.w) > below) { last = true; break; }
             int id = beam_entry_id(em.x, sub);
             if (id != own && beam_mark_holds(g - vec2(b), em.y, reach)) pass_ |= 1u << uint(k - k0);
