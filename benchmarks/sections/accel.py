@@ -9,10 +9,10 @@ pixel (16 spp against 16 times 1 spp says how much of a pixel's work its samples
 the work per ray from the tracer's own counters: boxes (BVH), cells (grid) or the bin and
 the list entries read (beams) and cylinders tested per primary ray (a render without
 shadows) and per shadow ray (the rest of a render with the sun, over the shadow rays it
-cast). A test is a full intersection test: the beams' walks first test each entry's mark, the
-listed cylinder's capsule in the bin (a 2-D distance, docs/DECISIONS.md "Rays of a beam test
-a cylinder's capsule first"), which the counters count as an entry read, a step. The images are compared pixel by pixel: the structures must find
-the same hits.
+cast). A test is a full intersection test: the beams' walks first test each entry's mark,
+the listed cylinder's capsule in the bin (a 2-D distance, docs/DECISIONS.md "Rays of a beam
+test a cylinder's capsule first"), which the counters count as an entry read, a step. The
+images are compared pixel by pixel: the structures must find the same hits.
 
 Builds: the grid and the beams by the compute passes (the renderer's default build), the BVH
 in numpy (its only build). The grid and the BVH are built by set_strands; the beams by the
