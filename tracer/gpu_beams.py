@@ -6,7 +6,9 @@ finest slice of their key and fill the lists fine slice after fine slice, or fil
 one dispatch in id order into a scratch buffer and sort each bin's entries by fine slice
 into the lists (tracer/beams.py, fill_plan). Nothing goes up from the host but uniforms and
 the fine slices' first places (the scratch buffers are zeroed by a pass), so a camera move
-uploads next to nothing; what comes back is the total, the fine slices' sizes and two flags.
+uploads next to nothing; what comes back is the total, the fine slices' sizes and two flags
+(and the chunks' first entries where the lists outgrow a storage block the driver binds no
+further: then they are filled a window of bins at a time, BeamBuilder._windows).
 """
 import math
 
@@ -87,8 +89,8 @@ class BeamBuilder:
 
     def _frame_uniforms(self, prog, frame, pad_factor, tex_cyl, n, sub):
         """The frame's uniforms, the whole frame's rows for `band` (a window's fill sets its own)."""
-        set_uniforms(prog, band=(0, int(frame.dims[1]) - 1), n_items=int(n), pad_factor=float(pad_factor), frame_kind=KIND_CODE[frame.kind],
-                     frame_origin=tuple(float(x) for x in frame.origin),
+        set_uniforms(prog, band=(0, int(frame.dims[1]) - 1), n_items=int(n), pad_factor=float(pad_factor),
+                     frame_kind=KIND_CODE[frame.kind], frame_origin=tuple(float(x) for x in frame.origin),
                      axis_x=tuple(float(x) for x in frame.axes[0]), axis_y=tuple(float(x) for x in frame.axes[1]),
                      axis_z=tuple(float(x) for x in frame.axes[2]),
                      frame_offset=tuple(float(x) for x in frame.offset), radius_scale=float(frame.radius_scale),
