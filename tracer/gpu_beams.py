@@ -114,7 +114,12 @@ class BeamBuilder:
             if prog is None:
                 prog = self._passes["probe"] = self.ctx.compute_shader(PROBE_SOURCE)
             set_uniforms(prog, at=int(at), word=PROBE_WORD)
+            _ = self.ctx.error                  # (reading it clears an earlier error)
             buf.bind_to_storage_buffer(0)
+            if self.ctx.error != "GL_NO_ERROR":
+                # Refused: binding 0 still holds an earlier buffer, which the probe must not touch.
+                self._past_block = False
+                return False
             prog.run(1)
             self.ctx.memory_barrier()
             landed = int(np.frombuffer(buf.read(size=4, offset=4 * at), np.uint32)[0]) == PROBE_WORD

@@ -622,6 +622,30 @@ def test_a_driver_that_binds_past_its_storage_block_fills_the_lists_at_once(fami
         assert past, "llvmpipe writes through a whole binding past its block"
 
 
+def test_a_driver_that_refuses_a_whole_binding_past_its_block_gets_windows(monkeypatch):
+    """Where binding the whole buffer raises a GL error, the probe touches nothing (the
+    binding it would write through is still an earlier buffer's) and says no: windows."""
+    from tracer.gl_state import beam_builder
+    builder = beam_builder()
+
+    class Refusing:
+        """The builder's context, whose error after the probe's bind is GL_INVALID_VALUE."""
+        def __init__(self, ctx):
+            self._ctx, self._reads = ctx, 0
+
+        def __getattr__(self, name):
+            return getattr(self._ctx, name)
+
+        @property
+        def error(self):
+            self._reads += 1
+            return "GL_NO_ERROR" if self._reads == 1 else "GL_INVALID_VALUE"
+    taken = _small_storage_blocks(monkeypatch, probed=True)
+    monkeypatch.setattr(builder, "ctx", Refusing(builder.ctx))
+    _compute_vs_numpy("sun")
+    assert builder._past_block is False and len(taken[0]) >= 3
+
+
 @pytest.mark.parametrize("spp", [1, 16])
 def test_a_render_of_lists_past_the_storage_block_is_the_grids(pair, spp, monkeypatch):
     """A render whose sun's lists, and at 16 samples its camera's, are filled a window at a
