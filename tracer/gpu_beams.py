@@ -227,6 +227,7 @@ class BeamBuilder:
             raise TooManyRefs(f"{total:,} references, more than {max_refs:,}")
         table = store.store(table_name, nbins, 2, "i4")
         marks = reach is not None
+        entry_bytes = 8 if marks else 4
         lists = store.store(list_name, max(total, 1), 2 if marks else 1, "u4")
         prog = self._program(4, 1)
         set_uniforms(prog, n_items=chunks, dims=tuple(int(d) for d in frame.dims))
@@ -236,10 +237,10 @@ class BeamBuilder:
         prog.run(*_groups(chunks))
         sizes = np.frombuffer(slices.read(size=4 * fines), np.int32).astype(np.int64)
         sort, sub = fill_plan(sizes, total, n, nbins, marks)
-        windows = self._windows(frame, sums, chunks, total, 8 if marks else 4, lists.buffer)
+        windows = self._windows(frame, sums, chunks, total, entry_bytes, lists.buffer)
         if sort:
             self._sorted_fill(frame, n, tex_cyl, pad_factor, sub, total, (counts, filed), table, lists, reach,
-                              windows)
+                              windows, entry_bytes)
             return Beams(frame, total, sub, reach=reach)
         # The cylinders bucketed by fine slice: every fine slice's first place from its count.
         first = np.cumsum(sizes) - sizes
@@ -261,24 +262,24 @@ class BeamBuilder:
         if marks:
             set_uniforms(prog, mark_reach=float(reach))
         for window in windows:
-            self._bind_window(prog, [(lists.buffer, 6)], window, 8 if marks else 4)
+            self._bind_window(prog, [(lists.buffer, 6)], window, entry_bytes)
             for k in np.flatnonzero(filled):
                 set_uniforms(prog, n_items=int(filled[k]), first_item=int(first[k * group]))
                 prog.run(*_groups(int(filled[k])))
                 ctx.memory_barrier()
         return Beams(frame, total, sub, reach=reach)
 
-    def _sorted_fill(self, frame, n, tex_cyl, pad_factor, sub, total, scratch, table, lists, reach, windows):
+    def _sorted_fill(self, frame, n, tex_cyl, pad_factor, sub, total, scratch, table, lists, reach, windows,
+                     entry_bytes):
         """fill_plan's other fill (PASS 6 SORTED, PASS 7): every listed cylinder in id order in
         one dispatch into scratch lists at the bins' cursors, then each bin's entries into
         `lists` sorted by fine slice of `sub` bits (with `reach`, entries with their marks), a
-        window of bins at a time (`windows`, _windows). scratch: the build's (cursors, filed);
-        table: the bins' starts and counts."""
+        window of bins at a time (`windows`, _windows, of entries of `entry_bytes`). scratch:
+        the build's (cursors, filed); table: the bins' starts and counts."""
         ctx = self.ctx
         ctx.memory_barrier()
         keys = layout.BEAM_SLICES << sub
         marks = reach is not None
-        entry_bytes = 8 if marks else 4
         unsorted = self._buffer("unsorted", max(total, 1) * (2 if marks else 1))
         fill = self._program(6, len(tex_cyl.parts), frame.centres, keys, marks)
         self._frame_uniforms(fill, frame, pad_factor, tex_cyl, n, sub)
@@ -286,9 +287,9 @@ class BeamBuilder:
             set_uniforms(fill, mark_reach=float(reach))
         sort = self._program(7, 1, sort_keys=keys, marks=marks)
         set_uniforms(sort, sub_bits=int(sub))
+        scratch[0].bind_to_storage_buffer(0)
+        scratch[1].bind_to_storage_buffer(5)
         for window in windows:
-            scratch[0].bind_to_storage_buffer(0)
-            scratch[1].bind_to_storage_buffer(5)
             self._bind_window(fill, [(unsorted, 6)], window, entry_bytes)
             fill.run(*_groups(n))
             ctx.memory_barrier()

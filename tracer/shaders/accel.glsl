@@ -20,8 +20,8 @@
 //       it drops below t_eps.
 //
 // With COUNT it adds to counter.z the cells (or nodes; beams: its bin and the list entries
-// it reads) it visits and to counter.w the cylinders it tests. Its buffers and uniforms are its own (the host binds them:
-// tracer/draw.py TRACE_BUFFERS).
+// it reads) it visits and to counter.w the cylinders it tests. Its buffers and uniforms are
+// its own (the host binds them: tracer/draw.py TRACE_BUFFERS).
 
 // The pixel (whole-image coordinates) whose samples this invocation's camera rays go
 // through, and the independent sampler's sample point in it (pixels), set by main: the
