@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Beams: an acceleration structure for a family of rays that share an origin (the camera's)
-or a direction (a sun's), built in whole-array numpy (the compute passes,
-shaders/beams_build.glsl, follow the same rules).
+or a direction (a sun's), or end near one point (a point, spot or area light's shadow rays:
+light_frame), built in whole-array numpy (the compute passes, shaders/beams_build.glsl,
+follow the same rules).
 
 Every camera ray of a pixel stays inside the pyramid of that pixel, and every shadow ray
 toward a sun stays inside a thin prism along the sun's direction. So the rays of such a
@@ -31,6 +32,9 @@ depth of an entry, its `key`:
     sun      minus the capsule's greatest height toward the sun (max over its axis of p·w,
              plus its radius): a shadow ray leaving p reaches only heights above p·w, so
              entries whose key exceeds -p·w (lying wholly below p) cannot stop it.
+    light    as a perspective camera's, from the light's position: a shadow ray from p toward
+             a point of the light within its extent R of the position goes no farther from
+             the position than max(|p - position|, R) (light_frame).
 
 Listing (conservative): a ray of a bin passes within r of some point q of a cylinder's axis
 (its capsule holds the cut cylinder, bent joints included: tracer/cylinders.py, `extension`),
@@ -81,7 +85,9 @@ class BeamFrame:
     `drift`: bins added to every radius (a sun's spread; a camera's shift_pad); the keys' slices start at `key0`,
     `key_step` apart; `dims`: bins along x and y; `bin_px` (cameras): pixels a bin side,
     `box`: the whole-image pixels (x0, y0, x1, y1) the bins cover; `centres` (cameras, 1-pixel
-    bins): a bin lists only what the ray through its centre may meet."""
+    bins): a bin lists only what the ray through its centre may meet; `extent` (a point, spot or
+    area light's "persp" frame, light_frame): how far from `origin` its shadow rays may end,
+    which every capsule's listing radius is widened for."""
     kind: str
     origin: np.ndarray
     axes: np.ndarray
@@ -96,6 +102,7 @@ class BeamFrame:
     near_limit: float = 0.0     # perspective: a capsule whose key is not above this reaches the camera's plane
     centre: tuple = (0.0, 0.0)  # cameras: the optical axis in pixels the bins were laid for
     centres: bool = False       # cameras: for the rays through the pixels' centres alone (module text)
+    extent: float = 0.0         # lights ("persp"): how far from the origin their shadow rays may end
 
     @property
     def num_bins(self):
@@ -229,6 +236,88 @@ def sun_frame(towards, spread, scene_lo, scene_hi, rmax, pad, bin_size):
                      1.0 / h, drift_units / h, key0, step, dims)
 
 
+def light_frame(position, extent, scene_lo, scene_hi, rmax, pad, bin_size):
+    """The frame of shadow rays toward a light at `position` whose rays end within `extent` of
+    it (a point or spot light's radius, an area light's half diagonal; 0: at it): a perspective
+    frame from the position toward the scene box's centre, square bins `bin_size` a side at unit
+    depth over the box's projection widened by the widest listing radius, keys the distances
+    from the position (as a perspective camera's). A ray from p toward a point q of the light
+    meets a capsule only at distances from the position up to max(|p - position|, extent), and
+    only where p's projection lies within (r + extent)·sqrt(1 + |x|²) / (depth - r) of the
+    capsule's axis at unit depth (the camera's bound for the ray from the position through the
+    meeting point, plus how far that point's projection lies from p's: the ray's points
+    drift from p's direction by at most extent·sqrt(1 + |x|²) over their depth). BeamsUnfit
+    where the box comes within its near limit plus `extent` of the light's plane (a light among
+    the hair), whose rays walk the grid."""
+    view = light_view(position, extent, scene_lo, scene_hi, rmax, pad)
+    h = float(bin_size)
+    widen = (view.dpad + float(extent)) / view.nearest      # the listing radius over the slant factor
+    # The bins reach past the box's projection by the widest listing radius, its slant factor
+    # taken a bin past them (a few rounds settle it).
+    margin = 0.0
+    for _ in range(8):
+        margin = widen * view.slant(margin + h) + h * layout.BEAM_BIN_EPS
+    margin *= 1.01
+    slant = view.slant(margin + h)
+    if widen * slant + h * layout.BEAM_BIN_EPS > margin:
+        raise BeamsUnfit("the light lies too near the hair for its bins to hold their listings")
+    x0, y0 = float(view.tx.min()) - margin, float(view.ty.min()) - margin
+    dims = (max(1, int(np.ceil((float(view.tx.max()) + margin - x0) / h))),
+            max(1, int(np.ceil((float(view.ty.max()) + margin - y0) / h))))
+    key0, step = _slices(float(view.depth.min()), view.far, view.dpad)
+    return BeamFrame("persp", view.origin, np.stack([view.u / h, view.v / h, view.w]), np.array([-x0 / h, -y0 / h]),
+                     slant / h, 0.0, key0, step, dims, near_limit=view.near_limit, extent=float(extent))
+
+
+@dataclass(frozen=True, eq=False)
+class LightView:
+    """What light_frame sees of a scene box from a light: its origin and axes (w toward the
+    box's centre), the box corners' depths and their projections at unit depth (tx, ty), the
+    capsules' nearest depth less their widest radius, that radius (dpad), the farthest corner's
+    distance and the near limit."""
+    origin: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    w: np.ndarray
+    depth: np.ndarray
+    tx: np.ndarray
+    ty: np.ndarray
+    nearest: float
+    dpad: float
+    far: float
+    near_limit: float
+
+    def slant(self, past):
+        """sqrt(1 + |x|²) at the farthest corner of the box's projection widened by `past`."""
+        return float(np.sqrt(1.0 + (np.abs(self.tx).max() + past) ** 2 + (np.abs(self.ty).max() + past) ** 2))
+
+    def tangents(self, points):
+        """(tx, ty, depth) of (N,3) points."""
+        q = np.asarray(points, np.float64) - self.origin
+        z = q @ self.w
+        return (q @ self.u) / z, (q @ self.v) / z, z
+
+
+def light_view(position, extent, scene_lo, scene_hi, rmax, pad):
+    """The LightView of light_frame; BeamsUnfit as there."""
+    c = np.asarray(position, np.float64)
+    lo, hi = np.asarray(scene_lo, np.float64), np.asarray(scene_hi, np.float64)
+    to_centre = 0.5 * (lo + hi) - c
+    length = float(np.linalg.norm(to_centre))
+    if not length > 0.0:
+        raise BeamsUnfit("the light lies at the hair's centre")
+    u, v, w = sun_basis(to_centre / length)
+    q = box_corners(lo, hi) - c
+    depth = q @ w
+    dpad = float(rmax) * float(pad)
+    near_limit = layout.BEAM_NEAR_FRACTION * max(float(np.ptp(depth)), float(rmax))
+    nearest = float(depth.min()) - dpad
+    if nearest - float(extent) <= near_limit:
+        raise BeamsUnfit("the hair reaches the light's plane")
+    return LightView(c, u, v, w, depth, (q @ u) / depth, (q @ v) / depth, nearest, dpad,
+                     float(np.max(np.linalg.norm(q, axis=1))), near_limit)
+
+
 def frame_reach(frame, scene_lo, scene_hi, rmax, pad):
     """The largest listing radius (bins) of any capsule of a scene within scene_lo..scene_hi
     whose widest radius is `rmax`, widened `pad` times, in `frame`: what bins_touched widens
@@ -238,7 +327,10 @@ def frame_reach(frame, scene_lo, scene_hi, rmax, pad):
     r = float(rmax) * float(pad) * frame.radius_scale
     if frame.kind == "persp":
         depth = (box_corners(scene_lo, scene_hi) - frame.origin) @ frame.axes[2]
-        r /= float(depth.min())
+        if frame.extent > 0.0:
+            r = (float(rmax) * float(pad) + frame.extent) * frame.radius_scale / (float(depth.min()) - rmax * pad)
+        else:
+            r /= float(depth.min())
     return r + frame.drift + layout.BEAM_BIN_EPS
 
 
@@ -273,7 +365,11 @@ def _keys_and_radii(frame, top, far, z0, z1, r):
         return near - r, r * frame.radius_scale + frame.drift + layout.BEAM_BIN_EPS, np.ones(len(r), bool)
     ok = near - r > frame.near_limit
     key = segment_distance(frame.origin, np.asarray(top, np.float64), np.asarray(far, np.float64)) - r
-    return key, r * frame.radius_scale / np.where(ok, near, 1.0) + frame.drift + layout.BEAM_BIN_EPS, ok
+    if frame.extent > 0.0:      # a light's rays end within its extent of the origin (light_frame)
+        rho = (r + frame.extent) * frame.radius_scale / np.where(ok, near - r, 1.0)
+    else:
+        rho = r * frame.radius_scale / np.where(ok, near, 1.0)
+    return key, rho + frame.drift + layout.BEAM_BIN_EPS, ok
 
 
 def slice_of(frame, key, sub=0):

@@ -276,6 +276,14 @@ def _set_uniforms(prog, camera, settings):
     set_uniforms(prog, **shading_model(settings.shading).uniforms(settings))
 
 
+def _set_origin(frame):
+    """A shadow set's origin as accel_beams.glsl's sun_origin: a light's position and extent,
+    or w = -1 for a sun."""
+    if frame.kind == "sun":
+        return (0.0, 0.0, 0.0, -1.0)
+    return (*(float(x) for x in frame.origin), float(frame.extent))
+
+
 def _set_beam_uniforms(prog, beams):
     """The camera's and the suns' beams (tracer/scene_beams.py, BeamPlan) as the trace shader
     reads them (shaders/accel_beams.glsl)."""
@@ -301,7 +309,8 @@ def _set_beam_uniforms(prog, beams):
                  else (0.0,) * 4, np.float32),
                 ("sun_dims", lambda b: tuple(int(d) for d in b.frame.dims) if b else (0, 0), np.int32),
                 ("sun_sub", lambda b: int(b.sub) if b else 0, np.int32),
-                ("sun_reach", lambda b: float(b.reach) if b else 0.0, np.float32)):
+                ("sun_reach", lambda b: float(b.reach) if b else 0.0, np.float32),
+                ("sun_origin", lambda b: _set_origin(b.frame) if b else (0.0, 0.0, 0.0, -1.0), np.float32)):
             if name in prog:
                 prog[name].write(pick(fn, dtype).tobytes())
     if "light_sun" in prog:

@@ -95,7 +95,8 @@ class BeamBuilder:
                      axis_z=tuple(float(x) for x in frame.axes[2]),
                      frame_offset=tuple(float(x) for x in frame.offset), radius_scale=float(frame.radius_scale),
                      drift=float(frame.drift), key0=float(frame.key0), key_step=float(frame.key_step),
-                     near_limit=float(frame.near_limit), dims=tuple(int(d) for d in frame.dims),
+                     near_limit=float(frame.near_limit), frame_extent=float(frame.extent),
+                     dims=tuple(int(d) for d in frame.dims),
                      max_bins=int(layout.BEAM_MAX_BINS_PER_CYLINDER), sub_bits=int(sub),
                      cyl_split=tex_cyl.part_texels // layout.TEXELS_PER_CYL)
         for unit, part in enumerate(tex_cyl.parts):

@@ -1,15 +1,16 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The scene's beams (tracer/beams.py) on the GPU: the camera's, built for the pixels a render
 traces and kept while the view stays (a progressive render's passes keep them), and up to
-MAX_SUN_BEAMS suns', kept while the sun stays, each built by the compute passes
+MAX_SUN_BEAMS lights' (suns, and point, spot and area lights from their position:
+beams.light_frame), kept while the light stays, each built by the compute passes
 (tracer/gpu_beams.py: beams need them, as a camera move must upload nothing); and which rays
 they cannot serve or would not pay for (those walk the scene's grid).
 
 Resolution. A camera bin is `bin_px` pixels a side, the smallest of CAMERA_BIN_PX (from
 ONE_SAMPLE_BIN_PX for a render of one sample a pixel) whose lists are estimated (from an
 even sample of the cylinders) to stay within their share of
-layout.BEAM_MAX_REFS; a sun's bins are squares sized so that a cylinder is listed in about
-SUN_REFS_PER_CYLINDER bins (fewer for large scenes, within the same budget), or half as many
+layout.BEAM_MAX_REFS; a sun's bins (a light's: of the directions from it) are squares sized
+so that a cylinder is listed in about SUN_REFS_PER_CYLINDER bins (fewer for large scenes, within the same budget), or half as many
 until the renders have traced rays enough to pay for those (SUN_FINE_RAYS_PER_BIN). Smaller bins list
 each cylinder more often but hand a ray fewer cylinders to test: docs/DECISIONS.md, "Beams".
 """
@@ -20,8 +21,8 @@ from typing import Optional
 import numpy as np
 
 from . import layout
-from .beams import (Beams, BeamsUnfit, TooManyRefs, box_corners, camera_frame, frame_reach, project, sun_basis,
-                    sun_frame)
+from .beams import (Beams, BeamsUnfit, TooManyRefs, box_corners, camera_frame, frame_reach, light_frame, light_view,
+                    project, sun_basis, sun_frame)
 from .cylinders import column_bounds, segment_radius
 from .gl_state import beam_builder
 
@@ -250,15 +251,20 @@ def camera_beams(state, scene, buffers, camera, box, pad, samples=1, pixel_n=0):
     return state.camera, shift, time.perf_counter() - t0
 
 
+# The lights whose shadow rays can take beams: a sun's rays share a direction (within its
+# spread, tan of half its angle, which the lists are padded for), a point, spot or area light's
+# end within its extent of its position (beams.light_frame); an environment's go everywhere.
+BEAM_LIGHTS = ("directional", "point", "spot", "area")
+
+
 def sun_slots(settings):
-    """Per light of `settings`, whether shadow rays toward it can take sun beams: a
-    directional light that casts shadows (its spread, tan of half its angle, is padded for),
-    the first MAX_SUN_BEAMS of them."""
+    """Per light of `settings`, the slot of the sun beams its shadow rays can take (-1: none):
+    a light of BEAM_LIGHTS that casts shadows, the first MAX_SUN_BEAMS of them."""
     if not settings.shadows:
         return [-1] * len(settings.lights)
     slots, n = [], 0
     for light in settings.lights:
-        if light.kind == "directional" and light.shadows and n < MAX_SUN_BEAMS:
+        if light.kind in BEAM_LIGHTS and light.shadows and n < MAX_SUN_BEAMS:
             slots.append(n)
             n += 1
         else:
@@ -267,18 +273,26 @@ def sun_slots(settings):
 
 
 def sun_beams(state, scene, buffers, light, slot, rays=None, traced=0, to_come=0):
-    """The Beams of shadow rays toward directional `light` in sun slot `slot`, built (or
-    kept while the light's direction and angle stay) into SUN_BUFFERS[slot]; None where beams
-    cannot serve it or would not pay. `rays`: the shadow rays this render may cast, when the
+    """The Beams of shadow rays toward `light` (of BEAM_LIGHTS) in sun slot `slot`, built (or
+    kept while a sun's direction and angle, or a light's position and extent, stay) into
+    SUN_BUFFERS[slot]; None where beams cannot serve it (a light among the hair:
+    beams.light_frame) or would not pay. `rays`: the shadow rays this render may cast, when the
     grid is to be built for it anyway (None: it is not: beams spare it; see SUN_REFS_PER_RAY).
     `traced`: the rays this render traces (samples times pixels), which with those of the
     renders before (state.traced) and `to_come`, the rays later renders are to trace
     (RenderSettings.samples_to_come), choose coarse or fine lists (SUN_FINE_RAYS_PER_BIN).
     Returns (beams, seconds building or 0.0)."""
     packed, _ = light.packed()
-    towards = -np.asarray(packed[:3], np.float32).astype(np.float64)
-    spread = float(light.extent()[1][3])
-    key = (towards.tobytes(), spread, id(scene.plan))
+    vector = np.asarray(packed[:3], np.float32).astype(np.float64)
+    if light.kind == "directional":
+        towards = -vector
+        spread = float(light.extent()[1][3])
+        frames = lambda: _sun_frames(scene, towards, spread, state.sample(scene.plan))  # noqa: E731
+        key = ("sun", towards.tobytes(), spread, id(scene.plan))
+    else:
+        reach = light_reach(light)
+        frames = lambda: _light_frames(scene, vector, reach, state.sample(scene.plan))  # noqa: E731
+        key = ("light", vector.tobytes(), reach, id(scene.plan))
     traced = state.traced + traced + to_come
     kept = state.suns[slot]
     # A kept entry: (key, beams, the fine frame they are to be built again for, or None).
@@ -294,12 +308,16 @@ def sun_beams(state, scene, buffers, light, slot, rays=None, traced=0, to_come=0
             SUN_REFS_PER_RAY * rays):
         return None, 0.0                     # not kept: the next render of these strands asks again
     t0 = time.perf_counter()
-    frame_for = _sun_frames(scene, towards, spread, state.sample(scene.plan))
-    fine = frame_for(most)
-    if most > SUN_MIN_REFS_PER_CYLINDER and traced < SUN_FINE_RAYS_PER_BIN * fine.num_bins:
-        frame = frame_for(SUN_MIN_REFS_PER_CYLINDER)
-    else:
-        frame, fine = fine, None
+    try:
+        frame_for = frames()
+        fine = frame_for(most)
+        if most > SUN_MIN_REFS_PER_CYLINDER and traced < SUN_FINE_RAYS_PER_BIN * fine.num_bins:
+            frame = frame_for(SUN_MIN_REFS_PER_CYLINDER)
+        else:
+            frame, fine = fine, None
+    except BeamsUnfit:
+        state.suns[slot] = (key, None, None)     # a light among the hair: its rays walk the grid
+        return None, time.perf_counter() - t0
     beams, _ = _sun_build(state, scene, buffers, slot, key, frame, fine)
     return beams, time.perf_counter() - t0
 
@@ -322,6 +340,52 @@ def _sun_build(state, scene, buffers, slot, key, frame, later, refused=None):
 def _ref_budget(buffers):
     """The references one family's lists may hold: layout.BEAM_MAX_REFS, within one buffer."""
     return min(layout.BEAM_MAX_REFS, buffers.max_texels)
+
+
+def light_reach(light):
+    """How far from its position a shadow ray toward a point, spot or area light may end: its
+    radius (the disk its points are drawn from), an area light's half diagonal; 0 without an
+    extent (tracer.settings.Light.extent)."""
+    u, v = (np.asarray(e, np.float64) for e in light.extent())
+    if light.kind == "area":
+        return float(np.sqrt(u[:3] @ u[:3] + v[:3] @ v[:3]))
+    return float(v[3])
+
+
+def _light_frames(scene, position, reach, sample):
+    """_sun_frames for a point, spot or area light at `position` whose rays end within `reach`
+    of it (beams.light_frame): bins of side h at unit depth, h by bisection of the same
+    estimate as a sun's over the cylinders of `sample` projected from the light, each listed as
+    wide as light_frame lists it at its depth. BeamsUnfit as light_frame."""
+    lo, hi = scene.box
+    rmax = float(scene.plan.radius.max())
+    view = light_view(position, reach, lo, hi, rmax, 1.0)
+    top, tip, r = sample
+    tx0, ty0, z0 = view.tangents(top)
+    tx1, ty1, z1 = view.tangents(tip)
+    du, dv = np.abs(tx1 - tx0), np.abs(ty1 - ty0)
+    major, minor = np.maximum(du, dv), np.minimum(du, dv)
+    slant = view.slant(0.0)
+    near = np.maximum(np.minimum(z0, z1) - r, view.nearest)
+    width = 2.0 * (r + reach) * slant / near
+    span = max(float(np.ptp(view.tx)), float(np.ptp(view.ty))) + float(width.max(initial=0.0))
+
+    def refs(h):
+        """_estimated_refs of the bins of side h (a cylinder's columns times its rows)."""
+        return float(np.mean(((major + width) / h + 1.0) * (minor / np.maximum(major, h) + width / h + 1.0)))
+
+    def frame_for(target):
+        h_lo, h_hi = span / SUN_MAX_SIDE, span
+        if refs(h_lo) <= target:
+            return light_frame(position, reach, lo, hi, rmax, 1.0, h_lo)
+        for _ in range(20):      # bisection: references fall as bins grow
+            h = 0.5 * (h_lo + h_hi)
+            if refs(h) > target:
+                h_lo = h
+            else:
+                h_hi = h
+        return light_frame(position, reach, lo, hi, rmax, 1.0, h_hi)
+    return frame_for
 
 
 def _sun_frames(scene, towards, spread, sample):

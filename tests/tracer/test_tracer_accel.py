@@ -163,10 +163,10 @@ def test_a_render_of_many_rays_refines_the_grid_and_finds_the_same_hits(renderer
     """A render of 16 samples a pixel builds the grid again with more references per
     cylinder (tracer/grid.py, refs_per_cylinder) where its rays pay for them; it keeps that
     grid for the renders after it, and new strands start from the rule for one sample. With
-    beams the grid serves the shadow rays toward a point light."""
+    beams the grid serves the shadow rays toward an environment (they go every way)."""
     import dataclasses
     from tracer import grid as tg
-    one = RenderSettings(layers=3, shadow_mode="transmittance", lights=(Light("point", (0.6, -1.0, 1.2)),))
+    one = RenderSettings(layers=3, shadow_mode="transmittance", lights=(Light("environment", intensity=3.0),))
     many = dataclasses.replace(one, spp=16)
     strands, want, coarse = _tuft(renderer, monkeypatch, accel, many)
     monkeypatch.setattr(tg, "RAYS_TUNED", 32 * 32)

@@ -2,8 +2,10 @@
 """Beams (Renderer(accel="beams"), tracer/beams.py): the camera's and the suns' binned lists
 give the grid's image, every cylinder a ray of a bin can meet is in the bin's list no later
 than its depth allows, the compute passes list what numpy lists, and where beams cannot serve
-a family of rays (a camera among the hair, lists past their budget, a point light) those
-rays walk the grid and the image does not change. A camera move uploads nothing."""
+a family of rays (a camera among the hair, lists past their budget, a light among the hair) those
+rays walk the grid and the image does not change. A camera move uploads nothing. Point, spot
+and area lights get beams from their position (a frame of perspective bins), widened for the
+rays' ends spread over the light."""
 from dataclasses import replace
 
 import numpy as np
@@ -12,7 +14,7 @@ import pytest
 from tracer import Camera, Light, Renderer, RenderSettings, strands_to_cylinders
 from tracer import layout
 from tracer.beams import (BeamsUnfit, TooManyRefs, build_beams, camera_frame, capsule_far, fine_bits, frame_reach,
-                          project, sun_frame)
+                          light_frame, project, sun_frame)
 from tracer.gpu_build import compute_available
 from tracer.gl_state import shared_context
 from tracer.scene_beams import CAMERA_BUFFERS, SUN_BUFFERS, beam_scene_box, read_beams
@@ -137,13 +139,44 @@ def test_rays_test_fully_only_the_cylinders_whose_capsule_holds_their_point(pair
     assert np.abs(grid - beams).max() <= 1e-6
 
 
-def test_a_point_light_walks_the_grid_and_a_sun_its_beams(pair):
+# Lights whose shadow rays share neither a direction nor an end: beams from their position.
+LIGHTS = {
+    "point": Light("point", (1.0, -1.0, 2.0), intensity=0.5),
+    "point with a radius": Light("point", (-1.2, 0.4, 2.2), intensity=3.0, falloff=True, radius=0.25),
+    "spot with a radius": Light("spot", (0.9, 1.1, 2.4), intensity=4.0, axis=(-0.3, -0.4, -1.0),
+                                spot_size=1.2, spot_blend=0.3, radius=0.1),
+    "area": Light("area", (1.4, -0.6, 1.9), intensity=3.0, axis=(-0.6, 0.3, -0.7), size=(0.6, 0.3),
+                  tangent=(0.0, 1.0, 0.0)),
+    "environment": Light("environment", intensity=1.0),
+}
+
+
+@pytest.mark.parametrize("light", list(LIGHTS))
+@pytest.mark.parametrize("spp", [1, 4])
+def test_a_lights_beams_give_the_grids_image(pair, light, spp):
+    """A point, spot or area light's shadow rays take beams from its position, soft shadows
+    (points drawn over its extent) too; an environment's walk the grid."""
+    strands = curls(30, 10, alpha=0.6)
+    settings = RenderSettings(spp=spp, layers=3, shading="chiang", lights=(LIGHTS[light],))
+    grid, beams = _render_both(pair, strands, CAM, settings)
+    assert (grid[..., 3] > 0).mean() > 0.05
+    lit = grid[..., :3][grid[..., 3] > 0]
+    assert lit.max() > 2 * np.percentile(lit, 10), "no light and shadow to tell apart"
+    assert (pair[1].scene.grid is None) == (light != "environment")
+    assert np.abs(grid - beams).max() <= 1e-6
+
+
+def test_a_light_among_the_hair_walks_the_grid(pair):
+    strands = curls(30, 10, alpha=0.6)
+    inside = Light("point", (0.0, 0.0, 0.5), intensity=0.3)
+    settings = RenderSettings(spp=1, layers=3, lights=(Light(), inside))
+    grid, beams = _render_both(pair, strands, CAM, settings)
+    assert pair[1].scene.grid is not None           # built for the point light's shadow rays
+    assert pair[1].beam_state.suns[0][1] is not None and pair[1].beam_state.suns[1][1] is None
+    assert np.abs(grid - beams).max() <= 1e-6
     strands, settings = CASES["opaque, hard shadows"]
     _render_both(pair, strands, CAM, settings)
-    assert pair[1].scene.grid is None            # a sun alone: no ray walks the grid
-    strands, settings = CASES["alpha, hard, 4 spp, two lights"]   # a sun and a point light
-    _render_both(pair, strands, CAM, settings)
-    assert pair[1].scene.grid is not None        # built for the point light's shadow rays
+    assert pair[1].scene.grid is None               # a sun alone: no ray walks the grid
 
 
 @pytest.mark.parametrize("spp, lists", [(1, "pixel centres"), (4, "1 px bins")])
@@ -495,6 +528,8 @@ def _scene(strands):
 
 
 SUN_SPREAD = np.tan(0.1)
+LIGHT_AT = np.array([0.9, -1.1, 2.3])
+LIGHT_EXTENT = 0.2
 
 
 def _frames(lo, hi, rmax):
@@ -505,16 +540,23 @@ def _frames(lo, hi, rmax):
     sun = sun_frame(towards, 0.0, lo, hi, rmax, 1.0, 0.02)
     wide_sun = sun_frame(towards, SUN_SPREAD, lo, hi, rmax, 1.0, 0.02)
     centres = camera_frame(CAM, (0, 0, 64, 64), lo, hi, rmax, 1.0, centres=True)
+    light = light_frame(LIGHT_AT, 0.0, lo, hi, rmax, 1.0, 0.01)
+    wide_light = light_frame(LIGHT_AT, LIGHT_EXTENT, lo, hi, rmax, 1.0, 0.03)
     return {"perspective": (persp, CAM), "orthographic": (ortho, ortho_cam), "sun": (sun, None),
-            "sun with an angle": (wide_sun, None), "pixel centres": (centres, CAM)}
+            "sun with an angle": (wide_sun, None), "pixel centres": (centres, CAM), "light": (light, None),
+            "light with an extent": (wide_light, None)}
 
 
-@pytest.mark.parametrize("family", ["perspective", "orthographic", "sun", "sun with an angle"])
+@pytest.mark.parametrize("family", ["perspective", "orthographic", "sun", "sun with an angle", "light",
+                                    "light with an extent"])
 def test_every_surface_point_is_listed_where_its_rays_look_it_up(family):
     """A ray that meets a point of a cylinder's surface looks up a bin that lists the cylinder
     in a fine slice starting no farther than the walk goes: a camera ray the bin of the pixel it
     goes through, up to the point's distance; a shadow ray the bin of where it leaves (below
-    the point, within the sun's angle of its direction), up to minus that origin's height."""
+    the point, within the sun's angle of its direction), up to minus that origin's height; a
+    shadow ray toward a light (from beyond the point, toward a point of the light within its
+    extent) the bin of where it leaves, up to that origin's distance from the light (or the
+    extent, if more)."""
     rng = np.random.default_rng(5)
     c, lo, hi, rmax = _scene(curls(30, 12, radius=0.01))
     frame, camera = _frames(lo, hi, rmax)[family]
@@ -534,6 +576,13 @@ def test_every_surface_point_is_listed_where_its_rays_look_it_up(family):
             d = w + tilt
             p = q - rng.uniform(0, 0.8, len(q))[:, None] * d / np.linalg.norm(d, axis=1)[:, None]
             reach = -(p @ w)
+        elif camera is None:
+            # Origins beyond q from a point of the light, within its extent of the position.
+            ends = rng.normal(0, 1, (len(q), 3))
+            ends *= (frame.extent * rng.uniform(0, 1, len(q)) ** (1 / 3) / np.linalg.norm(ends, axis=1))[:, None]
+            ends += frame.origin
+            p = q + rng.uniform(0, 0.8, len(q))[:, None] * (q - ends)
+            reach = np.maximum(np.linalg.norm(p - frame.origin, axis=1), frame.extent)
         else:
             p = q
             reach = np.linalg.norm(q - camera.position, axis=1) if frame.kind == "persp" else project(frame, q)[2]
@@ -549,7 +598,8 @@ def test_every_surface_point_is_listed_where_its_rays_look_it_up(family):
     assert checked > 500
 
 
-@pytest.mark.parametrize("family", ["perspective", "orthographic", "sun", "pixel centres"])
+@pytest.mark.parametrize("family", ["perspective", "orthographic", "sun", "pixel centres", "light",
+                                    "light with an extent"])
 def test_the_compute_passes_list_what_numpy_lists(family):
     assert _compute_vs_numpy(family) == 0       # references too few to pay for a fine slice
 
@@ -707,7 +757,7 @@ def _compute_vs_numpy(family):
     frame, _ = _frames(lo, hi, rmax)[family]
     want = build_beams(frame, c)
     from tracer.gl_state import beam_builder
-    names = CAMERA_BUFFERS if family != "sun" else SUN_BUFFERS[1]
+    names = SUN_BUFFERS[1] if family == "sun" or family.startswith("light") else CAMERA_BUFFERS
     # (The pixel centres' walk takes no marks.)
     reach = None if family == "pixel centres" else frame_reach(frame, lo, hi, rmax, 1.0)
     built = beam_builder().build(frame, r.num_cylinders, r.buffers["tex_cyl"], 1.0, r.buffers, *names,

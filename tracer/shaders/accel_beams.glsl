@@ -196,6 +196,10 @@ uniform vec4 sun_frame[SUN_BEAMS];
 uniform ivec2 sun_dims[SUN_BEAMS];
 uniform int sun_sub[SUN_BEAMS];
 uniform float sun_reach[SUN_BEAMS];     // the widest capsule's radius in bins, the drift and the listing's margin
+// A point, spot or area light's set (tracer/beams.py, light_frame): its position and how far
+// from it its rays may end (w >= 0); its bins are a perspective frame's from there, its keys
+// distances from there. A sun's: w < 0.
+uniform vec4 sun_origin[SUN_BEAMS];
 // Entry i of sun set `set` and its mark.
 uvec2 sun_entry(int set, int i) {
 #if SUN_BEAMS > 1
@@ -205,12 +209,29 @@ uvec2 sun_entry(int set, int i) {
 }
 
 // accel_transmittance for a shadow ray from p toward sun set `set` (its direction, or within
-// the spread its lists were padded for): the entries of p's bin nearest the sun first, until
-// the rest lie wholly below p.
+// the spread its lists were padded for; a light's: toward a point within its extent of its
+// position): the entries of p's bin nearest the sun (or the light) first, until the rest lie
+// wholly below p (farther from the light than p, or than its extent).
 float sun_transmittance(int set, vec3 p, vec3 d, float tmax, int own, float tmin, inout int hint) {
     vec4 fr = sun_frame[set];
     ivec2 n = sun_dims[set];
-    vec2 g = vec2(dot(p, sun_u[set]), dot(p, sun_v[set])) + fr.xy;
+    vec4 org = sun_origin[set];
+    vec3 q = p - org.xyz;
+    vec2 g = vec2(dot(q, sun_u[set]), dot(q, sun_v[set]));
+    // An entry whose fine slice starts past -height(p) lies wholly below p, as do all after it
+    // (a light's: past p's distance, or its extent).
+    float hp;
+    if (org.w >= 0.0) {
+        // A ray from behind the light's plane, or outside its bins, meets no hair: the hair
+        // lies beyond the extent, and every capsule's listing reaches as far as its rays drift.
+        float z = dot(q, sun_w[set]);
+        if (z <= 0.0) return 1.0;
+        g /= z;
+        hp = max(length(q), org.w);
+    } else {
+        hp = -dot(p, sun_w[set]);
+    }
+    g += fr.xy;
     ivec2 b = ivec2(floor(g));
     if (any(lessThan(b, ivec2(0))) || any(greaterThanEqual(b, n))) return 1.0;
     int cell = b.x + n.x * b.y;
@@ -219,8 +240,6 @@ float sun_transmittance(int set, vec3 p, vec3 d, float tmax, int own, float tmin
     if (set == 1) sc = texelFetch(tex_sun_cell1, cell).xy; else
 #endif
     sc = texelFetch(tex_sun_cell0, cell).xy;
-    // An entry whose fine slice starts past -height(p) lies wholly below p, as do all after it.
-    float hp = -dot(p, sun_w[set]);
     float below = hp + abs(hp) * 1e-5 + 1e-30;
     float trans = 1.0;
 #if COUNT

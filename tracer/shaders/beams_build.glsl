@@ -50,6 +50,7 @@ uniform float drift;
 uniform float key0;
 uniform float key_step;
 uniform float near_limit;     // perspective: a capsule's key at or below this reaches the camera's plane
+uniform float frame_extent;   // perspective: how far from the origin a light's rays may end (0: a camera's)
 uniform ivec2 dims;
 uniform int max_bins;         // MAX_BINS_PER_CYLINDER
 uniform int sub_bits;         // fine slices a slice: 2^sub_bits (count: the most, fill: the host's choice)
@@ -121,7 +122,9 @@ int project_cylinder(int id, out vec2 g0, out vec2 g1, out float rho, out int sl
         key = near - r;
         if (frame_kind == 0) {
             if (key <= near_limit) return max(f0.z, f1.z) + r < 0.0 ? 1 : 2;
-            rho = r * radius_scale / near + drift + BEAM_BIN_EPS;
+            // A light's rays end within its extent of the origin (tracer/beams.py, light_frame).
+            rho = (frame_extent > 0.0 ? (r + frame_extent) * radius_scale / (near - r) : r * radius_scale / near)
+                + drift + BEAM_BIN_EPS;
             key = segment_distance(frame_origin, top.xyz, far) - r;
         }
     }
