@@ -87,7 +87,8 @@ class BeamFrame:
     `box`: the whole-image pixels (x0, y0, x1, y1) the bins cover; `centres` (cameras, 1-pixel
     bins): a bin lists only what the ray through its centre may meet; `extent` (a point, spot or
     area light's "persp" frame, light_frame): how far from `origin` its shadow rays may end,
-    which every capsule's listing radius is widened for."""
+    `spread` what every capsule's listing radius is widened for (the rays' drift from their
+    origins' directions), `far_depth` the hair's farthest depth."""
     kind: str
     origin: np.ndarray
     axes: np.ndarray
@@ -103,6 +104,8 @@ class BeamFrame:
     centre: tuple = (0.0, 0.0)  # cameras: the optical axis in pixels the bins were laid for
     centres: bool = False       # cameras: for the rays through the pixels' centres alone (module text)
     extent: float = 0.0         # lights ("persp"): how far from the origin their shadow rays may end
+    spread: float = 0.0         # lights: how far those rays drift from their origin's direction (light_frame)
+    far_depth: float = 0.0      # lights: the hair's farthest depth (origins beyond move along their ray to it)
 
     @property
     def num_bins(self):
@@ -127,6 +130,7 @@ class Beams:
     count: np.ndarray = None
     entries: np.ndarray = None
     reach: float = None
+    longest: int = 0            # the most entries a bin holds
 
     @property
     def id_bits(self):
@@ -243,15 +247,19 @@ def light_frame(position, extent, scene_lo, scene_hi, rmax, pad, bin_size):
     depth over the box's projection widened by the widest listing radius, keys the distances
     from the position (as a perspective camera's). A ray from p toward a point q of the light
     meets a capsule only at distances from the position up to max(|p - position|, extent), and
-    only where p's projection lies within (r + extent)·sqrt(1 + |x|²) / (depth - r) of the
+    only where p's projection lies within (r + spread)·sqrt(1 + |x|²) / (depth - r) of the
     capsule's axis at unit depth (the camera's bound for the ray from the position through the
-    meeting point, plus how far that point's projection lies from p's: the ray's points
-    drift from p's direction by at most extent·sqrt(1 + |x|²) over their depth). BeamsUnfit
+    meeting point, plus how far that point's projection lies from p's: a point s of the way
+    from p to the light drifts from p's direction by at most s·extent·sqrt(1 + |x|²) over its
+    depth, and at the hair's depths s is at most (far - near) / (far - extent), LightView.spread,
+    once an origin deeper than the hair is moved along its ray to the hair's farthest depth,
+    which the walk does). BeamsUnfit
     where the box comes within its near limit plus `extent` of the light's plane (a light among
     the hair), whose rays walk the grid."""
     view = light_view(position, extent, scene_lo, scene_hi, rmax, pad)
     h = float(bin_size)
-    widen = (view.dpad + float(extent)) / view.nearest      # the listing radius over the slant factor
+    spread = view.spread(extent)
+    widen = (view.dpad + spread) / view.nearest      # the listing radius over the slant factor
     # The bins reach past the box's projection by the widest listing radius, its slant factor
     # taken a bin past them (a few rounds settle it).
     margin = 0.0
@@ -266,7 +274,8 @@ def light_frame(position, extent, scene_lo, scene_hi, rmax, pad, bin_size):
             max(1, int(np.ceil((float(view.ty.max()) + margin - y0) / h))))
     key0, step = _slices(float(view.depth.min()), view.far, view.dpad)
     return BeamFrame("persp", view.origin, np.stack([view.u / h, view.v / h, view.w]), np.array([-x0 / h, -y0 / h]),
-                     slant / h, 0.0, key0, step, dims, near_limit=view.near_limit, extent=float(extent))
+                     slant / h, 0.0, key0, step, dims, near_limit=view.near_limit, extent=float(extent),
+                     spread=spread, far_depth=float(view.depth.max()))
 
 
 @dataclass(frozen=True, eq=False)
@@ -286,6 +295,17 @@ class LightView:
     dpad: float
     far: float
     near_limit: float
+
+    def spread(self, extent):
+        """How far a ray toward a point within `extent` of the origin drifts, at most, from its
+        origin's direction, times that point's depth over its own (module text): extent times
+        the most of the way s toward the light it has gone at the hair's nearest depth, from an
+        origin no deeper than the hair's farthest (one deeper starts, for the lists, where its
+        ray comes back to that depth)."""
+        near, far = float(self.depth.min()), float(self.depth.max())
+        if not extent > 0.0:
+            return 0.0
+        return float(extent) * min(1.0, (far - near) / max(far - float(extent), 1e-30))
 
     def slant(self, past):
         """sqrt(1 + |x|²) at the farthest corner of the box's projection widened by `past`."""
@@ -327,8 +347,8 @@ def frame_reach(frame, scene_lo, scene_hi, rmax, pad):
     r = float(rmax) * float(pad) * frame.radius_scale
     if frame.kind == "persp":
         depth = (box_corners(scene_lo, scene_hi) - frame.origin) @ frame.axes[2]
-        if frame.extent > 0.0:
-            r = (float(rmax) * float(pad) + frame.extent) * frame.radius_scale / (float(depth.min()) - rmax * pad)
+        if frame.spread > 0.0:
+            r = (float(rmax) * float(pad) + frame.spread) * frame.radius_scale / (float(depth.min()) - rmax * pad)
         else:
             r /= float(depth.min())
     return r + frame.drift + layout.BEAM_BIN_EPS
@@ -365,8 +385,8 @@ def _keys_and_radii(frame, top, far, z0, z1, r):
         return near - r, r * frame.radius_scale + frame.drift + layout.BEAM_BIN_EPS, np.ones(len(r), bool)
     ok = near - r > frame.near_limit
     key = segment_distance(frame.origin, np.asarray(top, np.float64), np.asarray(far, np.float64)) - r
-    if frame.extent > 0.0:      # a light's rays end within its extent of the origin (light_frame)
-        rho = (r + frame.extent) * frame.radius_scale / np.where(ok, near - r, 1.0)
+    if frame.spread > 0.0:      # a light's rays drift from their origin's direction (light_frame)
+        rho = (r + frame.spread) * frame.radius_scale / np.where(ok, near - r, 1.0)
     else:
         rho = r * frame.radius_scale / np.where(ok, near, 1.0)
     return key, rho + frame.drift + layout.BEAM_BIN_EPS, ok
@@ -563,4 +583,5 @@ def build_beams(frame, cylinders, pad_factor=1.0, max_refs=None):
     key = np.sort(np.concatenate(keys)) if keys else np.zeros(0, np.int64)
     count = np.bincount(key >> 32, minlength=frame.num_bins).astype(np.int32)
     start = (np.cumsum(count, dtype=np.int64) - count).astype(np.int32)
-    return Beams(frame, len(key), sub, start, count, (key & 0xFFFFFFFF).astype(np.uint32))
+    return Beams(frame, len(key), sub, start, count, (key & 0xFFFFFFFF).astype(np.uint32),
+                 longest=int(count.max(initial=0)))

@@ -310,7 +310,8 @@ def _set_beam_uniforms(prog, beams):
                 ("sun_dims", lambda b: tuple(int(d) for d in b.frame.dims) if b else (0, 0), np.int32),
                 ("sun_sub", lambda b: int(b.sub) if b else 0, np.int32),
                 ("sun_reach", lambda b: float(b.reach) if b else 0.0, np.float32),
-                ("sun_origin", lambda b: _set_origin(b.frame) if b else (0.0, 0.0, 0.0, -1.0), np.float32)):
+                ("sun_origin", lambda b: _set_origin(b.frame) if b else (0.0, 0.0, 0.0, -1.0), np.float32),
+                ("sun_far", lambda b: float(b.frame.far_depth) if b else 0.0, np.float32)):
             if name in prog:
                 prog[name].write(pick(fn, dtype).tobytes())
     if "light_sun" in prog:

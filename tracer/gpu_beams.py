@@ -95,7 +95,7 @@ class BeamBuilder:
                      axis_z=tuple(float(x) for x in frame.axes[2]),
                      frame_offset=tuple(float(x) for x in frame.offset), radius_scale=float(frame.radius_scale),
                      drift=float(frame.drift), key0=float(frame.key0), key_step=float(frame.key_step),
-                     near_limit=float(frame.near_limit), frame_extent=float(frame.extent),
+                     near_limit=float(frame.near_limit), frame_spread=float(frame.spread),
                      dims=tuple(int(d) for d in frame.dims),
                      max_bins=int(layout.BEAM_MAX_BINS_PER_CYLINDER), sub_bits=int(sub),
                      cyl_split=tex_cyl.part_texels // layout.TEXELS_PER_CYL)
@@ -192,13 +192,13 @@ class BeamBuilder:
         top = layout.beam_sub_bits(n)
         fines = layout.BEAM_SLICES << top
         slices = self._buffer("slices", fines)
-        flags = self._buffer("flags", 2)
+        flags = self._buffer("flags", 3)
         sums = self._buffer("sums", chunks + 1)
         perm = self._buffer("perm", max(n, 1))
         filed = self._buffer("filed", max(n, 1))
         self._zero(counts, chunks * layout.BEAM_SCAN_CHUNK)
         self._zero(slices, fines)
-        self._zero(flags, 2)
+        self._zero(flags, 3)
         ctx.memory_barrier()
         prog = self._program(1, parts, frame.centres)
         self._frame_uniforms(prog, frame, pad_factor, tex_cyl, n, top)
@@ -217,6 +217,7 @@ class BeamBuilder:
         set_uniforms(prog, n_items=chunks)
         counts.bind_to_storage_buffer(0)
         sums.bind_to_storage_buffer(3)
+        flags.bind_to_storage_buffer(4)
         prog.run(*_groups(chunks))
         ctx.memory_barrier()
         prog = self._program(3, 1)
@@ -224,6 +225,7 @@ class BeamBuilder:
         prog.run(1)
         ctx.memory_barrier()
         total = int(np.frombuffer(sums.read(size=4, offset=4 * chunks), np.int32)[0])
+        longest = int(np.frombuffer(flags.read(size=4, offset=8), np.int32)[0])
         if total > max_refs:
             raise TooManyRefs(f"{total:,} references, more than {max_refs:,}")
         table = store.store(table_name, nbins, 2, "i4")
@@ -242,7 +244,7 @@ class BeamBuilder:
         if sort:
             self._sorted_fill(frame, n, tex_cyl, pad_factor, sub, total, (counts, filed), table, lists, reach,
                               windows, entry_bytes)
-            return Beams(frame, total, sub, reach=reach)
+            return Beams(frame, total, sub, reach=reach, longest=longest)
         # The cylinders bucketed by fine slice: every fine slice's first place from its count.
         first = np.cumsum(sizes) - sizes
         slices.write(first.astype(np.int32).tobytes())
@@ -268,7 +270,7 @@ class BeamBuilder:
                 set_uniforms(prog, n_items=int(filled[k]), first_item=int(first[k * group]))
                 prog.run(*_groups(int(filled[k])))
                 ctx.memory_barrier()
-        return Beams(frame, total, sub, reach=reach)
+        return Beams(frame, total, sub, reach=reach, longest=longest)
 
     def _sorted_fill(self, frame, n, tex_cyl, pad_factor, sub, total, scratch, table, lists, reach, windows,
                      entry_bytes):

@@ -141,6 +141,13 @@ PIXEL_MAX_SPP = 25
 # --- Compute passes (GL 4.3) -----------------------------------------------------------------
 GROUP = 64                  # local_size_x of the build shaders
 MAX_VISITS = 60000          # loop steps one invocation may take (llvmpipe stops at 65,535)
+# Loop steps the shadow walks of one trace invocation may take through sun and light beams
+# between them (renderer.within_walk_steps): llvmpipe counts the steps of all the loops of an
+# invocation together and stops every loop at 65,535 (two loops of 40,000 steps: the second
+# stopped after 17,000), which the camera's walk and the layers' loops share; a walk of a
+# light's lists is a list's entries and its runs of BEAM_RUN at the most.
+BEAM_WALK_STEPS = 48_000
+BEAM_RUN = 32               # entries a beam walk's run takes (shaders/accel_beams.glsl; a uint's bits at most)
 MAX_REPEATS = 4096          # repeated-point candidates one cylinder pass reports
 
 
@@ -173,7 +180,7 @@ def glsl_header():
         "LEAF_MAX": LEAF_MAX, "LEAF_BITS": LEAF_BITS, "PIECE_BITS": PIECE_BITS, "MAX_PIECES": MAX_PIECES,
         "WALK_TEXELS": WALK_TEXELS, "BVH_NODE": BVH_NODE, "BVH_SHORT_STACK": BVH_SHORT_STACK,
         "BEAM_ID_BITS": BEAM_ID_BITS, "BEAM_SLICES": BEAM_SLICES, "BEAM_SCAN_CHUNK": BEAM_SCAN_CHUNK,
-        "BEAM_BIN_EPS": float(BEAM_BIN_EPS), "BEAM_SLICE_EPS": float(BEAM_SLICE_EPS),
+        "BEAM_BIN_EPS": float(BEAM_BIN_EPS), "BEAM_SLICE_EPS": float(BEAM_SLICE_EPS), "BEAM_RUN": BEAM_RUN,
         "PIX_SHADE": PIXEL_SHADE, "PIX_SHADE_ONE": PIXEL_SHADE_ONE, "GROUP": GROUP, "MAX_VISITS": MAX_VISITS, "MAX_REPEATS": MAX_REPEATS,
     }
     lines = ["// Generated from tracer/layout.py when the program is made: edit the numbers there."]

@@ -314,6 +314,7 @@ class Renderer:
             sun_s += s
             suns[slot] = beams
             light_sun.append(slot if beams is not None else -1)
+        light_sun = within_walk_steps(light_sun, suns, shadow_walks(settings, self.effective_layers(settings)))
         state.renders += 1
         state.traced += traced
         plan = BeamPlan(cam, suns, light_sun, shift)
@@ -418,6 +419,32 @@ class Renderer:
         if settings.count:
             st.shadow_rays, st.layers_traced, st.cells_visited, st.cylinder_tests = (int(c) for c in counts)
         return img
+
+
+def shadow_walks(settings, layers):
+    """Shadow rays one invocation of the trace casts toward each light at the most: one a layer
+    of its sample, or the pixel sampler's shaded strands' (tracer/layout.py, PIXEL_SHADE) and
+    one more."""
+    if settings.sampler != "pixel":
+        return layers
+    return 2 if layers == 1 else layout.PIXEL_SHADE + 1
+
+
+def within_walk_steps(light_sun, suns, walks):
+    """`light_sun` (per light, its beam set or -1) with the sets whose lists are longest left
+    to the grid (-1) until `walks` walks of each remaining set's longest list, runs of
+    BEAM_RUN entries included, take no more than layout.BEAM_WALK_STEPS loop steps: llvmpipe
+    stops every loop of an invocation once they have taken 65,535 steps between them, which
+    would drop a sample's farther layers."""
+    used = sorted({k for k in light_sun if k >= 0})
+
+    def steps():
+        return walks * sum(suns[k].longest for k in used) * (1.0 + 1.0 / layout.BEAM_RUN)
+    while used and steps() > layout.BEAM_WALK_STEPS:
+        worst = max(used, key=lambda k: suns[k].longest)
+        used.remove(worst)
+        light_sun = [-1 if k == worst else k for k in light_sun]
+    return light_sun
 
 
 def check_gpu_range(strands, reach=None):

@@ -367,7 +367,7 @@ def _light_frames(scene, position, reach, sample):
     major, minor = np.maximum(du, dv), np.minimum(du, dv)
     slant = view.slant(0.0)
     near = np.maximum(np.minimum(z0, z1) - r, view.nearest)
-    width = 2.0 * (r + reach) * slant / near
+    width = 2.0 * (r + view.spread(reach)) * slant / near
     span = max(float(np.ptp(view.tx)), float(np.ptp(view.ty))) + float(width.max(initial=0.0))
 
     def refs(h):

@@ -166,6 +166,35 @@ def test_a_lights_beams_give_the_grids_image(pair, light, spp):
     assert np.abs(grid - beams).max() <= 1e-6
 
 
+def test_shadow_walks_past_the_loop_steps_leave_the_longest_lists_to_the_grid():
+    from types import SimpleNamespace
+    from tracer.renderer import within_walk_steps
+    suns = [SimpleNamespace(longest=3000), SimpleNamespace(longest=9000)]
+    steps = layout.BEAM_WALK_STEPS
+    # Four walks of each (four layers): 4 · 12,000 · (1 + 1/32) steps, more than 48,000.
+    assert within_walk_steps([0, 1, -1], suns, 4) == [0, -1, -1]
+    assert within_walk_steps([0, 1], suns, 1) == [0, 1]
+    assert within_walk_steps([1, 0], suns, steps // 3000) == [-1, -1]
+    assert within_walk_steps([-1, -1], suns, 100) == [-1, -1]
+
+
+def test_a_lights_lists_longer_than_the_walks_may_take_walk_the_grid(pair, monkeypatch):
+    """The same image where a light's lists would take a sample's walks past the steps llvmpipe
+    allows an invocation (renderer.within_walk_steps): its shadow rays walk the grid."""
+    strands = curls(30, 10, alpha=0.6)
+    settings = RenderSettings(spp=1, layers=3, lights=(LIGHTS["point with a radius"],))
+    grid, _ = _render_both(pair, strands, CAM, settings)
+    beams = pair[1]
+    assert beams.scene.grid is None
+    longest = beams.beam_state.suns[0][1].longest
+    assert longest > 0
+    monkeypatch.setattr(layout, "BEAM_WALK_STEPS", 3 * longest)        # less than three walks and their runs
+    beams.set_strands(strands)
+    img = beams.render(CAM, settings)
+    assert beams.scene.grid is not None and beams.beam_state.suns[0][1] is not None   # kept, not walked
+    assert np.abs(grid - img).max() <= 1e-6
+
+
 def test_a_light_among_the_hair_walks_the_grid(pair):
     strands = curls(30, 10, alpha=0.6)
     inside = Light("point", (0.0, 0.0, 0.5), intensity=0.3)
@@ -582,6 +611,11 @@ def test_every_surface_point_is_listed_where_its_rays_look_it_up(family):
             ends *= (frame.extent * rng.uniform(0, 1, len(q)) ** (1 / 3) / np.linalg.norm(ends, axis=1))[:, None]
             ends += frame.origin
             p = q + rng.uniform(0, 0.8, len(q))[:, None] * (q - ends)
+            # An origin deeper than the hair looks up where its ray comes back to its depth.
+            z = (p - frame.origin) @ frame.axes[2]
+            deep = z > frame.far_depth
+            toward = ends - p
+            p[deep] += ((z - frame.far_depth) / -(toward @ frame.axes[2]))[deep, None] * toward[deep]
             reach = np.maximum(np.linalg.norm(p - frame.origin, axis=1), frame.extent)
         else:
             p = q

@@ -29,8 +29,7 @@ int beam_entry_id(uint e, int sub) {
 // without the capsule test 95 and 47 (docs/DECISIONS.md, "Rays of a beam test a cylinder's
 // capsule first"; the marks: "A beam's entries carry their marks"). Not the full test behind
 // a branch: llvmpipe would run it for every entry (hit_cylinder_ab); the bits make a loop of
-// the entries that pass.
-const int BEAM_RUN = 32;
+// the entries that pass. BEAM_RUN comes from tracer/layout.py (at most 32: a uint's bits).
 
 // Whether point g (bins) lies within `reach` of the capsule axis G.xy..G.zw (bins).
 bool beam_capsule_holds(vec2 g, vec4 G, float reach) {
@@ -200,6 +199,7 @@ uniform float sun_reach[SUN_BEAMS];     // the widest capsule's radius in bins, 
 // from it its rays may end (w >= 0); its bins are a perspective frame's from there, its keys
 // distances from there. A sun's: w < 0.
 uniform vec4 sun_origin[SUN_BEAMS];
+uniform float sun_far[SUN_BEAMS];       // a light's: the hair's farthest depth from it
 // Entry i of sun set `set` and its mark.
 uvec2 sun_entry(int set, int i) {
 #if SUN_BEAMS > 1
@@ -217,21 +217,30 @@ float sun_transmittance(int set, vec3 p, vec3 d, float tmax, int own, float tmin
     ivec2 n = sun_dims[set];
     vec4 org = sun_origin[set];
     vec3 q = p - org.xyz;
-    vec2 g = vec2(dot(q, sun_u[set]), dot(q, sun_v[set]));
     // An entry whose fine slice starts past -height(p) lies wholly below p, as do all after it
     // (a light's: past p's distance, or its extent).
-    float hp;
+    float hp, z = 1.0;
     if (org.w >= 0.0) {
-        // A ray from behind the light's plane, or outside its bins, meets no hair: the hair
-        // lies beyond the extent, and every capsule's listing reaches as far as its rays drift.
-        float z = dot(q, sun_w[set]);
+        // A ray from deeper than the hair meets none until it comes back to the hair's
+        // farthest depth, where the lists take it up (tracer/beams.py, light_frame); one from
+        // behind the light's plane, or outside its bins, meets none at all: the hair lies
+        // beyond the extent, and every capsule's listing reaches as far as the rays drift.
+        vec3 w = sun_w[set];
+        z = dot(q, w);
+        float far = sun_far[set];
+        if (z > far) {
+            float dz = -dot(d, w);
+            float t = (z - far) / max(dz, 1e-30);
+            if (dz <= 0.0 || t >= tmax) return 1.0;
+            q += t * d;
+            z = dot(q, w);
+        }
         if (z <= 0.0) return 1.0;
-        g /= z;
         hp = max(length(q), org.w);
     } else {
         hp = -dot(p, sun_w[set]);
     }
-    g += fr.xy;
+    vec2 g = vec2(dot(q, sun_u[set]), dot(q, sun_v[set])) / z + fr.xy;
     ivec2 b = ivec2(floor(g));
     if (any(lessThan(b, ivec2(0))) || any(greaterThanEqual(b, n))) return 1.0;
     int cell = b.x + n.x * b.y;

@@ -10,7 +10,7 @@
 //                   cylinder listed somewhere, filed[cylinder] = its fine slice (-1: listed
 //                   nowhere), the fine slices of the most bits the ids leave
 //   PASS 2  sums:   sums[c] = the counts of bins c·CHUNK .. (c+1)·CHUNK (counts is padded
-//                   with zeros to whole chunks)
+//                   with zeros to whole chunks), flags[2] the most entries a bin has
 //   PASS 3  scan:   one invocation: sums become exclusive prefix sums, sums[n_items] the total
 //   PASS 4  starts: per chunk of bins, each bin's first entry into the bin table (start,
 //                   count), and into counts, which become the cursors
@@ -50,7 +50,7 @@ uniform float drift;
 uniform float key0;
 uniform float key_step;
 uniform float near_limit;     // perspective: a capsule's key at or below this reaches the camera's plane
-uniform float frame_extent;   // perspective: how far from the origin a light's rays may end (0: a camera's)
+uniform float frame_spread;   // perspective: how far a light's rays drift (tracer/beams.py, light_frame; 0: a camera's)
 uniform ivec2 dims;
 uniform int max_bins;         // MAX_BINS_PER_CYLINDER
 uniform int sub_bits;         // fine slices a slice: 2^sub_bits (count: the most, fill: the host's choice)
@@ -65,7 +65,7 @@ layout(std430, binding = 0) buffer Counts { int counts[]; };     // per bin: cou
 layout(std430, binding = 1) buffer Slices { int slices[]; };     // per fine slice: count, then cursor
 layout(std430, binding = 2) buffer Perm { int perm[]; };         // cylinders, fine slice by fine slice
 layout(std430, binding = 3) buffer Sums { int sums[]; };         // per chunk of bins
-layout(std430, binding = 4) buffer Flags { int flags[]; };       // [0] near the camera, [1] too wide
+layout(std430, binding = 4) buffer Flags { int flags[]; };       // [0] near the camera, [1] too wide, [2] longest list
 layout(std430, binding = 5) buffer Filed { int filed[]; };       // per cylinder: its fine slice, -1 listed nowhere
 #if PASS == 4
 layout(std430, binding = 6) writeonly buffer Table { ivec2 table[]; };
@@ -122,8 +122,8 @@ int project_cylinder(int id, out vec2 g0, out vec2 g1, out float rho, out int sl
         key = near - r;
         if (frame_kind == 0) {
             if (key <= near_limit) return max(f0.z, f1.z) + r < 0.0 ? 1 : 2;
-            // A light's rays end within its extent of the origin (tracer/beams.py, light_frame).
-            rho = (frame_extent > 0.0 ? (r + frame_extent) * radius_scale / (near - r) : r * radius_scale / near)
+            // A light's rays drift from their origin's direction (tracer/beams.py, light_frame).
+            rho = (frame_spread > 0.0 ? (r + frame_spread) * radius_scale / (near - r) : r * radius_scale / near)
                 + drift + BEAM_BIN_EPS;
             key = segment_distance(frame_origin, top.xyz, far) - r;
         }
@@ -294,9 +294,14 @@ void main() {
     }
 #elif PASS == 2
     if (i >= n_items) return;
-    int s = 0;
-    for (int k = 0; k < BEAM_SCAN_CHUNK; ++k) s += counts[i * BEAM_SCAN_CHUNK + k];
+    int s = 0, most = 0;
+    for (int k = 0; k < BEAM_SCAN_CHUNK; ++k) {
+        int c = counts[i * BEAM_SCAN_CHUNK + k];
+        s += c;
+        most = max(most, c);
+    }
     sums[i] = s;
+    atomicMax(flags[2], most);
 #elif PASS == 3
     if (i != 0) return;
     int total = 0;
