@@ -240,6 +240,15 @@ def sun_frame(towards, spread, scene_lo, scene_hi, rmax, pad, bin_size):
                      1.0 / h, drift_units / h, key0, step, dims)
 
 
+def capsule_spread(frame, depth):
+    """How far the shadow rays of a light's `frame` drift from their origins' directions at
+    `depth` (times depth over the drifted point's own, module text): the light's extent times
+    the most of the way toward it a ray from the hair's farthest depth has gone there, less the
+    nearer the capsule lies to that depth; at most frame.spread."""
+    return np.minimum(frame.extent * np.maximum(frame.far_depth - depth, 0.0) / (frame.far_depth - frame.extent),
+                      frame.spread)
+
+
 def light_frame(position, extent, scene_lo, scene_hi, rmax, pad, bin_size):
     """The frame of shadow rays toward a light at `position` whose rays end within `extent` of
     it (a point or spot light's radius, an area light's half diagonal; 0: at it): a perspective
@@ -386,7 +395,7 @@ def _keys_and_radii(frame, top, far, z0, z1, r):
     ok = near - r > frame.near_limit
     key = segment_distance(frame.origin, np.asarray(top, np.float64), np.asarray(far, np.float64)) - r
     if frame.spread > 0.0:      # a light's rays drift from their origin's direction (light_frame)
-        rho = (r + frame.spread) * frame.radius_scale / np.where(ok, near - r, 1.0)
+        rho = (r + capsule_spread(frame, near - r)) * frame.radius_scale / np.where(ok, near - r, 1.0)
     else:
         rho = r * frame.radius_scale / np.where(ok, near, 1.0)
     return key, rho + frame.drift + layout.BEAM_BIN_EPS, ok

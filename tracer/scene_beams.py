@@ -84,6 +84,15 @@ SUN_REFS_PER_RAY = 100.0
 # SUN_FINE_RAYS_PER_BIN a fine bin (the third of 10,000 strands at one sample): a camera
 # move or a progressive preview's passes pay for them once.
 SUN_FINE_RAYS_PER_BIN = 1.5
+# A point, spot or area light with an extent: each capsule is listed wider by how far its
+# rays drift, so its bins come out coarser than a light's without (for the same references a
+# cylinder) and its lists longer. Past this many times fewer bins its rays walk the grid:
+# measured on llvmpipe at 512², one sample, 4 layers, a point light three times the hair's
+# diagonal away, first render and re-render, beams against the grid: straight.hair of radius
+# 0.02 of the diagonal (6.7 times fewer bins) 0.51 and 0.42 s against 0.74 and 0.68, of 0.05
+# (21 times) 0.95 and 0.88 s against 0.62 and 0.59; 10,000 `wavy` strands of 0.02 (5.1 times)
+# 0.78 and 0.47 s against 0.81 and 0.53 (docs/DECISIONS.md, "Beams").
+LIGHT_MAX_COARSENING = 8.0
 SUN_MAX_SIDE = 2048          # bins along either side of a sun's plane
 SAMPLE = 20_000              # cylinders whose projections decide a resolution
 
@@ -287,7 +296,7 @@ def sun_beams(state, scene, buffers, light, slot, rays=None, traced=0, to_come=0
     if light.kind == "directional":
         towards = -vector
         spread = float(light.extent()[1][3])
-        frames = lambda: _sun_frames(scene, towards, spread, state.sample(scene.plan))  # noqa: E731
+        frames = lambda: (_sun_frames(scene, towards, spread, state.sample(scene.plan)), None)  # noqa: E731
         key = ("sun", towards.tobytes(), spread, id(scene.plan))
     else:
         reach = light_reach(light)
@@ -309,14 +318,16 @@ def sun_beams(state, scene, buffers, light, slot, rays=None, traced=0, to_come=0
         return None, 0.0                     # not kept: the next render of these strands asks again
     t0 = time.perf_counter()
     try:
-        frame_for = frames()
+        frame_for, coarsening = frames()
+        if coarsening is not None and coarsening(most) > LIGHT_MAX_COARSENING:
+            raise BeamsUnfit("a light so wide beside the hair that its lists would be long")
         fine = frame_for(most)
         if most > SUN_MIN_REFS_PER_CYLINDER and traced < SUN_FINE_RAYS_PER_BIN * fine.num_bins:
             frame = frame_for(SUN_MIN_REFS_PER_CYLINDER)
         else:
             frame, fine = fine, None
     except BeamsUnfit:
-        state.suns[slot] = (key, None, None)     # a light among the hair: its rays walk the grid
+        state.suns[slot] = (key, None, None)     # a light among the hair, or wide: its rays walk the grid
         return None, time.perf_counter() - t0
     beams, _ = _sun_build(state, scene, buffers, slot, key, frame, fine)
     return beams, time.perf_counter() - t0
@@ -353,10 +364,12 @@ def light_reach(light):
 
 
 def _light_frames(scene, position, reach, sample):
-    """_sun_frames for a point, spot or area light at `position` whose rays end within `reach`
-    of it (beams.light_frame): bins of side h at unit depth, h by bisection of the same
-    estimate as a sun's over the cylinders of `sample` projected from the light, each listed as
-    wide as light_frame lists it at its depth. BeamsUnfit as light_frame."""
+    """(frame_for, coarsening) for a point, spot or area light at `position` whose rays end
+    within `reach` of it (beams.light_frame): frame_for as _sun_frames's (bins of side h at
+    unit depth, h by bisection of the same estimate over the cylinders of `sample` projected
+    from the light, each as wide as light_frame lists it at its depth); coarsening(target) how
+    many times as many bins a light without extent would get for the same target (how much
+    longer the extent makes the lists). BeamsUnfit as light_frame."""
     lo, hi = scene.box
     rmax = float(scene.plan.radius.max())
     view = light_view(position, reach, lo, hi, rmax, 1.0)
@@ -367,25 +380,33 @@ def _light_frames(scene, position, reach, sample):
     major, minor = np.maximum(du, dv), np.minimum(du, dv)
     slant = view.slant(0.0)
     near = np.maximum(np.minimum(z0, z1) - r, view.nearest)
-    width = 2.0 * (r + view.spread(reach)) * slant / near
-    span = max(float(np.ptp(view.tx)), float(np.ptp(view.ty))) + float(width.max(initial=0.0))
+    far = float(view.depth.max())
+    drift = np.minimum(reach * np.maximum(far - near, 0.0) / (far - reach), view.spread(reach)) if reach > 0 else 0.0
+    widths = (2.0 * r * slant / near, 2.0 * (r + drift) * slant / near)       # without and with the extent
+    span = max(float(np.ptp(view.tx)), float(np.ptp(view.ty))) + float(widths[1].max(initial=0.0))
 
-    def refs(h):
-        """_estimated_refs of the bins of side h (a cylinder's columns times its rows)."""
-        return float(np.mean(((major + width) / h + 1.0) * (minor / np.maximum(major, h) + width / h + 1.0)))
-
-    def frame_for(target):
+    def side(target, width):
+        """The bins' side whose estimated references a cylinder (a cylinder's columns times
+        its rows) come to `target`, by bisection: references fall as bins grow."""
+        def refs(h):
+            return float(np.mean(((major + width) / h + 1.0) * (minor / np.maximum(major, h) + width / h + 1.0)))
         h_lo, h_hi = span / SUN_MAX_SIDE, span
         if refs(h_lo) <= target:
-            return light_frame(position, reach, lo, hi, rmax, 1.0, h_lo)
-        for _ in range(20):      # bisection: references fall as bins grow
+            return h_lo
+        for _ in range(20):
             h = 0.5 * (h_lo + h_hi)
             if refs(h) > target:
                 h_lo = h
             else:
                 h_hi = h
-        return light_frame(position, reach, lo, hi, rmax, 1.0, h_hi)
-    return frame_for
+        return h_hi
+
+    def frame_for(target):
+        return light_frame(position, reach, lo, hi, rmax, 1.0, side(target, widths[1]))
+
+    def coarsening(target):
+        return (side(target, widths[1]) / side(target, widths[0])) ** 2 if reach > 0 else 1.0
+    return frame_for, coarsening
 
 
 def _sun_frames(scene, towards, spread, sample):

@@ -142,10 +142,10 @@ def test_rays_test_fully_only_the_cylinders_whose_capsule_holds_their_point(pair
 # Lights whose shadow rays share neither a direction nor an end: beams from their position.
 LIGHTS = {
     "point": Light("point", (1.0, -1.0, 2.0), intensity=0.5),
-    "point with a radius": Light("point", (-1.2, 0.4, 2.2), intensity=3.0, falloff=True, radius=0.25),
+    "point with a radius": Light("point", (-1.2, 0.4, 2.2), intensity=3.0, falloff=True, radius=0.06),
     "spot with a radius": Light("spot", (0.9, 1.1, 2.4), intensity=4.0, axis=(-0.3, -0.4, -1.0),
-                                spot_size=1.2, spot_blend=0.3, radius=0.1),
-    "area": Light("area", (1.4, -0.6, 1.9), intensity=3.0, axis=(-0.6, 0.3, -0.7), size=(0.6, 0.3),
+                                spot_size=1.2, spot_blend=0.3, radius=0.04),
+    "area": Light("area", (1.4, -0.6, 1.9), intensity=3.0, axis=(-0.6, 0.3, -0.7), size=(0.12, 0.06),
                   tangent=(0.0, 1.0, 0.0)),
     "environment": Light("environment", intensity=1.0),
 }
@@ -195,9 +195,14 @@ def test_a_lights_lists_longer_than_the_walks_may_take_walk_the_grid(pair, monke
     assert np.abs(grid - img).max() <= 1e-6
 
 
-def test_a_light_among_the_hair_walks_the_grid(pair):
+@pytest.mark.parametrize("where", ["among the hair", "wide beside it"])
+def test_a_light_among_the_hair_or_wide_walks_the_grid(pair, where):
+    """A light whose box of hair reaches its plane cannot be projected; one so wide beside the
+    hair that its bins would be many times coarser than a point's (scene_beams,
+    LIGHT_MAX_COARSENING) would make long lists: their shadow rays walk the grid."""
     strands = curls(30, 10, alpha=0.6)
-    inside = Light("point", (0.0, 0.0, 0.5), intensity=0.3)
+    inside = (Light("point", (0.0, 0.0, 0.5), intensity=0.3) if where == "among the hair" else
+              Light("point", (-1.2, 0.4, 2.2), intensity=3.0, falloff=True, radius=0.6))
     settings = RenderSettings(spp=1, layers=3, lights=(Light(), inside))
     grid, beams = _render_both(pair, strands, CAM, settings)
     assert pair[1].scene.grid is not None           # built for the point light's shadow rays

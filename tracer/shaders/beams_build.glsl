@@ -51,6 +51,8 @@ uniform float key0;
 uniform float key_step;
 uniform float near_limit;     // perspective: a capsule's key at or below this reaches the camera's plane
 uniform float frame_spread;   // perspective: how far a light's rays drift (tracer/beams.py, light_frame; 0: a camera's)
+uniform float frame_extent;   // a light's extent and the hair's farthest depth from it (light_frame)
+uniform float frame_far;
 uniform ivec2 dims;
 uniform int max_bins;         // MAX_BINS_PER_CYLINDER
 uniform int sub_bits;         // fine slices a slice: 2^sub_bits (count: the most, fill: the host's choice)
@@ -122,8 +124,11 @@ int project_cylinder(int id, out vec2 g0, out vec2 g1, out float rho, out int sl
         key = near - r;
         if (frame_kind == 0) {
             if (key <= near_limit) return max(f0.z, f1.z) + r < 0.0 ? 1 : 2;
-            // A light's rays drift from their origin's direction (tracer/beams.py, light_frame).
-            rho = (frame_spread > 0.0 ? (r + frame_spread) * radius_scale / (near - r) : r * radius_scale / near)
+            // A light's rays drift from their origin's direction (tracer/beams.py, light_frame,
+            // capsule_spread).
+            float spread = min(frame_extent * max(frame_far - (near - r), 0.0) / (frame_far - frame_extent),
+                               frame_spread);
+            rho = (frame_spread > 0.0 ? (r + spread) * radius_scale / (near - r) : r * radius_scale / near)
                 + drift + BEAM_BIN_EPS;
             key = segment_distance(frame_origin, top.xyz, far) - r;
         }
