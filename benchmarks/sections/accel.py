@@ -179,6 +179,74 @@ def run(sec, cfg):
               caption="Work per ray (tracer counters, 1 spp). Steps are BVH boxes tested, grid cells visited or "
                       "a beam ray's bin and the list entries it read, their marks tested (with beams a 1-spp camera "
                       "ray of dense hair walks the grid); tests are cylinder (BVH: piece) intersection tests.")
+    if not over_budget(sec, 0.9):
+        _point_light(sec, tracer, scenes, size, kw, runs)
+
+
+# A point light where the sun stood, this many times the scene box's diagonal away, without a
+# radius and with one of these shares of the diagonal (soft shadows, as Blender's default point
+# light of 0.1 m casts: 0.004 of its distance, about 0.013 of a head's diagonal at 7 m).
+POINT_DISTANCE = 3.0
+POINT_RADII = (0.0, 0.01)
+
+
+def _point_light(sec, tracer, scenes, size, kw, runs):
+    """Shadow rays toward a point light: its beams (from its position, tracer/beams.py
+    light_frame) against the grid, first render and re-render after a camera move."""
+    from benchmarks.scenes import SUN_DIRECTION, orbit
+    rows = []
+    for name, count in scenes:
+        if (count or 0) > HUGE_STRANDS or over_budget(sec, 0.95):
+            continue
+        label, strands = _scene(name, count)
+        lo, hi = strands.bounds()
+        diagonal = float(np.linalg.norm(hi - lo))
+        toward = -SUN_DIRECTION / np.linalg.norm(SUN_DIRECTION)
+        matrix = view_matrix(lo, hi, size)
+        cams = [tracer_camera(orbit(matrix, np.radians(a), 0.5 * (lo + hi)), size) for a in (0.0, 12.0)]
+        for radius in POINT_RADII:
+            light = tracer.Light("point", tuple(0.5 * (lo + hi) + toward * POINT_DISTANCE * diagonal), intensity=3.0,
+                                 radius=radius * diagonal)
+            rows += _point_light_rows(sec, tracer, f"{label}, radius {radius:g}", strands, cams,
+                                      settings(spp=1, lights=(light,), **kw), runs)
+    sec.table(["scene, light's radius (of the diagonal)", "structure", "first render (median)",
+               "re-render after a camera move (median)", "max abs diff vs grid", "shadow rays walked"], rows,
+              caption=f"A point light where the sun stood ({POINT_DISTANCE:g} times the scene box's diagonal from "
+                      f"its centre), without a radius and with one (soft shadows), 1 spp, 4 layers, "
+                      f"{size[0]}×{size[1]}; first render = set_strands + render; the renderers take turns, "
+                      f"{runs} rounds after one that compiles the programs. Its shadow rays take beams from the "
+                      "light's position (tracer/beams.py, light_frame), or the grid where the light's lists would "
+                      "be long (tracer/scene_beams.py, LIGHT_MAX_COARSENING).")
+
+
+def _point_light_rows(sec, tracer, label, strands, cams, rs, runs):
+    """_point_light's rows for one scene and light."""
+    rows = []
+    renderers = {a: tracer.Renderer(accel=a) for a in ("grid", "beams")}
+    first = {a: [] for a in renderers}
+    again = {a: [] for a in renderers}
+    images = {}
+    for _ in range(runs + 1):       # the first round compiles the programs: not counted
+        for a, r in renderers.items():
+            t0 = time.perf_counter()
+            r.set_strands(strands)
+            images[a] = r.render(cams[0], rs)
+            t1 = time.perf_counter()
+            r.render(cams[1], rs)
+            first[a].append(t1 - t0)
+            again[a].append(time.perf_counter() - t1)
+    shadow = "beams" if renderers["beams"].scene.grid is None else "grid"
+    diff = float(np.abs(images["grid"] - images["beams"]).max())
+    for a in renderers:
+        rows.append([label, a, fmt_time(statistics.median(first[a][1:])), fmt_time(statistics.median(again[a][1:])),
+                     f"{diff:.1e}" if a == "beams" else "", shadow if a == "beams" else "grid"])
+    sec.summary.append(f"{label}, a point light: beams first render {fmt_time(statistics.median(first['beams'][1:]))}"
+                       f", re-render {fmt_time(statistics.median(again['beams'][1:]))} against the grid's "
+                       f"{fmt_time(statistics.median(first['grid'][1:]))} and "
+                       f"{fmt_time(statistics.median(again['grid'][1:]))}; images differ by {diff:.1e}")
+    for r in renderers.values():
+        r.buffers.release()
+    return rows
 
 
 FINE = "grid, 16-spp aim"
