@@ -314,7 +314,8 @@ class Renderer:
             sun_s += s
             suns[slot] = beams
             light_sun.append(slot if beams is not None else -1)
-        light_sun = within_walk_steps(light_sun, suns, shadow_walks(settings, self.effective_layers(settings)))
+        walks = shadow_walks(settings, self.effective_layers(settings), self.meshes is not None)
+        light_sun = within_walk_steps(light_sun, suns, walks)
         state.renders += 1
         state.traced += traced
         plan = BeamPlan(cam, suns, light_sun, shift)
@@ -421,13 +422,13 @@ class Renderer:
         return img
 
 
-def shadow_walks(settings, layers):
+def shadow_walks(settings, layers, meshes=False):
     """Shadow rays one invocation of the trace casts toward each light at the most: one a layer
     of its sample, or the pixel sampler's shaded strands' (tracer/layout.py, PIXEL_SHADE) and
-    one more."""
+    one more; with `meshes` one more, from the mesh behind."""
     if settings.sampler != "pixel":
-        return layers
-    return 2 if layers == 1 else layout.PIXEL_SHADE + 1
+        return layers + int(meshes)
+    return (2 if layers == 1 else layout.PIXEL_SHADE + 1) + int(meshes)
 
 
 def within_walk_steps(light_sun, suns, walks):

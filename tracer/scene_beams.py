@@ -10,9 +10,10 @@ Resolution. A camera bin is `bin_px` pixels a side, the smallest of CAMERA_BIN_P
 ONE_SAMPLE_BIN_PX for a render of one sample a pixel) whose lists are estimated (from an
 even sample of the cylinders) to stay within their share of
 layout.BEAM_MAX_REFS; a sun's bins (a light's: of the directions from it) are squares sized
-so that a cylinder is listed in about SUN_REFS_PER_CYLINDER bins (fewer for large scenes, within the same budget), or half as many
-until the renders have traced rays enough to pay for those (SUN_FINE_RAYS_PER_BIN). Smaller bins list
-each cylinder more often but hand a ray fewer cylinders to test: docs/DECISIONS.md, "Beams".
+so that a cylinder is listed in about SUN_REFS_PER_CYLINDER bins (fewer for large scenes,
+within the same budget), or half as many until the renders have traced rays enough to pay for
+those (SUN_FINE_RAYS_PER_BIN). Smaller bins list each cylinder more often but hand a ray fewer
+cylinders to test: docs/DECISIONS.md, "Beams".
 """
 import time
 from dataclasses import dataclass, field
@@ -89,9 +90,9 @@ SUN_FINE_RAYS_PER_BIN = 1.5
 # cylinder) and its lists longer. Past this many times fewer bins its rays walk the grid:
 # measured on llvmpipe at 512², one sample, 4 layers, a point light three times the hair's
 # diagonal away, first render and re-render, beams against the grid: straight.hair of radius
-# 0.02 of the diagonal (6.7 times fewer bins) 0.51 and 0.42 s against 0.74 and 0.68, of 0.05
-# (21 times) 0.95 and 0.88 s against 0.62 and 0.59; 10,000 `wavy` strands of 0.02 (5.1 times)
-# 0.78 and 0.47 s against 0.81 and 0.53 (docs/DECISIONS.md, "Beams").
+# 0.005, 0.01 and 0.02 of the diagonal (1.6, 2.3 and 3.8 times fewer bins) 301/215, 325/266
+# and 425/343 ms against 633/567, 641/548 and 643/568; of 0.05 (21 times) 947/884 against
+# 623/592 (docs/DECISIONS.md, "Beams").
 LIGHT_MAX_COARSENING = 8.0
 SUN_MAX_SIDE = 2048          # bins along either side of a sun's plane
 SAMPLE = 20_000              # cylinders whose projections decide a resolution

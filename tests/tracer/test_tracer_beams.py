@@ -168,7 +168,7 @@ def test_a_lights_beams_give_the_grids_image(pair, light, spp):
 
 def test_shadow_walks_past_the_loop_steps_leave_the_longest_lists_to_the_grid():
     from types import SimpleNamespace
-    from tracer.renderer import within_walk_steps
+    from tracer.renderer import shadow_walks, within_walk_steps
     suns = [SimpleNamespace(longest=3000), SimpleNamespace(longest=9000)]
     steps = layout.BEAM_WALK_STEPS
     # Four walks of each (four layers): 4 · 12,000 · (1 + 1/32) steps, more than 48,000.
@@ -176,6 +176,12 @@ def test_shadow_walks_past_the_loop_steps_leave_the_longest_lists_to_the_grid():
     assert within_walk_steps([0, 1], suns, 1) == [0, 1]
     assert within_walk_steps([1, 0], suns, steps // 3000) == [-1, -1]
     assert within_walk_steps([-1, -1], suns, 100) == [-1, -1]
+    # A sample casts a shadow ray a layer, one more from a mesh behind; the pixel sampler one
+    # for each strand it shades and one more.
+    assert shadow_walks(RenderSettings(layers=4), 4) == 4
+    assert shadow_walks(RenderSettings(layers=4), 4, meshes=True) == 5
+    pixel = RenderSettings(spp=16, layers=4, sampler="pixel")
+    assert shadow_walks(pixel, 4) == layout.PIXEL_SHADE + 1 and shadow_walks(pixel, 1) == 2
 
 
 def test_a_lights_lists_longer_than_the_walks_may_take_walk_the_grid(pair, monkeypatch):
