@@ -88,7 +88,10 @@ class BeamFrame:
     bins): a bin lists only what the ray through its centre may meet; `extent` (a point, spot or
     area light's "persp" frame, light_frame): how far from `origin` its shadow rays may end,
     `spread` what every capsule's listing radius is widened for (the rays' drift from their
-    origins' directions), `far_depth` the hair's farthest depth."""
+    origins' directions), `far_depth` the hair's farthest depth; `anchor` (suns and lights) a
+    point amid the hair, whose frame coordinates the GPU takes from the host (float64) and adds
+    to a point's offset from it: a light far away, or hair far from the world's origin, then
+    loses no float32 precision to the origin's distance (anchored)."""
     kind: str
     origin: np.ndarray
     axes: np.ndarray
@@ -106,6 +109,7 @@ class BeamFrame:
     extent: float = 0.0         # lights ("persp"): how far from the origin their shadow rays may end
     spread: float = 0.0         # lights: how far those rays drift from their origin's direction (light_frame)
     far_depth: float = 0.0      # lights: the hair's farthest depth (origins beyond move along their ray to it)
+    anchor: np.ndarray = None   # suns and lights: a point amid the hair the GPU measures from (anchored)
 
     @property
     def num_bins(self):
@@ -237,7 +241,16 @@ def sun_frame(towards, spread, scene_lo, scene_hi, rmax, pad, bin_size):
             max(1, int(np.ceil((float(cv.max()) + margin - lo_v) / h))))
     key0, step = _slices(-float(height.max()), -float(height.min()), reach)
     return BeamFrame("sun", np.zeros(3), np.stack([u / h, v / h, w]), np.array([-lo_u / h, -lo_v / h]),
-                     1.0 / h, drift_units / h, key0, step, dims)
+                     1.0 / h, drift_units / h, key0, step, dims, anchor=0.5 * (np.asarray(scene_lo, np.float64)
+                                                                               + np.asarray(scene_hi, np.float64)))
+
+
+def anchored(frame):
+    """(anchor, its frame coordinates (axes · (anchor - origin), float64)): a point is then
+    (axes · (point - anchor)) + those, which float32 computes from the point's small offset
+    (BeamFrame.anchor; the frame's origin itself where it has none)."""
+    anchor = frame.origin if frame.anchor is None else np.asarray(frame.anchor, np.float64)
+    return anchor, np.asarray(frame.axes, np.float64) @ (anchor - np.asarray(frame.origin, np.float64))
 
 
 def capsule_spread(frame, depth):
@@ -284,7 +297,8 @@ def light_frame(position, extent, scene_lo, scene_hi, rmax, pad, bin_size):
     key0, step = _slices(float(view.depth.min()), view.far, view.dpad)
     return BeamFrame("persp", view.origin, np.stack([view.u / h, view.v / h, view.w]), np.array([-x0 / h, -y0 / h]),
                      slant / h, 0.0, key0, step, dims, near_limit=view.near_limit, extent=float(extent),
-                     spread=spread, far_depth=float(view.depth.max()))
+                     spread=spread, far_depth=float(view.depth.max()),
+                     anchor=0.5 * (np.asarray(scene_lo, np.float64) + np.asarray(scene_hi, np.float64)))
 
 
 @dataclass(frozen=True, eq=False)

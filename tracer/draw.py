@@ -12,6 +12,7 @@ from hairio.validate import check_memory
 from . import layout
 from .gl_buffers import set_samplers
 from .gpu_build import set_uniforms
+from .beams import anchored
 from .grid import Grid
 from .mesh_upload import MESH_BUFFERS
 from .scene_buffers import split_part_names
@@ -311,7 +312,9 @@ def _set_beam_uniforms(prog, beams):
                 ("sun_sub", lambda b: int(b.sub) if b else 0, np.int32),
                 ("sun_reach", lambda b: float(b.reach) if b else 0.0, np.float32),
                 ("sun_origin", lambda b: _set_origin(b.frame) if b else (0.0, 0.0, 0.0, -1.0), np.float32),
-                ("sun_far", lambda b: float(b.frame.far_depth) if b else 0.0, np.float32)):
+                ("sun_far", lambda b: float(b.frame.far_depth) if b else 0.0, np.float32),
+                ("sun_anchor", lambda b: (*anchored(b.frame)[0], 0.0) if b else (0.0,) * 4, np.float32),
+                ("sun_anchor_frame", lambda b: (*anchored(b.frame)[1], 0.0) if b else (0.0,) * 4, np.float32)):
             if name in prog:
                 prog[name].write(pick(fn, dtype).tobytes())
     if "light_sun" in prog:

@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from . import layout
-from .beams import Beams, BeamsUnfit, TooManyRefs, fill_plan
+from .beams import Beams, BeamsUnfit, TooManyRefs, anchored, fill_plan
 from .gl_buffers import storage_limits
 from .gpu_build import _groups, set_uniforms
 from .shader_source import shader_source
@@ -89,6 +89,8 @@ class BeamBuilder:
 
     def _frame_uniforms(self, prog, frame, pad_factor, tex_cyl, n, sub):
         """The frame's uniforms, the whole frame's rows for `band` (a window's fill sets its own)."""
+        anchor, at = anchored(frame)
+        set_uniforms(prog, frame_anchor=tuple(float(x) for x in anchor), anchor_frame=tuple(float(x) for x in at))
         set_uniforms(prog, band=(0, int(frame.dims[1]) - 1), n_items=int(n), pad_factor=float(pad_factor),
                      frame_kind=KIND_CODE[frame.kind], frame_origin=tuple(float(x) for x in frame.origin),
                      axis_x=tuple(float(x) for x in frame.axes[0]), axis_y=tuple(float(x) for x in frame.axes[1]),

@@ -166,6 +166,30 @@ def test_a_lights_beams_give_the_grids_image(pair, light, spp):
     assert np.abs(grid - beams).max() <= 1e-6
 
 
+@pytest.mark.parametrize("where", ["a light far away", "hair far from the origin under a sun"])
+def test_a_far_light_or_far_hair_keeps_its_bins(pair, where):
+    """A shadow ray looks its bin up from its offset to a point amid the hair, in float32,
+    whose frame coordinates come from the host (tracer/beams.py, anchored): a light some
+    40,000 times the hair's size away loses no bins (measured from the light's position, as
+    before, some did), and hair thousands of units from the world's origin under a sun keeps
+    the grid's image too."""
+    strands = curls(30, 10, alpha=0.6)
+    camera = CAM
+    if where == "a light far away":
+        light = Light("point", tuple(np.array([0.0, 0.0, 0.5]) + 5e4 * np.array([0.4, -0.5, 0.76])), intensity=1.0)
+    else:
+        shift = np.array([3000.0, -2000.0, 1500.0])
+        strands = replace(strands, points=strands.points + shift.astype(strands.points.dtype))
+        camera = Camera.look_at(tuple(np.array([1.8, -1.6, 0.9]) + shift), tuple(np.array([0, 0, 0.5]) + shift),
+                                fov_deg=40, size=(64, 64))
+        light = Light(vector=(0.3, 0.2, -1.0))
+    settings = RenderSettings(spp=1, layers=3, lights=(light,))
+    grid, beams = _render_both(pair, strands, camera, settings)
+    assert (grid[..., 3] > 0).mean() > 0.05
+    assert pair[1].scene.grid is None and pair[1].beam_state.suns[0][1] is not None
+    assert np.abs(grid - beams).max() <= 1e-6
+
+
 def test_shadow_walks_past_the_loop_steps_leave_the_longest_lists_to_the_grid():
     from types import SimpleNamespace
     from tracer.renderer import shadow_walks, within_walk_steps

@@ -200,6 +200,8 @@ uniform float sun_reach[SUN_BEAMS];     // the widest capsule's radius in bins, 
 // distances from there. A sun's: w < 0.
 uniform vec4 sun_origin[SUN_BEAMS];
 uniform float sun_far[SUN_BEAMS];       // a light's: the hair's farthest depth from it
+uniform vec4 sun_anchor[SUN_BEAMS];     // a point amid the hair (xyz) and its frame coordinates
+uniform vec4 sun_anchor_frame[SUN_BEAMS];
 // Entry i of sun set `set` and its mark.
 uvec2 sun_entry(int set, int i) {
 #if SUN_BEAMS > 1
@@ -216,31 +218,36 @@ float sun_transmittance(int set, vec3 p, vec3 d, float tmax, int own, float tmin
     vec4 fr = sun_frame[set];
     ivec2 n = sun_dims[set];
     vec4 org = sun_origin[set];
-    vec3 q = p - org.xyz;
+    // p in the frame, from its offset to the set's anchor amid the hair (tracer/beams.py,
+    // anchored), which float32 keeps however far the light (or the world's origin) lies.
+    vec3 from_anchor = p - sun_anchor[set].xyz, at = sun_anchor_frame[set].xyz;
+    vec3 f = vec3(dot(from_anchor, sun_u[set]), dot(from_anchor, sun_v[set]), dot(from_anchor, sun_w[set])) + at;
     // An entry whose fine slice starts past -height(p) lies wholly below p, as do all after it
     // (a light's: past p's distance, or its extent).
-    float hp, z = 1.0;
+    float hp;
+    vec2 g;
     if (org.w >= 0.0) {
         // A ray from deeper than the hair meets none until it comes back to the hair's
         // farthest depth, where the lists take it up (tracer/beams.py, light_frame); one from
         // behind the light's plane, or outside its bins, meets none at all: the hair lies
         // beyond the extent, and every capsule's listing reaches as far as the rays drift.
-        vec3 w = sun_w[set];
-        z = dot(q, w);
+        vec3 q = p - org.xyz;
         float far = sun_far[set];
-        if (z > far) {
-            float dz = -dot(d, w);
-            float t = (z - far) / max(dz, 1e-30);
+        if (f.z > far) {
+            float dz = -dot(d, sun_w[set]);
+            float t = (f.z - far) / max(dz, 1e-30);
             if (dz <= 0.0 || t >= tmax) return 1.0;
+            from_anchor += t * d;
             q += t * d;
-            z = dot(q, w);
+            f = vec3(dot(from_anchor, sun_u[set]), dot(from_anchor, sun_v[set]), dot(from_anchor, sun_w[set])) + at;
         }
-        if (z <= 0.0) return 1.0;
+        if (f.z <= 0.0) return 1.0;
         hp = max(length(q), org.w);
+        g = f.xy / f.z + fr.xy;
     } else {
-        hp = -dot(p, sun_w[set]);
+        hp = -f.z;
+        g = f.xy + fr.xy;
     }
-    vec2 g = vec2(dot(q, sun_u[set]), dot(q, sun_v[set])) / z + fr.xy;
     ivec2 b = ivec2(floor(g));
     if (any(lessThan(b, ivec2(0))) || any(greaterThanEqual(b, n))) return 1.0;
     int cell = b.x + n.x * b.y;

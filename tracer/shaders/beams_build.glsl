@@ -41,6 +41,10 @@ uniform float pad_factor;     // capsules widened this many times
 // The frame (tracer/beams.py, BeamFrame): kind 0 perspective, 1 orthographic, 2 sun.
 uniform int frame_kind;
 uniform vec3 frame_origin;
+// A point amid the hair and its frame coordinates, made on the host (tracer/beams.py, anchored):
+// a point's are those plus its offset's, which float32 keeps however far the origin lies.
+uniform vec3 frame_anchor;
+uniform vec3 anchor_frame;
 uniform vec3 axis_x;
 uniform vec3 axis_y;
 uniform vec3 axis_z;
@@ -91,8 +95,8 @@ layout(std430, binding = 8) writeonly buffer Lists { ENTRY lists[]; };
 const float FAR = 1e30;     // past every bin, every crossing of an axis
 // A point in the frame: (X, Y, Z) = axes·(p - origin).
 vec3 to_frame(vec3 p) {
-    vec3 q = p - frame_origin;
-    return vec3(dot(q, axis_x), dot(q, axis_y), dot(q, axis_z));
+    vec3 q = p - frame_anchor;
+    return vec3(dot(q, axis_x), dot(q, axis_y), dot(q, axis_z)) + anchor_frame;
 }
 
 vec2 to_bins(vec3 f) {
