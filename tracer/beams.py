@@ -253,13 +253,13 @@ def anchored(frame):
     return anchor, np.asarray(frame.axes, np.float64) @ (anchor - np.asarray(frame.origin, np.float64))
 
 
-def capsule_spread(frame, depth):
-    """How far the shadow rays of a light's `frame` drift from their origins' directions at
-    `depth` (times depth over the drifted point's own, module text): the light's extent times
-    the most of the way toward it a ray from the hair's farthest depth has gone there, less the
-    nearer the capsule lies to that depth; at most frame.spread."""
-    return np.minimum(frame.extent * np.maximum(frame.far_depth - depth, 0.0) / (frame.far_depth - frame.extent),
-                      frame.spread)
+def drift_at(extent, far_depth, most, depth):
+    """How far shadow rays toward a point within `extent` of a light drift from their origins'
+    directions at `depth` (times depth over the drifted point's own, module text): the extent
+    times the most of the way toward the light a ray from the hair's farthest depth
+    `far_depth` has gone there, less the nearer it lies to that depth; at most `most`
+    (LightView.spread). The compute passes' project_cylinder the same."""
+    return np.minimum(extent * np.maximum(far_depth - depth, 0.0) / (far_depth - extent), most)
 
 
 def light_frame(position, extent, scene_lo, scene_hi, rmax, pad, bin_size):
@@ -409,7 +409,8 @@ def _keys_and_radii(frame, top, far, z0, z1, r):
     ok = near - r > frame.near_limit
     key = segment_distance(frame.origin, np.asarray(top, np.float64), np.asarray(far, np.float64)) - r
     if frame.spread > 0.0:      # a light's rays drift from their origin's direction (light_frame)
-        rho = (r + capsule_spread(frame, near - r)) * frame.radius_scale / np.where(ok, near - r, 1.0)
+        rho = (r + drift_at(frame.extent, frame.far_depth, frame.spread, near - r)) * frame.radius_scale / np.where(
+            ok, near - r, 1.0)
     else:
         rho = r * frame.radius_scale / np.where(ok, near, 1.0)
     return key, rho + frame.drift + layout.BEAM_BIN_EPS, ok

@@ -22,8 +22,8 @@ from typing import Optional
 import numpy as np
 
 from . import layout
-from .beams import (Beams, BeamsUnfit, TooManyRefs, box_corners, camera_frame, frame_reach, light_frame, light_view,
-                    project, sun_basis, sun_frame)
+from .beams import (Beams, BeamsUnfit, TooManyRefs, box_corners, camera_frame, drift_at, frame_reach, light_frame,
+                    light_view, project, sun_basis, sun_frame)
 from .cylinders import column_bounds, segment_radius
 from .gl_state import beam_builder
 
@@ -381,32 +381,17 @@ def _light_frames(scene, position, reach, sample):
     major, minor = np.maximum(du, dv), np.minimum(du, dv)
     slant = view.slant(0.0)
     near = np.maximum(np.minimum(z0, z1) - r, view.nearest)
-    far = float(view.depth.max())
-    drift = np.minimum(reach * np.maximum(far - near, 0.0) / (far - reach), view.spread(reach)) if reach > 0 else 0.0
+    drift = drift_at(reach, float(view.depth.max()), view.spread(reach), near)
     widths = (2.0 * r * slant / near, 2.0 * (r + drift) * slant / near)       # without and with the extent
     span = max(float(np.ptp(view.tx)), float(np.ptp(view.ty))) + float(widths[1].max(initial=0.0))
 
-    def side(target, width):
-        """The bins' side whose estimated references a cylinder (a cylinder's columns times
-        its rows) come to `target`, by bisection: references fall as bins grow."""
-        def refs(h):
-            return float(np.mean(((major + width) / h + 1.0) * (minor / np.maximum(major, h) + width / h + 1.0)))
-        h_lo, h_hi = span / SUN_MAX_SIDE, span
-        if refs(h_lo) <= target:
-            return h_lo
-        for _ in range(20):
-            h = 0.5 * (h_lo + h_hi)
-            if refs(h) > target:
-                h_lo = h
-            else:
-                h_hi = h
-        return h_hi
-
     def frame_for(target):
-        return light_frame(position, reach, lo, hi, rmax, 1.0, side(target, widths[1]))
+        return light_frame(position, reach, lo, hi, rmax, 1.0, _bin_side(major, minor, widths[1], span, target))
 
     def coarsening(target):
-        return (side(target, widths[1]) / side(target, widths[0])) ** 2 if reach > 0 else 1.0
+        if not reach > 0:
+            return 1.0
+        return (_bin_side(major, minor, widths[1], span, target) / _bin_side(major, minor, widths[0], span, target)) ** 2
     return frame_for, coarsening
 
 
@@ -428,22 +413,29 @@ def _sun_frames(scene, towards, spread, sample):
     major, minor = np.maximum(du, dv), np.minimum(du, dv)
     reach = 2.0 * (r * unit.radius_scale + unit.drift)
 
-    def refs(h):
-        """_estimated_refs of the bins of side h (a cylinder's columns times its rows)."""
-        return float(np.mean(((major + reach) / h + 1.0) * (minor / np.maximum(major, h) + reach / h + 1.0)))
-
     def frame_for(target):
-        h_lo, h_hi = span / SUN_MAX_SIDE, span
-        if refs(h_lo) <= target:
-            return sun_frame(towards, spread, lo, hi, rmax, 1.0, h_lo)
-        for _ in range(20):      # bisection: references fall as bins grow
-            h = 0.5 * (h_lo + h_hi)
-            if refs(h) > target:
-                h_lo = h
-            else:
-                h_hi = h
-        return sun_frame(towards, spread, lo, hi, rmax, 1.0, h_hi)
+        return sun_frame(towards, spread, lo, hi, rmax, 1.0, _bin_side(major, minor, reach, span, target))
     return frame_for
+
+
+def _bin_side(major, minor, width, span, target):
+    """The side of square bins for which cylinders whose projections reach `major` and `minor`
+    along their longer and shorter sides, listed `width` wide, make about `target` references
+    each (_estimated_refs's count: a cylinder's columns times its rows), by bisection within
+    span / SUN_MAX_SIDE and `span` (references fall as bins grow); the finest where even it
+    makes no more."""
+    def refs(h):
+        return float(np.mean(((major + width) / h + 1.0) * (minor / np.maximum(major, h) + width / h + 1.0)))
+    h_lo, h_hi = span / SUN_MAX_SIDE, span
+    if refs(h_lo) <= target:
+        return h_lo
+    for _ in range(20):
+        h = 0.5 * (h_lo + h_hi)
+        if refs(h) > target:
+            h_lo = h
+        else:
+            h_hi = h
+    return h_hi
 
 
 def _build(scene, buffers, frame, pad, names, budget, marks=False):

@@ -210,6 +210,12 @@ uvec2 sun_entry(int set, int i) {
     return texelFetch(tex_sun0, i).xy;
 }
 
+// The frame coordinates of the point `from_anchor` away from set `set`'s anchor.
+vec3 sun_set_point(int set, vec3 from_anchor) {
+    return vec3(dot(from_anchor, sun_u[set]), dot(from_anchor, sun_v[set]), dot(from_anchor, sun_w[set]))
+        + sun_anchor_frame[set].xyz;
+}
+
 // accel_transmittance for a shadow ray from p toward sun set `set` (its direction, or within
 // the spread its lists were padded for; a light's: toward a point within its extent of its
 // position): the entries of p's bin nearest the sun (or the light) first, until the rest lie
@@ -220,8 +226,8 @@ float sun_transmittance(int set, vec3 p, vec3 d, float tmax, int own, float tmin
     vec4 org = sun_origin[set];
     // p in the frame, from its offset to the set's anchor amid the hair (tracer/beams.py,
     // anchored), which float32 keeps however far the light (or the world's origin) lies.
-    vec3 from_anchor = p - sun_anchor[set].xyz, at = sun_anchor_frame[set].xyz;
-    vec3 f = vec3(dot(from_anchor, sun_u[set]), dot(from_anchor, sun_v[set]), dot(from_anchor, sun_w[set])) + at;
+    vec3 from_anchor = p - sun_anchor[set].xyz;
+    vec3 f = sun_set_point(set, from_anchor);
     // An entry whose fine slice starts past -height(p) lies wholly below p, as do all after it
     // (a light's: past p's distance, or its extent).
     float hp;
@@ -239,7 +245,7 @@ float sun_transmittance(int set, vec3 p, vec3 d, float tmax, int own, float tmin
             if (dz <= 0.0 || t >= tmax) return 1.0;
             from_anchor += t * d;
             q += t * d;
-            f = vec3(dot(from_anchor, sun_u[set]), dot(from_anchor, sun_v[set]), dot(from_anchor, sun_w[set])) + at;
+            f = sun_set_point(set, from_anchor);
         }
         if (f.z <= 0.0) return 1.0;
         hp = max(length(q), org.w);

@@ -128,12 +128,15 @@ int project_cylinder(int id, out vec2 g0, out vec2 g1, out float rho, out int sl
         key = near - r;
         if (frame_kind == 0) {
             if (key <= near_limit) return max(f0.z, f1.z) + r < 0.0 ? 1 : 2;
-            // A light's rays drift from their origin's direction (tracer/beams.py, light_frame,
-            // capsule_spread).
-            float spread = min(frame_extent * max(frame_far - (near - r), 0.0) / (frame_far - frame_extent),
-                               frame_spread);
-            rho = (frame_spread > 0.0 ? (r + spread) * radius_scale / (near - r) : r * radius_scale / near)
-                + drift + BEAM_BIN_EPS;
+            if (frame_spread > 0.0) {
+                // A light's rays drift from their origin's direction (tracer/beams.py,
+                // light_frame, drift_at).
+                float spread = min(frame_extent * max(frame_far - (near - r), 0.0) / (frame_far - frame_extent),
+                                   frame_spread);
+                rho = (r + spread) * radius_scale / (near - r) + drift + BEAM_BIN_EPS;
+            } else {
+                rho = r * radius_scale / near + drift + BEAM_BIN_EPS;
+            }
             key = segment_distance(frame_origin, top.xyz, far) - r;
         }
     }
