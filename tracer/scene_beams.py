@@ -71,20 +71,23 @@ SUN_REFS_PER_CYLINDER = 8.0
 SUN_MIN_REFS_PER_CYLINDER = 4.0
 SUN_REFS_PER_RAY = 100.0
 # Which of those two: the finer lists (SUN_REFS_PER_CYLINDER) take longer to build, in
-# proportion to the cylinders, and save each shadow ray tests, in proportion to the entries
-# its bin lists (the hair's depth seen from the sun, which grows with the cylinders too): so
-# they pay once the renders of these strands have traced some rays a bin of the lists,
-# SUN_FINE_RAYS_PER_BIN of the fine ones (samples times pixels, this render's included);
-# fewer take SUN_MIN_REFS_PER_CYLINDER. Measured on llvmpipe at 512x512, first render and
-# re-render, 4 references a cylinder against 8: 100,000 wavy strands at one sample (135 k
-# rays, 0.5 a fine bin) 2.39-2.47 and 0.67-0.69 s against 2.77-3.15 and 0.47-0.54; at 16
-# samples (8 a bin) 11.2 and 9.1 s against 9.6 and 6.6; 10,000 at one sample (0.5 a bin)
-# 0.31-0.32 and 0.13-0.16 s against 0.39-0.45 and 0.10-0.12; straight.hair (150,000 long
-# cylinders, 4.9 rays a fine bin) 0.33-0.45 and 0.26-0.33 s against 0.32 and 0.18. Coarse
-# lists are built again, fine, by the render that brings the rays traced to
-# SUN_FINE_RAYS_PER_BIN a fine bin (the third of 10,000 strands at one sample): a camera
-# move or a progressive preview's passes pay for them once.
-SUN_FINE_RAYS_PER_BIN = 1.5
+# proportion to the cylinders, and save each shadow ray entries to walk, in proportion to the
+# entries its bin lists (the hair's depth seen from the sun, which grows with the cylinders
+# too): so they pay once the renders of these strands have traced some rays a bin of the
+# lists, SUN_FINE_RAYS_PER_BIN of the fine ones (samples times pixels, this render's and the
+# announced ones to come included); fewer take SUN_MIN_REFS_PER_CYLINDER. A render that cannot
+# say more are coming builds what its own rays pay for, and the render that brings the rays
+# traced to it builds the fine lists (a camera move pays for them once). Where the fine lists
+# pay off, measured on llvmpipe (AMD EPYC) at 512x512, 4 layers, interleaved in one process:
+# the extra build over the extra trace a ray of the coarse lists, in rays a fine bin:
+# straight.hair 12 (24 ms against 10 ms a 1-sample render; 29 k fine bins), 10,000 wavy
+# strands 20-23 (154 ms; 4 ms at one sample, 99 ms at 16), 100,000 wavy 18 at one sample and
+# 36 at 16 (1.5-1.6 s; 44 ms and 0.74 s; 250 k fine bins). 24 lies within a factor two of each:
+# a 16-sample render of 100,000 strands (16.8 rays a fine bin) takes coarse lists (first render
+# 7.9 s against 9.0, medians of 6) and its next render the fine ones; straight.hair's fifth
+# 1-sample render builds them. The marks made coarse lists cheaper to walk: before them the
+# fine lists paid from 1.5 rays a bin (docs/DECISIONS.md, "Beams").
+SUN_FINE_RAYS_PER_BIN = 24.0
 # A point, spot or area light with an extent: each capsule is listed wider by how far its
 # rays drift, so its bins come out coarser than a light's without (for the same references a
 # cylinder) and its lists longer. Past this many times fewer bins its rays walk the grid:
