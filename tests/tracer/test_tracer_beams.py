@@ -491,12 +491,14 @@ def _samples_for_fine_lists(state, fine):
     return int(np.ceil(np.sqrt(scene_beams.SUN_FINE_RAYS_PER_BIN * fine.num_bins / state.traced))) ** 2
 
 
-def test_a_suns_lists_are_coarse_for_few_rays_and_fine_once_the_rays_pay_for_them(pair):
+def test_a_suns_lists_are_coarse_for_few_rays_and_fine_once_the_rays_pay_for_them(pair, monkeypatch):
     """A render of few rays gets a sun's coarse lists (SUN_MIN_REFS_PER_CYLINDER references a
     cylinder: half the build), kept with the fine frame; the render that brings the rays
     traced to SUN_FINE_RAYS_PER_BIN a fine bin builds the fine lists, which later renders
-    keep. The images are the grid's every time."""
+    keep. The images are the grid's every time. (The rule's figure set low, so that a few
+    samples bring the rays there.)"""
     from tracer import scene_beams
+    monkeypatch.setattr(scene_beams, "SUN_FINE_RAYS_PER_BIN", 1.5)
     strands = dense_tuft()
     grid, first = _render_both(pair, strands, DENSE_CAM, RenderSettings())
     assert np.abs(grid - first).max() <= 1e-6
@@ -521,6 +523,8 @@ def test_fine_lists_that_do_not_fit_leave_the_coarse_ones(pair, monkeypatch):
     """Where the sun's fine lists are refused (more bins than a family may have), the render
     that would build them keeps the coarse ones, whose buffers the refusal left as they were,
     and later renders do not try again. The images are the grid's."""
+    from tracer import scene_beams
+    monkeypatch.setattr(scene_beams, "SUN_FINE_RAYS_PER_BIN", 1.5)
     strands = dense_tuft()
     _render_both(pair, strands, DENSE_CAM, RenderSettings())
     state = pair[1].beam_state

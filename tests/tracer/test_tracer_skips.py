@@ -2,7 +2,7 @@
 """The work the scene does not need is really skipped (counted with count=True)."""
 import numpy as np
 
-from tracer import Camera, RenderSettings
+from tracer import Camera, Light, RenderSettings
 
 from tracer_scenes import curls
 
@@ -15,6 +15,48 @@ def test_no_shadow_rays_with_shadows_off(renderer):
     assert renderer.stats.shadow_rays > 0
     renderer.render(CAM, RenderSettings(shadows=False, count=True))
     assert renderer.stats.shadow_rays == 0
+
+
+def test_no_shadow_rays_where_a_light_gives_nothing(renderer):
+    """A spot light whose cone misses the hair, or an area light that faces away from it,
+    lights none of it: no shadow ray is cast toward it, and the image is the one without
+    shadows. Turned toward the hair, the same lights cast them."""
+    strands = curls(10, 8)
+    renderer.set_strands(strands)
+    lo, hi = strands.bounds()
+    centre = 0.5 * (np.asarray(lo) + np.asarray(hi))
+    above = tuple(centre + (0.0, 0.0, 2.0))
+    for kind, extra in (("spot", dict(spot_size=0.3, falloff=True)), ("area", dict(size=(0.2, 0.2)))):
+        for axis, lit in (((0.0, 0.0, 1.0), False), ((0.0, 0.0, -1.0), True)):
+            light = Light(kind=kind, vector=above, axis=axis, intensity=4.0, **extra)
+            img = renderer.render(CAM, RenderSettings(lights=(light,), count=True))
+            rays = renderer.stats.shadow_rays
+            plain = renderer.render(CAM, RenderSettings(lights=(light,), shadows=False))
+            assert img[..., 3].max() > 0
+            if lit:
+                assert rays > 0 and not np.array_equal(img, plain), kind
+            else:
+                assert rays == 0, kind
+                np.testing.assert_array_equal(img, plain)
+
+
+def test_a_meshs_faces_turned_from_the_light_cast_no_shadow_rays(renderer):
+    """A sphere under a sun: only its lit half sends shadow rays (the dark half gains nothing
+    from the light whatever they found), so fewer rays than the sphere has pixels."""
+    from tracer_scenes import make_strands, uv_sphere
+    sphere = uv_sphere((0.0, 0.0, 0.0), 0.5)
+    renderer.set_strands(make_strands([[[5, 5, 5], [5, 5, 5.1]]], radius=0.01))
+    renderer.set_meshes([(*sphere, (0.6, 0.6, 0.6))])
+    try:
+        side = Camera.look_at((-2.5, 0.0, 0.0), (0, 0, 0), size=(48, 48), fov_deg=30)
+        sun = Light(vector=(0.0, 0.0, -1.0))     # from above: the camera sees the upper half lit
+        img = renderer.render(side, RenderSettings(lights=(sun,), count=True))
+        covered = int(np.count_nonzero(img[..., 3] > 0))
+        assert covered > 500
+        rays = renderer.stats.shadow_rays
+        assert 0.3 * covered < rays < 0.7 * covered
+    finally:
+        renderer.set_meshes(None)
 
 
 def test_one_layer_when_every_alpha_is_one(renderer):

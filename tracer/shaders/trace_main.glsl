@@ -190,6 +190,10 @@ vec3 shade(int id, int surf, vec3 o, vec3 d, float t, int k) {
     for (int l = 0; l < NUM_LIGHTS; ++l) {
         float dist;
         vec3 L = light_dir(l, s.p, light_sample(k, l), dist);
+        vec3 E = light_at(l, L, dist);
+        // Nothing from this light here (outside a spot's cone, behind an area light): no
+        // shadow ray, as the sum would gain 0 whatever it found.
+        if (all(equal(E, vec3(0.0)))) continue;
         float lit = 1.0;
 #if SHADOWS
         if (light_shadow[l] > 0.5) {
@@ -197,7 +201,7 @@ vec3 shade(int id, int surf, vec3 o, vec3 d, float t, int k) {
             if (lit <= 0.0) continue;
         }
 #endif
-        result += lit * light_at(l, L, dist) * shade_light(s, L);
+        result += lit * E * shade_light(s, L);
     }
     return result;
 }
@@ -216,6 +220,11 @@ vec3 shade_mesh(int tri, vec3 o, vec3 d, float t, vec3 N) {
     for (int l = 0; l < NUM_LIGHTS; ++l) {
         float dist;
         vec3 L = light_dir(l, q, light_sample(MESH_SHADING, l), dist);
+        vec3 E = light_at(l, L, dist);
+        float ndl = max(dot(N, L), 0.0);
+        // A face turned from the light, or a point the light gives nothing, gains 0 from it:
+        // no shadow rays.
+        if (ndl <= 0.0 || all(equal(E, vec3(0.0)))) continue;
         float lit = 1.0;
 #if SHADOWS
         if (light_shadow[l] > 0.5) {
@@ -228,7 +237,7 @@ vec3 shade_mesh(int tri, vec3 o, vec3 d, float t, vec3 N) {
             if (lit <= 0.0) continue;
         }
 #endif
-        result += lit * light_at(l, L, dist) * max(dot(N, L), 0.0) * (mesh_brdf * col);
+        result += lit * E * ndl * (mesh_brdf * col);
     }
     return result;
 }
