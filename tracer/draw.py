@@ -37,6 +37,14 @@ WIDE_BUFFERS = WIDE
 # Then the beams (tracer/scene_beams.py): the camera's, then each sun slot's.
 BEAM_BUFFERS = CAMERA_BUFFERS + tuple(n for pair in SUN_BUFFERS for n in pair)
 
+
+def sun_slots_within(units):
+    """How many sun slots' buffers (each two units, after every other buffer's) lie within a
+    driver's `units` texture units (GL_MAX_TEXTURE_IMAGE_UNITS: 32 on llvmpipe and desktop
+    GPUs, 16 on some): the lights past them walk the grid."""
+    first = len(TRACE_BUFFERS["grid"] + MESH_BUFFERS + SPLIT_PARTS + WIDE_BUFFERS + CAMERA_BUFFERS)
+    return max(0, min(len(SUN_BUFFERS), (int(units) - first) // 2))
+
 _VERTEX = """#version 330 core
 void main() {   // one triangle that covers the screen; the scissor picks the pixels
     vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);

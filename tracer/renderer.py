@@ -19,7 +19,7 @@ from hairio import InputError, Strands
 
 from . import layout
 from .cylinders import column_bounds, plan_cylinders, points_reach
-from .draw import Drawer, screen_bounds
+from .draw import Drawer, screen_bounds, sun_slots_within
 from .gl_state import context_backend, shared_context
 from .gpu_build import compute_available
 from .grid import refs_per_cylinder
@@ -296,7 +296,7 @@ class Renderer:
         pad = GRID_WIDEN_CAP if settings.min_pixel_width else 1.0
         pixel_n = settings.spp_n if settings.sampler == "pixel" else 0
         cam, shift, cam_s = camera_beams(state, self.scene, self.buffers, camera, whole, pad, settings.spp, pixel_n)
-        slots = sun_slots(settings)
+        slots = sun_slots(settings, sun_slots_within(self.ctx.info["GL_MAX_TEXTURE_IMAGE_UNITS"]))
         shadowed = [settings.shadows and light.shadows for light in settings.lights]
         # Whether the grid is built for this render whatever the suns get: then a sun's beams
         # must pay for themselves against it (scene_beams.SUN_REFS_PER_RAY).

@@ -35,7 +35,10 @@ from .gl_state import beam_builder
 # capsule (shaders/accel_beams.glsl, beam_mark_holds), reading the marks in list order beside
 # the entries, not each cylinder's axis wherever its id points.
 CAMERA_BUFFERS = ("tex_beam", "tex_beam_cell")
-SUN_BUFFERS = (("tex_sun0", "tex_sun_cell0"), ("tex_sun1", "tex_sun_cell1"))
+# Up to four lights' shadow rays take beams (a key, a fill and a rim light and one more: three-point
+# lighting is how hair is lit for look development); a renderer uses as many of the slots as
+# the driver's texture units hold (tracer/draw.py, sun_slots_within).
+SUN_BUFFERS = tuple((f"tex_sun{k}", f"tex_sun_cell{k}") for k in range(4))
 MAX_SUN_BEAMS = len(SUN_BUFFERS)
 CAMERA_BIN_PX = (1, 2, 4)
 # A render of one sample a pixel starts at 2-pixel bins, which build in about half the time;
@@ -270,14 +273,15 @@ def camera_beams(state, scene, buffers, camera, box, pad, samples=1, pixel_n=0):
 BEAM_LIGHTS = ("directional", "point", "spot", "area")
 
 
-def sun_slots(settings):
+def sun_slots(settings, usable=MAX_SUN_BEAMS):
     """Per light of `settings`, the slot of the sun beams its shadow rays can take (-1: none):
-    a light of BEAM_LIGHTS that casts shadows, the first MAX_SUN_BEAMS of them."""
+    a light of BEAM_LIGHTS that casts shadows, the first `usable` of them (at most
+    MAX_SUN_BEAMS)."""
     if not settings.shadows:
         return [-1] * len(settings.lights)
     slots, n = [], 0
     for light in settings.lights:
-        if light.kind in BEAM_LIGHTS and light.shadows and n < MAX_SUN_BEAMS:
+        if light.kind in BEAM_LIGHTS and light.shadows and n < min(usable, MAX_SUN_BEAMS):
             slots.append(n)
             n += 1
         else:

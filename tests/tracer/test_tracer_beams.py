@@ -166,6 +166,50 @@ def test_a_lights_beams_give_the_grids_image(pair, light, spp):
     assert np.abs(grid - beams).max() <= 1e-6
 
 
+@pytest.mark.parametrize("lights", [4, 5])
+def test_four_lights_take_beams_and_a_fifth_walks_the_grid(pair, lights):
+    """Three-point lighting and one more: a sun and a point, spot and area light each cast
+    their shadow rays through beams of their own (four slots), with the grid's image and no
+    grid built; a fifth light walks the grid."""
+    from tracer.scene_beams import MAX_SUN_BEAMS
+    strands = curls(30, 10, alpha=0.6)
+    chosen = (Light(vector=(0.3, 0.2, -1.0), intensity=0.5), LIGHTS["point"], LIGHTS["spot with a radius"],
+              LIGHTS["area"], Light("point", (-1.0, 1.2, 1.8), intensity=0.4))[:lights]
+    settings = RenderSettings(spp=1, layers=3, lights=chosen)
+    grid, beams = _render_both(pair, strands, CAM, settings)
+    assert MAX_SUN_BEAMS == 4
+    assert all(s is not None and s[1] is not None for s in pair[1].beam_state.suns)
+    assert (pair[1].scene.grid is None) == (lights <= MAX_SUN_BEAMS)
+    lit = grid[..., :3][grid[..., 3] > 0]
+    assert lit.max() > 2 * np.percentile(lit, 10), "no light and shadow to tell apart"
+    assert np.abs(grid - beams).max() <= 1e-6
+
+
+def test_sun_slots_fit_the_drivers_texture_units(pair):
+    """Each sun slot takes two texture units after every other buffer's: a driver of 32 (llvmpipe,
+    desktop GPUs) holds all four, one of 16 none (their lights walk the grid, rather than
+    bind a buffer past the driver's units); the renderer asks its own driver."""
+    from tracer.draw import sun_slots_within
+    from tracer.scene_beams import sun_slots
+    assert sun_slots_within(32) == 4 and sun_slots_within(18) == 1 and sun_slots_within(16) == 0
+    settings = RenderSettings(lights=(Light(), LIGHTS["point"], Light("environment"), LIGHTS["area"]))
+    assert sun_slots(settings) == [0, 1, -1, 2]
+    assert sun_slots(settings, usable=1) == [0, -1, -1, -1]
+    assert sun_slots(RenderSettings(shadows=False, lights=settings.lights)) == [-1] * 4
+
+
+def test_a_driver_of_fewer_texture_units_leaves_the_lights_past_them_to_the_grid(pair, monkeypatch):
+    """The renderer reads its driver's units: told 18 (room for one sun slot), the second of
+    two lights walks the grid, and the image is the grid's."""
+    strands = curls(30, 10, alpha=0.6)
+    settings = RenderSettings(spp=1, layers=3, lights=(Light(vector=(0.3, 0.2, -1.0)), LIGHTS["point"]))
+    monkeypatch.setitem(pair[1].ctx.info, "GL_MAX_TEXTURE_IMAGE_UNITS", 18)
+    grid, beams = _render_both(pair, strands, CAM, settings)
+    assert pair[1].beam_state.suns[0][1] is not None and pair[1].beam_state.suns[1] is None
+    assert pair[1].scene.grid is not None
+    assert np.abs(grid - beams).max() <= 1e-6
+
+
 @pytest.mark.parametrize("where", ["a light far away", "hair far from the origin under a sun"])
 def test_a_far_light_or_far_hair_keeps_its_bins(pair, where):
     """A shadow ray looks its bin up from its offset to a point amid the hair, in float32,

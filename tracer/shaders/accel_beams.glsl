@@ -188,6 +188,14 @@ uniform isamplerBuffer tex_sun_cell0;
 uniform usamplerBuffer tex_sun1;
 uniform isamplerBuffer tex_sun_cell1;
 #endif
+#if SUN_BEAMS > 2
+uniform usamplerBuffer tex_sun2;
+uniform isamplerBuffer tex_sun_cell2;
+#endif
+#if SUN_BEAMS > 3
+uniform usamplerBuffer tex_sun3;
+uniform isamplerBuffer tex_sun_cell3;
+#endif
 uniform vec3 sun_u[SUN_BEAMS];
 uniform vec3 sun_v[SUN_BEAMS];
 uniform vec3 sun_w[SUN_BEAMS];
@@ -204,6 +212,12 @@ uniform vec4 sun_anchor[SUN_BEAMS];     // a point amid the hair (xyz) and its f
 uniform vec4 sun_anchor_frame[SUN_BEAMS];
 // Entry i of sun set `set` and its mark.
 uvec2 sun_entry(int set, int i) {
+#if SUN_BEAMS > 3
+    if (set == 3) return texelFetch(tex_sun3, i).xy;
+#endif
+#if SUN_BEAMS > 2
+    if (set == 2) return texelFetch(tex_sun2, i).xy;
+#endif
 #if SUN_BEAMS > 1
     if (set == 1) return texelFetch(tex_sun1, i).xy;
 #endif
@@ -258,6 +272,12 @@ float sun_transmittance(int set, vec3 p, vec3 d, float tmax, int own, float tmin
     if (any(lessThan(b, ivec2(0))) || any(greaterThanEqual(b, n))) return 1.0;
     int cell = b.x + n.x * b.y;
     ivec2 sc;
+#if SUN_BEAMS > 3
+    if (set == 3) sc = texelFetch(tex_sun_cell3, cell).xy; else
+#endif
+#if SUN_BEAMS > 2
+    if (set == 2) sc = texelFetch(tex_sun_cell2, cell).xy; else
+#endif
 #if SUN_BEAMS > 1
     if (set == 1) sc = texelFetch(tex_sun_cell1, cell).xy; else
 #endif
