@@ -45,6 +45,7 @@ def sun_slots_within(units):
     first = len(TRACE_BUFFERS["grid"] + MESH_BUFFERS + SPLIT_PARTS + WIDE_BUFFERS + CAMERA_BUFFERS)
     return max(0, min(len(SUN_BUFFERS), (int(units) - first) // 2))
 
+
 _VERTEX = """#version 330 core
 void main() {   // one triangle that covers the screen; the scissor picks the pixels
     vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
