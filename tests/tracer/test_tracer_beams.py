@@ -166,17 +166,24 @@ def test_a_lights_beams_give_the_grids_image(pair, light, spp):
     assert np.abs(grid - beams).max() <= 1e-6
 
 
-@pytest.mark.parametrize("lights", [4, 5])
-def test_four_lights_take_beams_and_a_fifth_walks_the_grid(pair, lights):
+@pytest.mark.parametrize("lights, sampler, spp", [(4, "independent", 1), (5, "independent", 1), (4, "pixel", 4)])
+def test_four_lights_take_beams_and_a_fifth_walks_the_grid(pair, lights, sampler, spp):
     """Three-point lighting and one more: a sun and a point, spot and area light each cast
     their shadow rays through beams of their own (four slots), with the grid's image and no
-    grid built; a fifth light walks the grid."""
+    grid built, for either sampler; a fifth light walks the grid."""
     from tracer.scene_beams import MAX_SUN_BEAMS
     strands = curls(30, 10, alpha=0.6)
     chosen = (Light(vector=(0.3, 0.2, -1.0), intensity=0.5), LIGHTS["point"], LIGHTS["spot with a radius"],
               LIGHTS["area"], Light("point", (-1.0, 1.2, 1.8), intensity=0.4))[:lights]
-    settings = RenderSettings(spp=1, layers=3, lights=chosen)
-    grid, beams = _render_both(pair, strands, CAM, settings)
+    settings = RenderSettings(spp=spp, sampler=sampler, layers=3, lights=chosen)
+    if sampler == "pixel":          # with a mesh too: its points' shadow rays take the same beams
+        for r in pair:
+            r.set_meshes([(*uv_sphere((0.3, -0.4, 0.5), 0.25), (0.6, 0.5, 0.4))])
+    try:
+        grid, beams = _render_both(pair, strands, CAM, settings)
+    finally:
+        for r in pair:
+            r.set_meshes(None)
     assert MAX_SUN_BEAMS == 4
     assert all(s is not None and s[1] is not None for s in pair[1].beam_state.suns)
     assert (pair[1].scene.grid is None) == (lights <= MAX_SUN_BEAMS)
