@@ -110,6 +110,7 @@ class BeamFrame:
     spread: float = 0.0         # lights: how far those rays drift from their origin's direction (light_frame)
     far_depth: float = 0.0      # lights: the hair's farthest depth (origins beyond move along their ray to it)
     anchor: np.ndarray = None   # suns and lights: a point amid the hair the GPU measures from (anchored)
+    cone: tuple = None          # spot lights: (axis x, y, z, half angle): what lies wholly outside is never listed
 
     @property
     def num_bins(self):
@@ -262,7 +263,7 @@ def drift_at(extent, far_depth, most, depth):
     return np.minimum(extent * np.maximum(far_depth - depth, 0.0) / (far_depth - extent), most)
 
 
-def light_frame(position, extent, scene_lo, scene_hi, rmax, pad, bin_size):
+def light_frame(position, extent, scene_lo, scene_hi, rmax, pad, bin_size, cone=None):
     """The frame of shadow rays toward a light at `position` whose rays end within `extent` of
     it (a point or spot light's radius, an area light's half diagonal; 0: at it): a perspective
     frame from the position toward the scene box's centre, square bins `bin_size` a side at unit
@@ -277,7 +278,8 @@ def light_frame(position, extent, scene_lo, scene_hi, rmax, pad, bin_size):
     once an origin deeper than the hair is moved along its ray to the hair's farthest depth,
     which the walk does). BeamsUnfit
     where the box comes within its near limit plus `extent` of the light's plane (a light among
-    the hair), whose rays walk the grid."""
+    the hair), whose rays walk the grid. `cone` (a spot light: its unit axis and half angle):
+    capsules wholly outside it lie in no shadow ray's way (outside_cone)."""
     view = light_view(position, extent, scene_lo, scene_hi, rmax, pad)
     h = float(bin_size)
     spread = view.spread(extent)
@@ -298,7 +300,28 @@ def light_frame(position, extent, scene_lo, scene_hi, rmax, pad, bin_size):
     return BeamFrame("persp", view.origin, np.stack([view.u / h, view.v / h, view.w]), np.array([-x0 / h, -y0 / h]),
                      slant / h, 0.0, key0, step, dims, near_limit=view.near_limit, extent=float(extent),
                      spread=spread, far_depth=float(view.depth.max()),
-                     anchor=0.5 * (np.asarray(scene_lo, np.float64) + np.asarray(scene_hi, np.float64)))
+                     anchor=0.5 * (np.asarray(scene_lo, np.float64) + np.asarray(scene_hi, np.float64)),
+                     cone=None if cone is None else tuple(float(x) for x in cone))
+
+
+def outside_cone(cone, origin, extent, top, far, radius):
+    """Which capsules top..far of `radius` no shadow ray toward a spot light crosses: the light
+    at `origin` sends light only within `cone` (its axis, half angle theta) from each point of
+    it, all within `extent` of the origin, so a shadow ray cast (trace_main.glsl casts none
+    where the light gives nothing) lies within the cone widened by `extent`; a capsule whose
+    bounding sphere (centre m, radius rho) lies farther from that cone, by an angle past
+    theta + asin(rho / |m - origin|) (plus layout.BEAM_CONE_MARGIN), is crossed by none of them.
+    shaders/beams_build.glsl, project_cylinder, makes the same test."""
+    axis, theta = np.asarray(cone[:3], np.float64), float(cone[3])
+    top, far = np.asarray(top, np.float64), np.asarray(far, np.float64)
+    m = 0.5 * (top + far) - np.asarray(origin, np.float64)
+    rho = 0.5 * np.sqrt(((far - top) ** 2).sum(axis=-1)) + np.asarray(radius, np.float64) + float(extent)
+    d = np.sqrt((m * m).sum(axis=-1))
+    along = m @ axis
+    across = np.sqrt(np.maximum(d * d - along * along, 0.0))
+    alpha = np.arctan2(across, along)
+    beta = np.arctan2(rho, np.sqrt(np.maximum(d * d - rho * rho, 0.0)))
+    return (d > rho) & (alpha > theta + beta + layout.BEAM_CONE_MARGIN)
 
 
 @dataclass(frozen=True, eq=False)
@@ -434,6 +457,8 @@ def bins_touched(frame, top, far, radius, sub=0):
     behind = ~ok & (np.maximum(z0, z1) + r < 0)     # wholly behind the camera: never seen
     if np.any(~ok & ~behind):
         raise BeamsUnfit("the hair reaches the camera's plane")
+    if frame.cone is not None:
+        ok &= ~outside_cone(frame.cone, frame.origin, frame.extent, top, far, r)
     live = np.flatnonzero(ok)
     # The dominant axis of each projected segment, then (dominant, other) coordinates.
     dx, dy = gx1 - gx0, gy1 - gy0

@@ -99,6 +99,7 @@ class BeamBuilder:
                      drift=float(frame.drift), key0=float(frame.key0), key_step=float(frame.key_step),
                      near_limit=float(frame.near_limit), frame_spread=float(frame.spread),
                      frame_extent=float(frame.extent), frame_far=float(frame.far_depth),
+                     frame_cone=tuple(float(x) for x in frame.cone) if frame.cone is not None else (0.0, 0.0, 1.0, -1.0),
                      dims=tuple(int(d) for d in frame.dims),
                      max_bins=int(layout.BEAM_MAX_BINS_PER_CYLINDER), sub_bits=int(sub),
                      cyl_split=tex_cyl.part_texels // layout.TEXELS_PER_CYL)

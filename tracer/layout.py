@@ -112,6 +112,9 @@ BEAM_SCAN_CHUNK = 256
 # The listing's own margin, in bins: covers the float32 rounding of the shaders' projection
 # (bins are compared with coordinates of at most a few thousand bins).
 BEAM_BIN_EPS = 1e-3
+# Radians a capsule must lie past a spot light's cone for its lists to leave it out
+# (tracer/beams.py, outside_cone): the GPU's float32 and the host's float64 then agree.
+BEAM_CONE_MARGIN = 1e-3
 # A key is filed this fraction of a slice low, so that float32 rounding cannot put an entry in
 # a slice that starts past its key (the walks stop at a slice's start).
 BEAM_SLICE_EPS = 1e-4
@@ -180,7 +183,7 @@ def glsl_header():
         "LEAF_MAX": LEAF_MAX, "LEAF_BITS": LEAF_BITS, "PIECE_BITS": PIECE_BITS, "MAX_PIECES": MAX_PIECES,
         "WALK_TEXELS": WALK_TEXELS, "BVH_NODE": BVH_NODE, "BVH_SHORT_STACK": BVH_SHORT_STACK,
         "BEAM_ID_BITS": BEAM_ID_BITS, "BEAM_SLICES": BEAM_SLICES, "BEAM_SCAN_CHUNK": BEAM_SCAN_CHUNK,
-        "BEAM_BIN_EPS": float(BEAM_BIN_EPS), "BEAM_SLICE_EPS": float(BEAM_SLICE_EPS), "BEAM_RUN": BEAM_RUN,
+        "BEAM_BIN_EPS": float(BEAM_BIN_EPS), "BEAM_CONE_MARGIN": float(BEAM_CONE_MARGIN), "BEAM_SLICE_EPS": float(BEAM_SLICE_EPS), "BEAM_RUN": BEAM_RUN,
         "PIX_SHADE": PIXEL_SHADE, "PIX_SHADE_ONE": PIXEL_SHADE_ONE, "GROUP": GROUP, "MAX_VISITS": MAX_VISITS, "MAX_REPEATS": MAX_REPEATS,
     }
     lines = ["// Generated from tracer/layout.py when the program is made: edit the numbers there."]

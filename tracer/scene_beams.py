@@ -23,7 +23,7 @@ import numpy as np
 
 from . import layout
 from .beams import (Beams, BeamsUnfit, TooManyRefs, box_corners, camera_frame, drift_at, frame_reach, light_frame,
-                    light_view, project, sun_basis, sun_frame)
+                    light_view, outside_cone, project, sun_basis, sun_frame)
 from .cylinders import column_bounds, segment_radius
 from .gl_state import beam_builder
 
@@ -308,8 +308,9 @@ def sun_beams(state, scene, buffers, light, slot, rays=None, traced=0, to_come=0
         key = ("sun", towards.tobytes(), spread, id(scene.plan))
     else:
         reach = light_reach(light)
-        frames = lambda: _light_frames(scene, vector, reach, state.sample(scene.plan))  # noqa: E731
-        key = ("light", vector.tobytes(), reach, id(scene.plan))
+        cone = spot_cone(light)
+        frames = lambda: _light_frames(scene, vector, reach, state.sample(scene.plan), cone)  # noqa: E731
+        key = ("light", vector.tobytes(), reach, cone, id(scene.plan))
     traced = state.traced + traced + to_come
     kept = state.suns[slot]
     # A kept entry: (key, beams, the fine frame they are to be built again for, or None).
@@ -371,17 +372,31 @@ def light_reach(light):
     return float(v[3])
 
 
-def _light_frames(scene, position, reach, sample):
+def spot_cone(light):
+    """A spot light's cone as beams.light_frame takes it (its unit axis and half angle, the
+    angle a point must lie within for the light to reach it: settings.Light.cone), else None."""
+    if light.kind != "spot":
+        return None
+    (x, y, z, cos_half), _ = light.cone()
+    return (x, y, z, float(np.arccos(np.clip(cos_half, -1.0, 1.0))))
+
+
+def _light_frames(scene, position, reach, sample, cone=None):
     """(frame_for, coarsening) for a point, spot or area light at `position` whose rays end
-    within `reach` of it (beams.light_frame): frame_for as _sun_frames's (bins of side h at
-    unit depth, h by bisection of the same estimate over the cylinders of `sample` projected
-    from the light, each as wide as light_frame lists it at its depth); coarsening(target) how
-    many times as many bins a light without extent would get for the same target (how much
-    longer the extent makes the lists). BeamsUnfit as light_frame."""
+    within `reach` of it (beams.light_frame; `cone`: a spot's): frame_for as _sun_frames's
+    (bins of side h at unit depth, h by bisection of the same estimate over the cylinders of
+    `sample` projected from the light, each as wide as light_frame lists it at its depth, those
+    outside a spot's cone left out); coarsening(target) how many times as many bins a light
+    without extent would get for the same target (how much longer the extent makes the
+    lists). BeamsUnfit as light_frame."""
     lo, hi = scene.box
     rmax = float(scene.plan.radius.max())
     view = light_view(position, reach, lo, hi, rmax, 1.0)
     top, tip, r = sample
+    if cone is not None:
+        keep = ~outside_cone(cone, position, reach, top, tip, r)
+        if keep.any():
+            top, tip, r = top[keep], tip[keep], r[keep]
     tx0, ty0, z0 = view.tangents(top)
     tx1, ty1, z1 = view.tangents(tip)
     du, dv = np.abs(tx1 - tx0), np.abs(ty1 - ty0)
@@ -393,7 +408,7 @@ def _light_frames(scene, position, reach, sample):
     span = max(float(np.ptp(view.tx)), float(np.ptp(view.ty))) + float(widths[1].max(initial=0.0))
 
     def frame_for(target):
-        return light_frame(position, reach, lo, hi, rmax, 1.0, _bin_side(major, minor, widths[1], span, target))
+        return light_frame(position, reach, lo, hi, rmax, 1.0, _bin_side(major, minor, widths[1], span, target), cone)
 
     def coarsening(target):
         if not reach > 0:

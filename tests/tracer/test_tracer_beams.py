@@ -649,6 +649,9 @@ def _scene(strands):
 SUN_SPREAD = np.tan(0.1)
 LIGHT_AT = np.array([0.9, -1.1, 2.3])
 LIGHT_EXTENT = 0.2
+# A spot light there whose cone takes in part of the curls (axis and half angle).
+_SPOT_AXIS = np.array([0.25, 0.1, 0.45]) - LIGHT_AT
+SPOT_CONE = (*(_SPOT_AXIS / np.linalg.norm(_SPOT_AXIS)), 0.1)
 
 
 def _frames(lo, hi, rmax):
@@ -661,13 +664,14 @@ def _frames(lo, hi, rmax):
     centres = camera_frame(CAM, (0, 0, 64, 64), lo, hi, rmax, 1.0, centres=True)
     light = light_frame(LIGHT_AT, 0.0, lo, hi, rmax, 1.0, 0.01)
     wide_light = light_frame(LIGHT_AT, LIGHT_EXTENT, lo, hi, rmax, 1.0, 0.03)
-    return {"perspective": (persp, CAM), "orthographic": (ortho, ortho_cam), "sun": (sun, None),
+    spot = light_frame(LIGHT_AT, LIGHT_EXTENT, lo, hi, rmax, 1.0, 0.03, cone=SPOT_CONE)
+    return {"spot": (spot, None), "perspective": (persp, CAM), "orthographic": (ortho, ortho_cam), "sun": (sun, None),
             "sun with an angle": (wide_sun, None), "pixel centres": (centres, CAM), "light": (light, None),
             "light with an extent": (wide_light, None)}
 
 
 @pytest.mark.parametrize("family", ["perspective", "orthographic", "sun", "sun with an angle", "light",
-                                    "light with an extent"])
+                                    "light with an extent", "spot"])
 def test_every_surface_point_is_listed_where_its_rays_look_it_up(family):
     """A ray that meets a point of a cylinder's surface looks up a bin that lists the cylinder
     in a fine slice starting no farther than the walk goes: a camera ray the bin of the pixel it
@@ -675,7 +679,7 @@ def test_every_surface_point_is_listed_where_its_rays_look_it_up(family):
     the point, within the sun's angle of its direction), up to minus that origin's height; a
     shadow ray toward a light (from beyond the point, toward a point of the light within its
     extent) the bin of where it leaves, up to that origin's distance from the light (or the
-    extent, if more)."""
+    extent, if more); toward a spot light, the rays it casts: those its cone lights."""
     rng = np.random.default_rng(5)
     c, lo, hi, rmax = _scene(curls(30, 12, radius=0.01))
     frame, camera = _frames(lo, hi, rmax)[family]
@@ -707,12 +711,17 @@ def test_every_surface_point_is_listed_where_its_rays_look_it_up(family):
             toward = ends - p
             p[deep] += ((z - frame.far_depth) / -(toward @ frame.axes[2]))[deep, None] * toward[deep]
             reach = np.maximum(np.linalg.norm(p - frame.origin, axis=1), frame.extent)
+            if frame.cone is not None:      # no shadow ray where the light gives nothing
+                away = p - ends
+                cos = (away @ np.asarray(frame.cone[:3])) / np.linalg.norm(away, axis=1)
+                reach = np.where(cos > np.cos(frame.cone[3]), reach, -np.inf)
         else:
             p = q
             reach = np.linalg.norm(q - camera.position, axis=1) if frame.kind == "persp" else project(frame, q)[2]
         gx, gy, _ = project(frame, p)
         inside = (gx >= 0) & (gx < nx) & (gy >= 0) & (gy < ny)
         bins = np.floor(gx).astype(int) + nx * np.floor(gy).astype(int)
+        inside &= reach > -np.inf
         for b, limit in zip(bins[inside], reach[inside]):
             run = beams.entries[beams.start[b]:beams.start[b] + beams.count[b]]
             ids = beams.ids(run)
@@ -722,8 +731,36 @@ def test_every_surface_point_is_listed_where_its_rays_look_it_up(family):
     assert checked > 500
 
 
+def test_a_spots_lists_leave_out_what_lies_outside_its_cone(pair):
+    """A spot light's shadow rays leave only where its cone lights (trace_main.glsl casts no
+    other), so its lists leave out the capsules wholly outside the cone widened by its extent:
+    fewer entries than the same light's without a cone, none of them outside, and a render
+    under it gives the grid's image."""
+    from tracer.beams import outside_cone
+    c, lo, hi, rmax = _scene(curls(30, 12, radius=0.01))
+    frames = _frames(lo, hi, rmax)
+    spot, light = build_beams(frames["spot"][0], c), build_beams(frames["light with an extent"][0], c)
+    out = outside_cone(SPOT_CONE, LIGHT_AT, LIGHT_EXTENT, c.top, capsule_far(c), c.radius)
+    assert 0.2 < out.mean() < 0.8
+    assert 0 < spot.refs < 0.8 * light.refs
+    assert not np.any(out[spot.ids(spot.entries)])
+    strands = curls(30, 10, alpha=0.6)
+    lit = Light("spot", tuple(LIGHT_AT), intensity=6.0, axis=tuple(SPOT_CONE[:3]), spot_size=2 * SPOT_CONE[3],
+                radius=LIGHT_EXTENT / 4, falloff=True)
+    settings = RenderSettings(spp=1, layers=3, lights=(lit,))
+    grid, beams = _render_both(pair, strands, CAM, settings)
+    assert pair[1].scene.grid is None
+    narrow = pair[1].beam_state.suns[0][1].refs
+    assert (grid[..., 3] > 0).mean() > 0.05
+    shade = grid[..., :3][grid[..., 3] > 0]
+    assert shade.max() > 2 * np.percentile(shade, 10), "no light and shadow to tell apart"
+    assert np.abs(grid - beams).max() <= 1e-6
+    _render_both(pair, strands, CAM, replace(settings, lights=(replace(lit, spot_size=np.pi),)))
+    assert narrow < 0.8 * pair[1].beam_state.suns[0][1].refs
+
+
 @pytest.mark.parametrize("family", ["perspective", "orthographic", "sun", "pixel centres", "light",
-                                    "light with an extent"])
+                                    "light with an extent", "spot"])
 def test_the_compute_passes_list_what_numpy_lists(family):
     assert _compute_vs_numpy(family) == 0       # references too few to pay for a fine slice
 
@@ -881,7 +918,7 @@ def _compute_vs_numpy(family):
     frame, _ = _frames(lo, hi, rmax)[family]
     want = build_beams(frame, c)
     from tracer.gl_state import beam_builder
-    names = SUN_BUFFERS[1] if family == "sun" or family.startswith("light") else CAMERA_BUFFERS
+    names = SUN_BUFFERS[1] if family in ("sun", "spot") or family.startswith("light") else CAMERA_BUFFERS
     # (The pixel centres' walk takes no marks.)
     reach = None if family == "pixel centres" else frame_reach(frame, lo, hi, rmax, 1.0)
     built = beam_builder().build(frame, r.num_cylinders, r.buffers["tex_cyl"], 1.0, r.buffers, *names,

@@ -57,6 +57,7 @@ uniform float near_limit;     // perspective: a capsule's key at or below this r
 uniform float frame_spread;   // perspective: how far a light's rays drift (tracer/beams.py, light_frame; 0: a camera's)
 uniform float frame_extent;   // a light's extent and the hair's farthest depth from it (light_frame)
 uniform float frame_far;
+uniform vec4 frame_cone;      // a spot light's axis and half angle (w < 0: none; tracer/beams.py, outside_cone)
 uniform ivec2 dims;
 uniform int max_bins;         // MAX_BINS_PER_CYLINDER
 uniform int sub_bits;         // fine slices a slice: 2^sub_bits (count: the most, fill: the host's choice)
@@ -111,6 +112,19 @@ float segment_distance(vec3 c, vec3 a, vec3 b) {
     return length(a + s * ab - c);
 }
 
+// Whether no shadow ray toward the spot light at frame_origin crosses the capsule a..b of
+// radius r (tracer/beams.py, outside_cone, the same test in float64).
+bool outside_cone(vec3 a, vec3 b, float r) {
+    vec3 m = 0.5 * (a + b) - frame_origin;
+    float rho = 0.5 * length(b - a) + r + frame_extent;
+    float d = length(m);
+    float along = dot(m, frame_cone.xyz);
+    float across = sqrt(max(d * d - along * along, 0.0));
+    float alpha = atan(across, along);
+    float beta = atan(rho, sqrt(max(d * d - rho * rho, 0.0)));
+    return d > rho && alpha > frame_cone.w + beta + BEAM_CONE_MARGIN;
+}
+
 // Cylinder `id`'s projected axis g0..g1 (bins), how far its capsule reaches past it (rho,
 // bins) and its key's fine slice of sub_bits (tracer/beams.py, slice_of). Returns 0: to be
 // listed, 1: never seen (wholly behind the camera), 2: it reaches the camera's plane.
@@ -128,6 +142,7 @@ int project_cylinder(int id, out vec2 g0, out vec2 g1, out float rho, out int sl
         key = near - r;
         if (frame_kind == 0) {
             if (key <= near_limit) return max(f0.z, f1.z) + r < 0.0 ? 1 : 2;
+            if (frame_cone.w >= 0.0 && outside_cone(top.xyz, far, r)) return 1;
             if (frame_spread > 0.0) {
                 // A light's rays drift from their origin's direction (tracer/beams.py,
                 // light_frame, drift_at).
