@@ -21,6 +21,7 @@ from .gpu_build import _groups, set_uniforms
 from .shader_source import shader_source
 
 KIND_CODE = {"persp": 0, "ortho": 1, "sun": 2}
+NO_CONE = (0.0, 0.0, 1.0, -1.0)     # frame_cone of a frame without one (w < 0: beams_build.glsl)
 BUILD_FILES = ["build_cylinders.glsl", "capsule.glsl", "beams_build.glsl"]
 
 
@@ -99,7 +100,7 @@ class BeamBuilder:
                      drift=float(frame.drift), key0=float(frame.key0), key_step=float(frame.key_step),
                      near_limit=float(frame.near_limit), frame_spread=float(frame.spread),
                      frame_extent=float(frame.extent), frame_far=float(frame.far_depth),
-                     frame_cone=tuple(float(x) for x in frame.cone) if frame.cone is not None else (0.0, 0.0, 1.0, -1.0),
+                     frame_cone=NO_CONE if frame.cone is None else tuple(float(x) for x in frame.cone),
                      dims=tuple(int(d) for d in frame.dims),
                      max_bins=int(layout.BEAM_MAX_BINS_PER_CYLINDER), sub_bits=int(sub),
                      cyl_split=tex_cyl.part_texels // layout.TEXELS_PER_CYL)
