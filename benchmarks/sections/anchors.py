@@ -14,6 +14,15 @@ interactive session, so runs after the first reuse its GPU allocations; the cold
 render (new context allocations and shader compiles) is reported beside each scene, and the
 stages of each first render (what its camera rays walked, what it built) below the table.
 
+At each sample count of the independent samples the two take turns: after a warm-up of
+each, every round times one first render, one re-render and one Cycles render, so that
+both see the same state of a shared machine (timed one block after the other, the ratios
+moved between runs more than the code did: straight.hair's first render at 1 spp came out
+at 0.47-1.02 of Cycles over ten runs, and Cycles' own time there ran from 248 to 520 ms
+over seventeen). The table gives the medians' ratio and, in
+brackets, the spread of the rounds' own ratios. The pixel sampler's rows are timed after
+(their Cycles figure is the independent row's), and so are the huge scenes below.
+
 The groom scenes fade alpha from 1 at 70 % of each strand's length to 0.4 at the tip, so both
 renderers composite alpha layers, as the figure asks; the real file has alpha 0.64 throughout.
 
@@ -41,7 +50,7 @@ import tempfile
 import numpy as np
 
 from benchmarks.blender_anchors import CyclesAnchor, reset_scene
-from benchmarks.harness import MIN_RUNS, Timing, TooSlow, fmt_num, fmt_time, measure, ratio, to_srgb8
+from benchmarks.harness import MIN_RUNS, Timing, TooSlow, fmt_num, fmt_time, measure, once, ratio, to_srgb8
 from benchmarks.metrics import hair_rmse, image_error
 from benchmarks.scenes import (SUN_DIRECTION, crop_camera, groom_scene, orbit, pick_window, real_strands,
                                settings, tracer_api, tracer_camera, view_matrix)
@@ -108,6 +117,7 @@ class _Scene:
         self.parts_split = None  # buffer textures of the cylinders and of the cell lists (huge scenes)
         self.error_note = None
         self.ours, self.cycles, self.images, self.error = {}, {}, {}, None
+        self.rounds = {}        # per sample count: [(first, re-render) / Cycles] of each round (_rounds_job)
 
 
 def run(sec, cfg):
@@ -142,6 +152,9 @@ def run(sec, cfg):
     for spp, sampler, sc in jobs:
         key = _key(spp, sampler)
         try:
+            if sampler == ind and not _huge(sc):
+                _rounds_job(sec, cfg, tracer, sc, spp, size)
+                continue
             _tracer_job(sec, cfg, tracer, sc, spp, sampler)
             if sampler == ind:
                 _cycles_job(sec, cfg, sc, spp, size)
@@ -226,6 +239,13 @@ def _tracer_job(sec, cfg, tracer, sc, spp, sampler="independent"):
         sc.error_note = ("not measured: the float64 references (numpy) over "
                          f"{sc.strands.num_segments / 1e6:.0f} M cylinders need more memory than this machine has")
         return
+    _error_job(sec, cfg, tracer, sc, key, rs, img)
+
+
+def _error_job(sec, cfg, tracer, sc, key, rs, img):
+    """The tracer's error beside its time, once a scene (at the lowest sample count): `img`,
+    its image of the scene's camera with settings `rs`, against the float64 references."""
+    r = sc.renderer
     if sc.error is None and key == min(cfg.anc_spp) and left(sec) > 0:
         # Error beside the time: both float64 references over the whole image (a random
         # subset of its pixel centres where every pixel would not fit the scene's share of
@@ -256,14 +276,78 @@ def _cycles_job(sec, cfg, sc, spp, size):
     except TooSlow as e:
         sc.cycles[spp] = f"Cycles: {e}"
         return
+    _keep_cycles_image(sc, cyc, spp)
+    if _huge(sc):       # give Blender's copy of the scene back before the next job
+        del cyc
+        reset_scene()
+
+
+def _keep_cycles_image(sc, cyc, spp):
+    """Cycles' last image of scene `sc` at `spp`, for the side-by-side figure."""
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "cycles.png")
         cyc.save_last(path)
         import matplotlib.image as mpimg
         sc.images[("cycles", spp)] = mpimg.imread(path)
-    if _huge(sc):       # give Blender's copy of the scene back before the next job
-        del cyc
-        reset_scene()
+
+
+def _rounds_job(sec, cfg, tracer, sc, spp, size):
+    """The tracer's independent samples at `spp` and Cycles at the same samples, side by side:
+    after a warm-up of each, `runs` rounds of one first render, one re-render after a camera
+    move and one Cycles render, in turn, so that the three see the same state of a shared
+    machine (see the module text). Keeps the rounds' own ratios (sc.rounds) beside the medians."""
+    r = sc.renderer
+    rs = settings(spp=spp, layers=LAYERS, shading="kajiya-kay")
+    guess = _predicted(sc, spp, cfg)
+    runs = max(_runs(sc, cfg), MIN_RUNS)
+    if guess is not None and 2 * guess * (runs + 1) > left(sec):
+        sc.ours[spp] = (f"tracer: one run should take about {fmt_time(guess)} (from the {min(cfg.anc_spp)}-spp runs), "
+                        f"more than the {fmt_time(max(0, left(sec)))} left allows for {runs} run(s)")
+        return
+    cyc = CyclesAnchor(sc.strands, sc.matrix, size=size, sun_direction=SUN_DIRECTION, layers=LAYERS)
+
+    def first():
+        r.set_strands(sc.strands)
+        return r.render(sc.cam, rs)
+    # Warm-ups: the first render (cold when it is the scene's first), a re-render, Cycles.
+    warm_first, _ = once(first)
+    if sc.cold is None:
+        sc.cold = warm_first
+    warm_again, _ = once(lambda: r.render(sc.moved, rs))
+    warm_cycles, _ = once(lambda: cyc.render(spp))
+    one = warm_first + warm_again + warm_cycles
+    if one * runs > left(sec):
+        why = (f"one round takes {fmt_time(one)}, so {runs} rounds would exceed the "
+               f"{fmt_time(max(0, left(sec)))} left in this section's budget")
+        sc.ours[spp], sc.cycles[spp] = f"tracer: {why}", f"Cycles: {why}"
+        return
+    f, a, c = [], [], []
+    no_upload = True
+    for _ in range(runs):
+        t, _ = once(first)
+        f.append(t)
+        sc.parts[spp] = _stages(r.stats)
+        uploaded = r.stats.bytes_uploaded
+        a.append(once(lambda: r.render(sc.moved, rs))[0])
+        no_upload &= r.stats.bytes_uploaded == uploaded
+        c.append(once(lambda: cyc.render(spp))[0])
+    img = r.render(sc.cam, rs)
+    sc.ours[spp] = (Timing(f, [warm_first]), Timing(a, [warm_again]), no_upload)
+    sc.cycles[spp] = Timing(c, [warm_cycles])
+    sc.rounds[spp] = [(x / z, y / z) for x, y, z in zip(f, a, c)]
+    sc.images[("ours", spp)] = img
+    _keep_cycles_image(sc, cyc, spp)
+    _error_job(sec, cfg, tracer, sc, spp, rs, img)
+
+
+def _round_range(sc, key, which):
+    """' (rounds a-b)': the spread of the rounds' own ratios (0: first render, 1: re-render,
+    each to Cycles at the same samples), or '' where the job had no rounds."""
+    got = sc.rounds.get(key)
+    if not got:
+        return ""
+    values = [x[which] for x in got]
+    return f" (rounds {min(values):.2f}-{max(values):.2f})"
 
 
 def _report(sec, cfg, scenes, size):
@@ -294,15 +378,20 @@ def _report(sec, cfg, scenes, size):
             else:
                 err = ("see the lowest-spp row" if sc.error else sc.error_note if sc.error_note
                        else "not measured: time budget")
-            rows.append([sc.name, label, shown, str(theirs), str(first), f"{ratio(first.median, theirs.median):.2f}",
+            low = spp == min(cfg.anc_spp)
+            rows.append([sc.name, label, shown, str(theirs), str(first),
+                         f"{ratio(first.median, theirs.median):.2f}{_round_range(sc, key, 0)}",
                          f"{ratio(first.median, c1):.2f}" if c1 else "n/a", str(again),
-                         f"{ratio(again.median, c1):.2f}" if c1 else "n/a", "yes" if no_upload else "NO", err])
+                         f"{ratio(again.median, c1):.2f}{_round_range(sc, key, 1) if low else ''}" if c1 else "n/a",
+                         "yes" if no_upload else "NO", err])
             sec.data.setdefault("rows", []).append({"scene": sc.name, "spp": spp, "cycles": theirs.median,
                                                     "sampler": key[1] if isinstance(key, tuple) else "independent",
-                                                    "first": first.median, "rerender": again.median})
+                                                    "first": first.median, "rerender": again.median,
+                                                    "round_ratios": sc.rounds.get(key, [])})
             if spp == top and top > min(cfg.anc_spp):
                 sec.summary.append(_top_line(sc.name, spp, isinstance(key, tuple), first.median, again.median,
-                                             theirs.median) + ("; " + err if isinstance(key, tuple) else ""))
+                                             theirs.median, _round_range(sc, key, 0), _round_range(sc, key, 1))
+                                   + ("; " + err if isinstance(key, tuple) else ""))
         lowest = sc.ours.get(min(cfg.anc_spp))
         if isinstance(lowest, tuple) and c1:
             f1, a1 = lowest[0].median, lowest[1].median
@@ -314,8 +403,10 @@ def _report(sec, cfg, scenes, size):
                                for key, stages in sc.parts.items())
                      + (" Cylinders in {} buffer textures, cell lists in {}; one run after one warm-up (no warm-up "
                         "for Cycles).".format(*sc.parts_split) if sc.parts_split else ""))
-            sec.summary.append(f"{sc.name}: first {fmt_time(f1)} = {ratio(f1, c1):.2f}× Cycles 1 spp ({fmt_time(c1)}); "
-                               f"re-render {fmt_time(a1)} = {ratio(a1, c1):.2f}×")
+            low = min(cfg.anc_spp)
+            sec.summary.append(f"{sc.name}: first {fmt_time(f1)} = {ratio(f1, c1):.2f}× Cycles 1 spp ({fmt_time(c1)})"
+                               f"{_round_range(sc, low, 0)}; re-render {fmt_time(a1)} = {ratio(a1, c1):.2f}×"
+                               f"{_round_range(sc, low, 1)}")
         both = [s for s in cfg.anc_spp if ("ours", s) in sc.images and ("cycles", s) in sc.images]
         if both:
             pics.append((sc.name, sc.images[("ours", both[-1])], sc.images[("cycles", both[-1])], both[-1]))
@@ -324,16 +415,18 @@ def _report(sec, cfg, scenes, size):
                "re-render / Cycles 1 spp", "re-render uploads nothing",
                "tracer vs float64, whole image, IoU / RMSE (hair) / max: model reference · solid reference · "
                "old method (window RMSE / coverage agreement)"],
-              rows, caption=f"The tracer against Cycles at {size[0]}×{size[1]} (medians, same run).")
+              rows, caption=f"The tracer against Cycles at {size[0]}×{size[1]} (medians, same run; in brackets the "
+                            "spread of the rounds' own ratios, where the two took turns).")
     if pics:
         _side_by_side(sec, pics)
 
 
-def _top_line(name, spp, pixel, first, again, cycles):
-    """The summary's line for a scene's highest sample count, with either sampler."""
+def _top_line(name, spp, pixel, first, again, cycles, first_rounds="", again_rounds=""):
+    """The summary's line for a scene's highest sample count, with either sampler (the
+    rounds' spreads, _round_range, where it had rounds)."""
     how = "with the pixel sampler" if pixel else "independent samples"
     return (f"{name}: {spp} spp, {how}: first {fmt_time(first)} = {ratio(first, cycles):.2f}× Cycles {spp} spp "
-            f"({fmt_time(cycles)}); re-render {ratio(again, cycles):.2f}×")
+            f"({fmt_time(cycles)}){first_rounds}; re-render {ratio(again, cycles):.2f}×{again_rounds}")
 
 
 def _stages(st):
