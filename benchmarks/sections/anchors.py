@@ -15,13 +15,14 @@ render (new context allocations and shader compiles) is reported beside each sce
 stages of each first render (what its camera rays walked, what it built) below the table.
 
 At each sample count of the independent samples the two take turns: after a warm-up of
-each, every round times one first render, one re-render and one Cycles render, so that
-both see the same state of a shared machine (timed one block after the other, the ratios
-moved between runs more than the code did: straight.hair's first render at 1 spp came out
-at 0.47-1.02 of Cycles over ten runs, and Cycles' own time there ran from 248 to 520 ms
-over seventeen). The table gives the medians' ratio and, in
-brackets, the spread of the rounds' own ratios. The pixel sampler's rows are timed after
-(their Cycles figure is the independent row's), and so are the huge scenes below.
+each, every round (5, or up to 15 where they are short) times one first render, one
+re-render and one Cycles render, so that both see the same state of a shared machine (timed
+one block after the other, the ratios moved between runs more than the code did:
+straight.hair's first render at 1 spp came out at 0.47-1.02 of Cycles over ten runs, and
+Cycles' own time there ran from 248 to 520 ms over seventeen). The table gives the medians'
+ratio and, in brackets, the spread of the rounds' own ratios. The pixel sampler's rows are
+timed after (their Cycles figure is the independent row's), and so are the huge scenes
+below.
 
 The groom scenes fade alpha from 1 at 70 % of each strand's length to 0.4 at the tip, so both
 renderers composite alpha layers, as the figure asks; the real file has alpha 0.64 throughout.
@@ -64,6 +65,10 @@ ALPHA_START, ALPHA_TIP = 0.7, 0.4   # the groom scenes' alpha fade (see the modu
 # Scenes past this many cylinders are timed once (see the module text): one first render of
 # 1,000,000 wavy strands takes about a minute on the 2-core machine, one Cycles render more.
 HUGE = 20_000_000
+# _rounds_job: rounds shorter than ROUND_SECONDS / cfg.runs get more of them, up to
+# MAX_ROUNDS, within ROUND_SECONDS a job.
+ROUND_SECONDS = 20.0
+MAX_ROUNDS = 15
 
 
 def _huge(sc):
@@ -316,6 +321,9 @@ def _rounds_job(sec, cfg, tracer, sc, spp, size):
     warm_again, _ = once(lambda: r.render(sc.moved, rs))
     warm_cycles, _ = once(lambda: cyc.render(spp))
     one = warm_first + warm_again + warm_cycles
+    # Short rounds are noisier (straight.hair at 1 spp: one round's ratio 0.39, the next
+    # 0.91): more of them, within ROUND_SECONDS.
+    runs = max(runs, min(MAX_ROUNDS, int(ROUND_SECONDS / max(one, 1e-9))))
     if one * runs > left(sec):
         why = (f"one round takes {fmt_time(one)}, so {runs} rounds would exceed the "
                f"{fmt_time(max(0, left(sec)))} left in this section's budget")
