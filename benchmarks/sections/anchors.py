@@ -196,6 +196,17 @@ def _predicted(sc, spp, cfg, sampler="independent"):
     return first.median + again.median * (spp / low - 1)
 
 
+def _too_slow(sec, cfg, sc, spp, runs, sampler="independent"):
+    """Why the tracer's `runs` first renders and re-renders at `spp` (each after one
+    warm-up), predicted from the lowest-spp runs, would not fit what is left of the section;
+    None where they would or there is no prediction yet."""
+    guess = _predicted(sc, spp, cfg, sampler)
+    if guess is None or 2 * guess * (runs + 1) <= left(sec):
+        return None
+    return (f"tracer: one run should take about {fmt_time(guess)} (from the {min(cfg.anc_spp)}-spp runs), "
+            f"more than the {fmt_time(max(0, left(sec)))} left allows for {runs} run(s)")
+
+
 def _tracer_job(sec, cfg, tracer, sc, spp, sampler="independent"):
     r = sc.renderer
     rs = settings(spp=spp, layers=LAYERS, shading="kajiya-kay", sampler=sampler)
@@ -206,12 +217,10 @@ def _tracer_job(sec, cfg, tracer, sc, spp, sampler="independent"):
         sc.ours[key] = (f"the renderer takes the {taken} sampler for {spp} samples × {LAYERS} layers "
                         "(Renderer.sampler_for): the independent row's figures")
         return
-    guess = _predicted(sc, spp, cfg, sampler)
     runs = _runs(sc, cfg)
-    # first render + re-render, each (runs + 1) times
-    if guess is not None and 2 * guess * (runs + 1) > left(sec):
-        sc.ours[key] = (f"tracer: one run should take about {fmt_time(guess)} (from the {min(cfg.anc_spp)}-spp runs), "
-                        f"more than the {fmt_time(max(0, left(sec)))} left allows for {runs} run(s)")
+    too_slow = _too_slow(sec, cfg, sc, spp, runs, sampler)
+    if too_slow:
+        sc.ours[key] = too_slow
         return
     try:
         first, _ = _measure(lambda: (r.set_strands(sc.strands), r.render(sc.cam, rs)), runs,
@@ -266,25 +275,26 @@ def _error_job(sec, cfg, tracer, sc, key, rs, img):
 
 
 def _cycles_job(sec, cfg, sc, spp, size):
+    """Cycles at `spp` on a huge scene (the others take turns with the tracer: _rounds_job):
+    one render, no warm-up (every render pays sync and BVH build anyway), after the tracer's
+    job, whose GPU buffers were given back; Blender's copy of the scene is given back after."""
     if not isinstance(sc.ours.get(spp), tuple):
         return      # nothing to compare with
     low = sc.cycles.get(min(cfg.anc_spp))
-    if _huge(sc) and spp != min(cfg.anc_spp) and hasattr(low, "median") and low.median > left(sec):
+    if spp != min(cfg.anc_spp) and hasattr(low, "median") and low.median > left(sec):
         # A render at more samples takes at least as long as the lowest-spp one.
         sc.cycles[spp] = (f"Cycles: one render at {min(cfg.anc_spp)} spp took {fmt_time(low.median)}, more than the "
                           f"{fmt_time(max(0, left(sec)))} left")
         return
     cyc = CyclesAnchor(sc.strands, sc.matrix, size=size, sun_direction=SUN_DIRECTION, layers=LAYERS)
     try:
-        sc.cycles[spp], _ = _measure(lambda: cyc.render(spp), _runs(sc, cfg), warmup=0 if _huge(sc) else 1,
-                                     budget=left(sec))
+        sc.cycles[spp], _ = _measure(lambda: cyc.render(spp), _runs(sc, cfg), warmup=0, budget=left(sec))
     except TooSlow as e:
         sc.cycles[spp] = f"Cycles: {e}"
         return
     _keep_cycles_image(sc, cyc, spp)
-    if _huge(sc):       # give Blender's copy of the scene back before the next job
-        del cyc
-        reset_scene()
+    del cyc     # give Blender's copy of the scene back before the next job
+    reset_scene()
 
 
 def _keep_cycles_image(sc, cyc, spp):
@@ -303,11 +313,10 @@ def _rounds_job(sec, cfg, tracer, sc, spp, size):
     machine (see the module text). Keeps the rounds' own ratios (sc.rounds) beside the medians."""
     r = sc.renderer
     rs = settings(spp=spp, layers=LAYERS, shading="kajiya-kay")
-    guess = _predicted(sc, spp, cfg)
     runs = max(_runs(sc, cfg), MIN_RUNS)
-    if guess is not None and 2 * guess * (runs + 1) > left(sec):
-        sc.ours[spp] = (f"tracer: one run should take about {fmt_time(guess)} (from the {min(cfg.anc_spp)}-spp runs), "
-                        f"more than the {fmt_time(max(0, left(sec)))} left allows for {runs} run(s)")
+    too_slow = _too_slow(sec, cfg, sc, spp, runs)
+    if too_slow:
+        sc.ours[spp] = too_slow
         return
     cyc = CyclesAnchor(sc.strands, sc.matrix, size=size, sun_direction=SUN_DIRECTION, layers=LAYERS)
 
@@ -386,11 +395,12 @@ def _report(sec, cfg, scenes, size):
             else:
                 err = ("see the lowest-spp row" if sc.error else sc.error_note if sc.error_note
                        else "not measured: time budget")
-            low = spp == min(cfg.anc_spp)
+            # The re-render's rounds were against Cycles at 1 spp only in the lowest-spp job.
+            again_rounds = _round_range(sc, key, 1) if spp == min(cfg.anc_spp) else ""
             rows.append([sc.name, label, shown, str(theirs), str(first),
                          f"{ratio(first.median, theirs.median):.2f}{_round_range(sc, key, 0)}",
                          f"{ratio(first.median, c1):.2f}" if c1 else "n/a", str(again),
-                         f"{ratio(again.median, c1):.2f}{_round_range(sc, key, 1) if low else ''}" if c1 else "n/a",
+                         f"{ratio(again.median, c1):.2f}{again_rounds}" if c1 else "n/a",
                          "yes" if no_upload else "NO", err])
             sec.data.setdefault("rows", []).append({"scene": sc.name, "spp": spp, "cycles": theirs.median,
                                                     "sampler": key[1] if isinstance(key, tuple) else "independent",
