@@ -6,6 +6,7 @@ straight hair needs only 3–4; `adaptive_sigma` gives each strand few cylinders
 it bends, whose polyline provably stays within a tolerance of the exact curve, and
 `geometric_error` measures the result the way SPEC §6 defines it.
 """
+import threading
 from dataclasses import dataclass
 from functools import partial
 
@@ -134,10 +135,12 @@ def _greedy_sigma(frac, guides, weights, bins, tolerance, max_cylinders, chunk=_
     do not depend on its range."""
     bins_t = np.ascontiguousarray(np.asarray(bins, np.float32).T)   # (NB, K): a bin's row is contiguous
 
+    scratch = {}
+
     def part(lo, hi):
         m = None if mix is None else (mix[0], mix[1], mix[2][lo:hi])
         return _greedy_range(frac[lo:hi], guides[lo:hi], weights[lo:hi], bins_t, tolerance[lo:hi], max_cylinders,
-                             table_step, m)
+                             table_step, m, scratch)
     parts = parallel.run_jobs([partial(part, lo, hi) for lo, hi in parallel.ranges(len(frac), size=chunk)], threads)
     if not parts:
         return np.zeros(0), np.zeros(0, np.int64), np.zeros(0, bool), np.zeros(0)
@@ -154,7 +157,7 @@ def _running(op, x, out):
     return out
 
 
-def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step, mix=None):
+def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step, mix=None, scratch=None):
     """_greedy_sigma on one range of strands, sweeping the bins from the root.
 
     Per strand the sweep carries the open segment's start c and the longest step its bins
@@ -166,7 +169,8 @@ def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step, mix=Non
     the longest whose h² times the largest bound over the bins it touches fits the budget,
     as in the greedy search bin by bin, but the work per bin is a few whole-array
     operations over the strands, not a search per segment (a tenth of the time at 100,000
-    strands). A strand leaves the sweep after its last bin, or when the cap stops it."""
+    strands). A strand leaves the sweep after its last bin, or when the cap stops it.
+    scratch: where its work arrays are kept between ranges (_sweep_scratch)."""
     nb = bins_t.shape[0]
     s = len(f)
     lanes = np.arange(s)
@@ -175,9 +179,10 @@ def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step, mix=Non
     # float32 (half the memory traffic of the work over strands x bins; a bound off by a few
     # parts in 10^7 is nothing beside its 5 % margin, interpolate._CURVATURE_SAFETY).
     f32 = np.float32
-    key = np.take(bins_t, g[:, 0], axis=1)
-    a = key * w[:, 0].astype(f32)
-    term = np.empty_like(a)
+    width = max_cylinders + 2           # root, max_cylinders - 1 inner points, tip; one spill column
+    key, a, term, grid = _sweep_scratch(scratch, nb, s, width)
+    np.take(bins_t, g[:, 0], axis=1, out=key, mode="clip")
+    np.multiply(key, w[:, 0].astype(f32), out=a)
     for k in (1, 2):
         np.take(bins_t, g[:, k], axis=1, out=term, mode="clip")    # clip: not buffered
         term *= w[:, k].astype(f32)
@@ -215,10 +220,9 @@ def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step, mix=Non
     leave = np.searchsorted(last_bin[order], np.arange(nb + 1))
     active = (f > 0) & (need <= max_cylinders)
     c = np.where(active, 0.0, np.inf)   # a strand out of the sweep: no segment of it ever ends
-    hm = np.full(s, np.inf)
+    hm = np.full(s, np.inf, f32)        # float32: it only ever holds values of h_bin (or inf)
     count = np.zeros(s, np.int64)       # inner points placed so far
-    width = max_cylinders + 2           # root, max_cylinders - 1 inner points, tip; one spill column
-    grid = np.full((s, width), np.nan)
+    grid.fill(np.nan)
     grid[:, 0] = 0.0
     flat = grid.ravel()
     reach, hi = np.empty(s), np.empty(s)
@@ -255,15 +259,18 @@ def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step, mix=Non
     done = np.flatnonzero((f > 0) & ~capped)
     grid[done, count[done] + 1] = f[done]
     grid = grid[:, :max_cylinders + 1]
-    _merge_sliver_tips(grid, ~capped & (f > 0), a, nb, last_bin, budget)
+    # Each row's points are a prefix of it: the root, the inner points, the tip.
+    points = np.where(capped, max_cylinders + 1, count + 2)
+    _merge_sliver_tips(grid, ~capped & (f > 0), a, nb, last_bin, budget, points)
     if capped.any():
         kk = np.arange(max_cylinders + 1)
         grid[capped] = f[capped, None] * (kk / max_cylinders)
     zero = f <= 0
     if zero.any():  # a strand of no length: one cylinder of no length
         grid[zero, 1] = 0.0
-    valid = ~np.isnan(grid)
-    return grid[valid], valid.sum(axis=1).astype(np.int64), capped, need
+        points[zero] = 2
+    valid = np.arange(max_cylinders + 1) < points[:, None]
+    return grid[valid], points, capped, need
 
 
 def strand_attributes(seed, ids, counts, along, base_radius, base_color, params, out=None):
@@ -423,7 +430,22 @@ def fill_strand_rows(radius, color, alpha, base_radius, strand_color, radius_pro
 SLIVER = 1e-3   # of a bin: a last segment shorter than this is merged when the bound allows
 
 
-def _merge_sliver_tips(grid, rows, a, nb, last_bin, budget):
+def _sweep_scratch(scratch, nb, s, width):
+    """The calling thread's work arrays for _greedy_range over s strands, three (nb, s)
+    float32 and the (s, width) float64 grid, from `scratch` (a dict by thread the caller
+    keeps for its ranges; None: fresh arrays). Fresh arrays of this size come as new pages,
+    each faulted in, for every range: kept for the ranges of one _greedy_sigma, 5 % of a
+    range's time at 12,500 strands; dropped with it, so no thread holds them afterwards."""
+    have = None if scratch is None else scratch.get(threading.get_ident())
+    if have is None or have[0].size < nb * s or have[3].size < s * width:
+        have = (np.empty(nb * s, np.float32), np.empty(nb * s, np.float32), np.empty(nb * s, np.float32),
+                np.empty(s * width))
+        if scratch is not None:
+            scratch[threading.get_ident()] = have
+    return tuple(x[:nb * s].reshape(nb, s) for x in have[:3]) + (have[3][:s * width].reshape(s, width),)
+
+
+def _merge_sliver_tips(grid, rows, a, nb, last_bin, budget, points):
     """In place: where a strand's trim fraction falls just past a bin edge, the greedy search
     stops at the edge and leaves a sliver of a last segment, whose end repeats its start to
     within float32 (renderers then drop or special-case it). The last two segments [a, b],
@@ -432,7 +454,7 @@ def _merge_sliver_tips(grid, rows, a, nb, last_bin, budget):
     of [a, c]: [a, b'] is a part of the accepted [a, b], and [b', c] has a quarter of
     (c - a)², which fits whenever [a, c] misses by less than 4x (the greedy segment before a
     sliver nearly always reaches the bound exactly, so it misses by a hair)."""
-    count = (~np.isnan(grid)).sum(axis=1)
+    count = points
     r = np.flatnonzero(rows & (count >= 3))
     if not r.size:
         return
@@ -449,6 +471,7 @@ def _merge_sliver_tips(grid, rows, a, nb, last_bin, budget):
     merge = miss <= 1.0
     grid[r[merge], k[merge] - 1] = last[merge]
     grid[r[merge], k[merge]] = np.nan
+    points[r[merge]] -= 1
     split = (miss > 1.0) & (miss <= 4.0)
     grid[r[split], k[split] - 1] = 0.5 * (prev2[split] + last[split])
 
