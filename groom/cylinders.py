@@ -222,7 +222,7 @@ def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step, mix=Non
     c = np.where(active, 0.0, np.inf)   # a strand out of the sweep: no segment of it ever ends
     hm = np.full(s, np.inf, f32)        # float32: it only ever holds values of h_bin (or inf)
     count = np.zeros(s, np.int64)       # inner points placed so far
-    grid.fill(np.nan)
+    # A row's points: the root, then each segment's end; what lies past them is never read.
     grid[:, 0] = 0.0
     flat = grid.ravel()
     reach, hi = np.empty(s), np.empty(s)
@@ -453,7 +453,8 @@ def _merge_sliver_tips(grid, rows, a, nb, last_bin, budget, points):
     from a's bin to the last bin, times (c - a)² within `budget`); otherwise b moves to the middle
     of [a, c]: [a, b'] is a part of the accepted [a, b], and [b', c] has a quarter of
     (c - a)², which fits whenever [a, c] misses by less than 4x (the greedy segment before a
-    sliver nearly always reaches the bound exactly, so it misses by a hair)."""
+    sliver nearly always reaches the bound exactly, so it misses by a hair). points (S,):
+    each row's points (a prefix of it), one fewer where two segments become one."""
     count = points
     r = np.flatnonzero(rows & (count >= 3))
     if not r.size:
@@ -470,7 +471,6 @@ def _merge_sliver_tips(grid, rows, a, nb, last_bin, budget, points):
     miss = suffix * (last - prev2) ** 2 / budget[r]
     merge = miss <= 1.0
     grid[r[merge], k[merge] - 1] = last[merge]
-    grid[r[merge], k[merge]] = np.nan
     points[r[merge]] -= 1
     split = (miss > 1.0) & (miss <= 4.0)
     grid[r[split], k[split] - 1] = 0.5 * (prev2[split] + last[split])
