@@ -226,11 +226,24 @@ def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step, mix=Non
     grid[:, 0] = 0.0
     flat = grid.ravel()
     reach, hi = np.empty(s), np.empty(s)
+    # Bins where every strand's step reaches across a whole bin: a segment ending in one
+    # never needs another step within it (first >= b / nb, first + h >= (b + 1) / nb >= hi,
+    # in float64 as in the test below), so the test for more steps is skipped there.
+    wide = (np.arange(nb) / nb + h_bin.min(axis=1)) >= (np.arange(nb) + 1.0) / nb if s else np.ones(nb, bool)
+    # Up to the shortest strand's tip, a bin's far edge hi = min(f, (b + 1) / nb) is the
+    # edge itself for every strand in the sweep (the others' reach is inf).
+    shortest = float(f[active].min()) if active.any() else 0.0
     for b in range(nb):
         np.minimum(hm, h_bin[b], out=hm)
         np.add(c, hm, out=reach)
-        np.minimum(f, (b + 1.0) / nb, out=hi)
-        ends = np.flatnonzero(reach < hi)   # inf (out of the sweep) is never below
+        edge = (b + 1.0) / nb
+        if edge <= shortest:
+            hi_of = None
+            ends = np.flatnonzero(reach < edge)
+        else:
+            np.minimum(f, edge, out=hi)
+            hi_of = hi.take
+            ends = np.flatnonzero(reach < hi)   # inf (out of the sweep) is never below
         if ends.size:
             h = h_bin[b, ends]
             first = np.maximum(reach[ends], b / nb)
@@ -238,9 +251,10 @@ def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step, mix=Non
             flat[ends * width + np.minimum(at, width - 1)] = first
             hm[ends] = h
             # Steps of h from `first` until one reaches hi: the least k with first + k·h + h >= hi.
-            more = np.flatnonzero(first + h < hi[ends])
-            if more.size:
-                fm, hh, hm_ = first[more], h[more], hi[ends[more]]
+            more = () if wide[b] else np.flatnonzero(first + h < (edge if hi_of is None else hi_of(ends)))
+            if len(more):
+                fm, hh = first[more], h[more]
+                hm_ = np.full(len(more), edge) if hi_of is None else hi_of(ends[more])
                 k = np.maximum(np.ceil((hm_ - fm) / hh) - 1.0, 1.0)
                 k = np.where(fm + k * hh + hh >= hm_, k, k + 1.0)
                 k = np.where((k > 1) & (fm + (k - 1.0) * hh + hh >= hm_), k - 1.0, k)
@@ -269,8 +283,13 @@ def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step, mix=Non
     if zero.any():  # a strand of no length: one cylinder of no length
         grid[zero, 1] = 0.0
         points[zero] = 2
-    valid = np.arange(max_cylinders + 1) < points[:, None]
-    return grid[valid], points, capped, need
+    # The rows' prefixes one after another: a gather by flat index (a boolean mask of the
+    # whole grid takes twice the time).
+    ends = np.cumsum(points)
+    total = int(ends[-1]) if s else 0
+    src = np.repeat(lanes * width - (ends - points), points)
+    src += np.arange(total)
+    return flat.take(src), points, capped, need
 
 
 def strand_attributes(seed, ids, counts, along, base_radius, base_color, params, out=None):
