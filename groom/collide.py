@@ -561,8 +561,8 @@ class Collider:
         for axis, m in enumerate(self.shape):
             np.subtract(p[:, axis], origin[axis], out=col, dtype=dt)
             col *= inv
-            np.maximum(col, 0, out=col)
-            np.minimum(col, m - 2, out=col)
+            # One clip, not a maximum and a minimum: half the passes (the same numbers).
+            np.clip(col, 0, m - 2, out=col)
             if axis:
                 idx *= m
                 np.copyto(i, col, casting="unsafe")   # truncation = floor, col >= 0
