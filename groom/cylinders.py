@@ -285,9 +285,9 @@ def _greedy_range(f, g, w, bins_t, tolerance, max_cylinders, table_step, mix=Non
         points[zero] = 2
     # The rows' prefixes one after another: a gather by flat index (a boolean mask of the
     # whole grid takes twice the time).
-    ends = np.cumsum(points)
-    total = int(ends[-1]) if s else 0
-    src = np.repeat(lanes * width - (ends - points), points)
+    stops = np.cumsum(points)
+    total = int(stops[-1]) if s else 0
+    src = np.repeat(lanes * width - (stops - points), points)
     src += np.arange(total)
     return flat.take(src), points, capped, need
 
@@ -474,11 +474,10 @@ def _merge_sliver_tips(grid, rows, a, nb, last_bin, budget, points):
     (c - a)², which fits whenever [a, c] misses by less than 4x (the greedy segment before a
     sliver nearly always reaches the bound exactly, so it misses by a hair). points (S,):
     each row's points (a prefix of it), one fewer where two segments become one."""
-    count = points
-    r = np.flatnonzero(rows & (count >= 3))
+    r = np.flatnonzero(rows & (points >= 3))
     if not r.size:
         return
-    k = count[r] - 1
+    k = points[r] - 1
     sliver = (grid[r, k] - grid[r, k - 1]) < SLIVER / nb
     r, k = r[sliver], k[sliver]
     if not r.size:
